@@ -1,0 +1,150 @@
+"""Atomic writes: a file or directory appears at its final path complete, or not at all.
+
+Everything is written to a hidden temporary sibling (same directory, so the final rename is
+atomic on POSIX), flushed and fsynced, then renamed over the target. On an exception the
+temporary is removed and any earlier file at the target is untouched. A process killed midway
+leaves only a hidden ``.<name>.<pid>.<token>.tmp`` sibling, which the next write to the same
+target removes once its process is gone.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import re
+import secrets
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+_TMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{8}\.tmp$")
+
+
+def _temp_sibling(target: Path) -> Path:
+    return target.with_name(f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_temps(target: Path) -> list[Path]:
+    """Remove temporaries left for ``target`` by processes that no longer run; returns them."""
+    removed: list[Path] = []
+    parent = target.parent
+    if not parent.is_dir():
+        return removed
+    for entry in parent.iterdir():
+        m = _TMP_RE.match(entry.name)
+        if not m or m["name"] != target.name or _pid_alive(int(m["pid"])):
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            entry.unlink(missing_ok=True)
+        removed.append(entry)
+    return removed
+
+
+def _fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_path(target: str | Path) -> Iterator[Path]:
+    """Yield a temporary path to write; on success it is fsynced and renamed to ``target``.
+
+    The caller writes a complete file at the yielded path. If the block raises, the temporary is
+    removed and ``target`` is left as it was.
+    """
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temps(target)
+    tmp = _temp_sibling(target)
+    try:
+        yield tmp
+        with tmp.open("rb") as fh:
+            os.fsync(fh.fileno())
+        tmp.replace(target)
+        _fsync_dir(target.parent)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_bytes(target: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``target`` atomically."""
+    with atomic_path(target) as tmp:
+        tmp.write_bytes(data)
+
+
+def atomic_write_text(target: str | Path, text: str) -> None:
+    """Write UTF-8 ``text`` to ``target`` atomically."""
+    atomic_write_bytes(target, text.encode("utf-8"))
+
+
+def json_ready(obj: Any) -> Any:
+    """Turn non-finite floats into None (JSON has no NaN) and tuples into lists, recursively."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_ready(v) for v in obj]
+    if hasattr(obj, "item") and callable(obj.item):  # numpy scalars
+        return json_ready(obj.item())
+    return obj
+
+
+def dumps_json(obj: Any) -> str:
+    """Deterministic JSON: sorted keys, two-space indent, NaN/inf as null, trailing newline."""
+    return json.dumps(json_ready(obj), indent=2, sort_keys=True, allow_nan=False) + "\n"
+
+
+def atomic_write_json(target: str | Path, obj: Any) -> None:
+    """Write ``obj`` as deterministic JSON (see ``dumps_json``) atomically."""
+    atomic_write_text(target, dumps_json(obj))
+
+
+@contextlib.contextmanager
+def atomic_directory(target: str | Path) -> Iterator[Path]:
+    """Yield a temporary directory to fill; on success it replaces ``target`` as a whole.
+
+    An existing ``target`` directory is moved aside and deleted only after the new one is in
+    place, so a failure at any point leaves either the old or the new directory, never a mix.
+    """
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temps(target)
+    tmp = _temp_sibling(target)
+    tmp.mkdir()
+    try:
+        yield tmp
+        for path in sorted(tmp.rglob("*"), reverse=True):
+            if path.is_file():
+                with path.open("rb") as fh:
+                    os.fsync(fh.fileno())
+        old: Path | None = None
+        if target.exists():
+            old = _temp_sibling(target)
+            target.replace(old)
+        tmp.replace(target)
+        _fsync_dir(target.parent)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise

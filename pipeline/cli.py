@@ -1,0 +1,107 @@
+"""The ``navreplay`` command line: a thin shell over the stage modules.
+
+Each subcommand lives in ``pipeline.stages.<name>`` with two functions, ``configure(parser)``
+(arguments only, cheap imports) and ``run(args) -> int`` (the work). The DVC stages in
+``dvc.yaml`` call these same subcommands, so a one-off run and the pipeline share one code path.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Sequence
+from typing import Protocol, cast
+
+from ingest.errors import IngestError
+from pipeline.errors import NotBuiltError, PipelineError
+
+log = logging.getLogger("navreplay")
+
+EXIT_ERROR = 2
+EXIT_NOT_BUILT = 3
+EXIT_INTERRUPTED = 130
+
+# name -> (module, one-line help). Order is the order shown by --help.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "ingest": (
+        "pipeline.stages.ingest",
+        "convert logs (MCAP, ROS bags, tlog, DataFlash, ULog, RINEX, CSV) to tables",
+    ),
+    "run": ("pipeline.stages.run", "replay a filter over canonical tables under a scenario"),
+    "analyze": (
+        "pipeline.stages.analyze",
+        "one-off post-mission analysis of a log: ingest + filters + report",
+    ),
+    "synth": ("pipeline.stages.synth", "generate a synthesized dataset with exact truth"),
+    "report": ("pipeline.stages.report", "render the HTML report of one dataset"),
+    "summarize": ("pipeline.stages.summarize", "rank filters across datasets"),
+    "bench": ("pipeline.stages.bench", "run the speed benchmarks against reference backends"),
+    "where-reports": ("pipeline.stages.where_reports", "list the generated reports"),
+}
+
+
+class _Stage(Protocol):
+    def configure(self, parser: argparse.ArgumentParser) -> None: ...
+
+    def run(self, args: argparse.Namespace) -> int: ...
+
+
+def _stage(name: str) -> _Stage:
+    return cast(_Stage, importlib.import_module(COMMANDS[name][0]))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="navreplay",
+        description=(
+            "Replay recorded vehicle and drone logs through GPS/INS filters under injected GNSS "
+            "outages and reduced satellite counts, and report how far each filter drifts. "
+            "`dvc repro` runs the whole pipeline over the datasets in params.yaml; these "
+            "subcommands run its steps one at a time."
+        ),
+        epilog="Run `navreplay COMMAND --help` for the options of each command.",
+    )
+    verbosity = parser.add_mutually_exclusive_group()
+    verbosity.add_argument("-v", "--verbose", action="store_true", help="log debug detail")
+    verbosity.add_argument("-q", "--quiet", action="store_true", help="log warnings only")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name, (_, help_text) in COMMANDS.items():
+        stage = _stage(name)
+        p = sub.add_parser(
+            name,
+            help=help_text,
+            description=(stage.__doc__ or help_text).strip(),
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+        stage.configure(p)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``navreplay`` console script; returns the process exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        return _stage(args.command).run(args)
+    except NotBuiltError as err:
+        print(f"navreplay {args.command}: not built yet: {err}", file=sys.stderr)
+        return EXIT_NOT_BUILT
+    except (IngestError, PipelineError) as err:
+        print(f"navreplay {args.command}: error: {err}", file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        print(
+            f"navreplay {args.command}: interrupted; nothing partial was left behind",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,228 @@
+"""Strapdown mechanization in the local-level navigation frame (NED), paper 001 eq. 1-3.
+
+The navigation state ``x`` is a float64 vector of ``NAV_DIM`` = 10 elements::
+
+    x = [lat_rad, lon_rad, h_m, v_n_mps, v_e_mps, v_d_mps, q_w, q_x, q_y, q_z]
+
+with ``q_wxyz`` rotating body FRD into NED (see ``pipeline.nav.rotations``). IMU samples are
+instantaneous specific force ``f_b`` (m/s^2) and angular rate ``w_ib_b`` (rad/s) in body FRD.
+Between two samples the inputs are interpolated linearly and the state is integrated with
+classical Runge-Kutta 4 in ``substeps`` steps (paper 001 uses 10 for its sigma points); the
+quaternion is renormalized after each step.
+
+``imu_from_motion`` is the exact inverse of ``nav_derivative``: the synthesizers derive their
+IMU from a trajectory with it, so forward integration of a noise-free synthesized IMU
+reproduces the trajectory up to integration error. Everything is numba-compiled
+(``cache=True``); estimator kernels call these functions directly.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from pipeline.nav.earth import E2, F64, I64, OMEGA_IE, A, gravity, omega_en_n, omega_ie_n
+from pipeline.nav.rotations import quat_to_dcm
+
+I_LAT, I_LON, I_H = 0, 1, 2
+I_VN, I_VE, I_VD = 3, 4, 5
+I_QW = 6
+NAV_DIM = 10
+
+
+@nb.njit(cache=True, inline="always")
+def _derivative_into(
+    x: F64, fx: float, fy: float, fz: float, wx: float, wy: float, wz: float, out: F64
+) -> None:
+    """Allocation-free core of ``nav_derivative``; writes dx/dt into ``out``."""
+    lat, h = x[I_LAT], x[I_H]
+    vn, ve, vd = x[I_VN], x[I_VE], x[I_VD]
+    qw, qx, qy, qz = x[I_QW], x[I_QW + 1], x[I_QW + 2], x[I_QW + 3]
+    sl, cl = math.sin(lat), math.cos(lat)
+    w2 = 1.0 - E2 * sl * sl
+    rn = A / math.sqrt(w2)
+    rm = rn * (1.0 - E2) / w2
+    # earth rate and transport rate in NED
+    ie_n, ie_d = OMEGA_IE * cl, -OMEGA_IE * sl
+    en_n, en_e, en_d = ve / (rn + h), -vn / (rm + h), -ve * sl / (cl * (rn + h))
+    # C_b^n from the quaternion
+    c00 = qw * qw + qx * qx - qy * qy - qz * qz
+    c01 = 2.0 * (qx * qy - qw * qz)
+    c02 = 2.0 * (qx * qz + qw * qy)
+    c10 = 2.0 * (qx * qy + qw * qz)
+    c11 = qw * qw - qx * qx + qy * qy - qz * qz
+    c12 = 2.0 * (qy * qz - qw * qx)
+    c20 = 2.0 * (qx * qz - qw * qy)
+    c21 = 2.0 * (qy * qz + qw * qx)
+    c22 = qw * qw - qx * qx - qy * qy + qz * qz
+    # eq. 1: position
+    out[I_LAT] = vn / (rm + h)
+    out[I_LON] = ve / ((rn + h) * cl)
+    out[I_H] = -vd
+    # eq. 2: velocity, with Coriolis and transport-rate terms and normal gravity
+    cwn, cwe, cwd = 2.0 * ie_n + en_n, en_e, 2.0 * ie_d + en_d
+    out[I_VN] = c00 * fx + c01 * fy + c02 * fz - (cwe * vd - cwd * ve)
+    out[I_VE] = c10 * fx + c11 * fy + c12 * fz - (cwd * vn - cwn * vd)
+    out[I_VD] = c20 * fx + c21 * fy + c22 * fz - (cwn * ve - cwe * vn) + gravity(lat, h)
+    # eq. 3: q_dot = 1/2 q * (0, w_nb_b), w_nb_b = w_ib_b - C_n^b (w_ie + w_en)
+    in_n, in_e, in_d = ie_n + en_n, en_e, ie_d + en_d
+    bx = wx - (c00 * in_n + c10 * in_e + c20 * in_d)
+    by = wy - (c01 * in_n + c11 * in_e + c21 * in_d)
+    bz = wz - (c02 * in_n + c12 * in_e + c22 * in_d)
+    out[I_QW] = 0.5 * (-qx * bx - qy * by - qz * bz)
+    out[I_QW + 1] = 0.5 * (qw * bx + qy * bz - qz * by)
+    out[I_QW + 2] = 0.5 * (qw * by - qx * bz + qz * bx)
+    out[I_QW + 3] = 0.5 * (qw * bz + qx * by - qy * bx)
+
+
+@nb.njit(cache=True)
+def nav_derivative(x: F64, f_b: F64, w_ib_b: F64) -> F64:
+    """Time derivative of the navigation state (paper 001 eq. 1-3).
+
+    Args:
+        x: navigation state, shape (10,).
+        f_b: specific force in body FRD, m/s^2, shape (3,).
+        w_ib_b: angular rate of body w.r.t. inertial space in body FRD, rad/s, shape (3,).
+
+    Returns:
+        dx/dt, shape (10,).
+    """
+    out = np.empty(NAV_DIM)
+    _derivative_into(x, f_b[0], f_b[1], f_b[2], w_ib_b[0], w_ib_b[1], w_ib_b[2], out)
+    return out
+
+
+@nb.njit(cache=True)
+def propagate_into(
+    x: F64, f0: F64, w0: F64, f1: F64, w1: F64, dt: float, substeps: int, out: F64, work: F64
+) -> None:
+    """Allocation-free ``propagate``: writes the result into ``out`` (may alias ``x``).
+
+    ``work`` is scratch space of shape (5, 10).
+    """
+    h = dt / substeps
+    y = work[0]
+    k1, k2, k3, k4 = work[1], work[2], work[3], work[4]
+    for j in range(NAV_DIM):
+        y[j] = x[j]
+    df = (f1[0] - f0[0], f1[1] - f0[1], f1[2] - f0[2])
+    dw = (w1[0] - w0[0], w1[1] - w0[1], w1[2] - w0[2])
+    for k in range(substeps):
+        a0 = k / substeps
+        am = (k + 0.5) / substeps
+        a1 = (k + 1.0) / substeps
+        _derivative_into(
+            y,
+            f0[0] + a0 * df[0],
+            f0[1] + a0 * df[1],
+            f0[2] + a0 * df[2],
+            w0[0] + a0 * dw[0],
+            w0[1] + a0 * dw[1],
+            w0[2] + a0 * dw[2],
+            k1,
+        )
+        for j in range(NAV_DIM):
+            k4[j] = y[j] + 0.5 * h * k1[j]
+        fmx, fmy, fmz = f0[0] + am * df[0], f0[1] + am * df[1], f0[2] + am * df[2]
+        wmx, wmy, wmz = w0[0] + am * dw[0], w0[1] + am * dw[1], w0[2] + am * dw[2]
+        _derivative_into(k4, fmx, fmy, fmz, wmx, wmy, wmz, k2)
+        for j in range(NAV_DIM):
+            k4[j] = y[j] + 0.5 * h * k2[j]
+        _derivative_into(k4, fmx, fmy, fmz, wmx, wmy, wmz, k3)
+        for j in range(NAV_DIM):
+            k4[j] = y[j] + h * k3[j]
+        for j in range(NAV_DIM):
+            k1[j] = k1[j] + 2.0 * k2[j] + 2.0 * k3[j]  # k2 is reused for the 4th slope
+        _derivative_into(
+            k4,
+            f0[0] + a1 * df[0],
+            f0[1] + a1 * df[1],
+            f0[2] + a1 * df[2],
+            w0[0] + a1 * dw[0],
+            w0[1] + a1 * dw[1],
+            w0[2] + a1 * dw[2],
+            k2,
+        )
+        for j in range(NAV_DIM):
+            y[j] = y[j] + (h / 6.0) * (k1[j] + k2[j])
+        n = math.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
+        s = 1.0 / n if y[6] >= 0.0 else -1.0 / n
+        for j in range(I_QW, I_QW + 4):
+            y[j] *= s
+    for j in range(NAV_DIM):
+        out[j] = y[j]
+
+
+@nb.njit(cache=True)
+def propagate(x: F64, f0: F64, w0: F64, f1: F64, w1: F64, dt: float, substeps: int) -> F64:
+    """Integrate the navigation state over ``dt`` seconds from IMU sample 0 to sample 1.
+
+    The inputs are interpolated linearly between the two samples; each of the ``substeps``
+    steps is a classical RK4 step, after which the quaternion is renormalized (scalar >= 0).
+
+    Returns:
+        the state at the time of sample 1, shape (10,).
+    """
+    out = np.empty(NAV_DIM)
+    propagate_into(x, f0, w0, f1, w1, dt, substeps, out, np.empty((5, NAV_DIM)))
+    return out
+
+
+@nb.njit(cache=True)
+def integrate(x0: F64, t_ns: I64, acc: F64, gyro: F64, substeps: int) -> F64:
+    """Free-inertial navigation: integrate IMU samples from the state ``x0`` at ``t_ns[0]``.
+
+    Args:
+        x0: navigation state at the first sample, shape (10,).
+        t_ns: sample times, int64 ns, strictly increasing, shape (N,).
+        acc: specific force, body FRD, m/s^2, shape (N, 3).
+        gyro: angular rate, body FRD, rad/s, shape (N, 3).
+        substeps: RK4 steps per sample interval.
+
+    Returns:
+        states at every sample time, shape (N, 10).
+    """
+    n = t_ns.shape[0]
+    out = np.empty((n, NAV_DIM))
+    out[0] = x0
+    work = np.empty((5, NAV_DIM))
+    for i in range(1, n):
+        dt = (t_ns[i] - t_ns[i - 1]) * 1e-9
+        propagate_into(
+            out[i - 1], acc[i - 1], gyro[i - 1], acc[i], gyro[i], dt, substeps, out[i], work
+        )
+    return out
+
+
+@nb.njit(cache=True)
+def imu_from_motion(x: F64, vdot_n: F64, w_nb_b: F64) -> tuple[F64, F64]:
+    """Exact IMU readings of a body moving with the given state and derivatives.
+
+    The inverse of ``nav_derivative``:
+    ``f_b = C_n^b (v_dot^n + (2 w_ie^n + w_en^n) x v^n - g^n)`` and
+    ``w_ib^b = w_nb^b + C_n^b (w_ie^n + w_en^n)``.
+
+    Args:
+        x: navigation state, shape (10,).
+        vdot_n: time derivative of the NED velocity components, m/s^2, shape (3,).
+        w_nb_b: angular rate of body w.r.t. NED, in body FRD, rad/s, shape (3,).
+
+    Returns:
+        (f_b, w_ib_b), each shape (3,).
+    """
+    lat, h = x[I_LAT], x[I_H]
+    v = x[I_VN : I_VN + 3]
+    c_bn = quat_to_dcm(x[I_QW : I_QW + 4])
+    w_ie = omega_ie_n(lat)
+    w_en = omega_en_n(lat, h, v[0], v[1])
+    cw = 2.0 * w_ie + w_en
+    cor = np.array(
+        [cw[1] * v[2] - cw[2] * v[1], cw[2] * v[0] - cw[0] * v[2], cw[0] * v[1] - cw[1] * v[0]]
+    )
+    a_n = vdot_n + cor
+    a_n[2] -= gravity(lat, h)
+    f_b = c_bn.T @ a_n
+    w_ib_b = w_nb_b + c_bn.T @ (w_ie + w_en)
+    return f_b, w_ib_b

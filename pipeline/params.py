@@ -1,0 +1,141 @@
+"""Typed parameters: ``params.yaml`` loaded into frozen dataclasses.
+
+Every knob of the pipeline lives in ``params.yaml``; stages read it through ``load_params``.
+Unknown or misspelled keys, wrong types, duplicated keys and missing sections are errors
+(``ParamsError``) naming the dotted key path.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+
+from pipeline.errors import ParamsError
+from pipeline.paramtypes import load_dataclass, to_plain
+
+DEFAULT_PARAMS = Path("params.yaml")
+_ID_RE = re.compile(r"^[a-z][a-z0-9_]*$")
+
+
+@dataclass(frozen=True)
+class SynthParams:
+    """``synth``: the synthesized datasets. ``seed`` seeds every random draw."""
+
+    seed: int
+
+
+@dataclass(frozen=True)
+class IngestParams:
+    """``ingest``: how logs become canonical tables.
+
+    Attributes:
+        strict: turn every recoverable defect (truncation, corrupt chunk ...) into an error.
+        reorder_window_s: out-of-order samples within this window are re-sorted; older dropped.
+        gap_factor: a gap is an interval longer than ``gap_factor`` nominal sample periods.
+    """
+
+    strict: bool
+    reorder_window_s: float
+    gap_factor: float
+
+    def __post_init__(self) -> None:
+        if self.reorder_window_s < 0:
+            raise ParamsError("ingest.reorder_window_s", "must be >= 0")
+        if self.gap_factor <= 1:
+            raise ParamsError("ingest.gap_factor", "must be > 1")
+
+
+@dataclass(frozen=True)
+class RunParams:
+    """``run``: which filters and scenarios the pipeline runs, and on which backend."""
+
+    backend: Literal["numba", "filterpy"]
+    filters: tuple[str, ...]
+    scenarios: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ReportParams:
+    """``report``: rendering of the HTML reports."""
+
+    figure_dpi: int
+
+    def __post_init__(self) -> None:
+        if not 50 <= self.figure_dpi <= 600:
+            raise ParamsError("report.figure_dpi", "must be within 50..600")
+
+
+@dataclass(frozen=True)
+class Params:
+    """The whole of ``params.yaml``."""
+
+    datasets: tuple[str, ...]
+    synth: SynthParams
+    ingest: IngestParams
+    run: RunParams
+    report: ReportParams
+
+    def __post_init__(self) -> None:
+        for i, ds in enumerate(self.datasets):
+            if not _ID_RE.match(ds):
+                raise ParamsError(
+                    f"datasets[{i}]", f"{ds!r} is not a dataset id (lowercase, digits, underscores)"
+                )
+        if len(set(self.datasets)) != len(self.datasets):
+            raise ParamsError("datasets", "lists a dataset twice")
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """A safe YAML loader that rejects a key given twice in one mapping."""
+
+
+def _construct_mapping(loader: _UniqueKeyLoader, node: yaml.MappingNode) -> dict[Any, Any]:
+    seen: dict[Any, Any] = {}
+    for key_node, value_node in node.value:
+        key = loader.construct_object(key_node)
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r}", key_node.start_mark
+            )
+        seen[key] = loader.construct_object(value_node, deep=True)
+    return seen
+
+
+_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
+def read_yaml(path: str | Path) -> Any:
+    """Parse a YAML file safely, rejecting duplicate keys; errors are ``ParamsError``."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as err:
+        raise ParamsError("", f"cannot read: {err.strerror}", source=str(path)) from err
+    try:
+        return yaml.load(text, Loader=_UniqueKeyLoader)
+    except yaml.YAMLError as err:
+        raise ParamsError("", f"not valid YAML: {err}", source=str(path)) from err
+
+
+def parse_params(data: object, *, source: str | None = None) -> Params:
+    """Build ``Params`` from a parsed mapping; raises ``ParamsError`` naming the key path."""
+    return load_dataclass(Params, data, source=source)
+
+
+def load_params(path: str | Path = DEFAULT_PARAMS) -> Params:
+    """Load and check ``params.yaml``."""
+    return parse_params(read_yaml(path), source=str(path))
+
+
+def section(params: Params, dotted: str) -> Any:
+    """The plain-data value at a dotted path (``"run"``, ``"synth.seed"``) for hashing."""
+    node: Any = to_plain(params)
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise ParamsError(dotted, "no such parameter section")
+        node = node[part]
+    return node

@@ -1,0 +1,39 @@
+"""Generate a synthesized dataset with exact truth, written as real log files.
+
+Datasets: seoul_campus_cw, seoul_campus_ccw (paper 001 land-vehicle drive), tractor_straight
+(paper 000), fwekf_reference (paper 004), car_speed_ramp (paper 003). Parameters and the seed
+come from the `synth` section of the parameter file; the same seed gives byte-identical files.
+
+examples:
+  navreplay synth seoul_campus_cw --out datasets/seoul_campus_cw/raw
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from pipeline.errors import NotBuiltError
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("name", metavar="NAME", help="synthesized dataset id")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="output directory for the log files and truth",
+    )
+    parser.add_argument(
+        "--params",
+        type=Path,
+        default=Path("params.yaml"),
+        help="parameter file (default: params.yaml)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    raise NotBuiltError(
+        "synthesizers arrive with the issue 'Synthesized datasets'; nothing was written"
+    )
