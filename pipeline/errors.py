@@ -2,26 +2,18 @@
 
 from __future__ import annotations
 
+from ingest.typed import KeyPathError
+
 
 class PipelineError(Exception):
     """Base class for errors raised by the pipeline package."""
 
 
-class ParamsError(PipelineError):
+class ParamsError(KeyPathError, PipelineError):
     """A parameter file is malformed: unknown or misspelled key, wrong type, missing section.
 
-    Args:
-        key_path: dotted path of the offending key, e.g. ``run.filters[2]``.
-        reason: what is wrong.
-        source: the parameter file, if known.
+    Carries ``key_path`` (e.g. ``run.filters[2]``), ``reason`` and ``source`` (the file).
     """
-
-    def __init__(self, key_path: str, reason: str, *, source: str | None = None) -> None:
-        self.key_path = key_path
-        self.reason = reason
-        self.source = source
-        where = f"{source}: " if source else ""
-        super().__init__(f"{where}{key_path or '<top level>'}: {reason}")
 
 
 class NotBuiltError(PipelineError):

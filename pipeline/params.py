@@ -14,8 +14,8 @@ from typing import Any, Literal
 
 import yaml
 
+from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
-from pipeline.paramtypes import load_dataclass, to_plain
 
 DEFAULT_PARAMS = Path("params.yaml")
 _ID_RE = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -44,9 +44,9 @@ class IngestParams:
 
     def __post_init__(self) -> None:
         if self.reorder_window_s < 0:
-            raise ParamsError("ingest.reorder_window_s", "must be >= 0")
+            raise FieldError("reorder_window_s", "must be >= 0")
         if self.gap_factor <= 1:
-            raise ParamsError("ingest.gap_factor", "must be > 1")
+            raise FieldError("gap_factor", "must be > 1")
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,7 @@ class ReportParams:
 
     def __post_init__(self) -> None:
         if not 50 <= self.figure_dpi <= 600:
-            raise ParamsError("report.figure_dpi", "must be within 50..600")
+            raise FieldError("figure_dpi", "must be within 50..600")
 
 
 @dataclass(frozen=True)
@@ -82,11 +82,11 @@ class Params:
     def __post_init__(self) -> None:
         for i, ds in enumerate(self.datasets):
             if not _ID_RE.match(ds):
-                raise ParamsError(
+                raise FieldError(
                     f"datasets[{i}]", f"{ds!r} is not a dataset id (lowercase, digits, underscores)"
                 )
         if len(set(self.datasets)) != len(self.datasets):
-            raise ParamsError("datasets", "lists a dataset twice")
+            raise FieldError("datasets", "lists a dataset twice")
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -123,7 +123,7 @@ def read_yaml(path: str | Path) -> Any:
 
 def parse_params(data: object, *, source: str | None = None) -> Params:
     """Build ``Params`` from a parsed mapping; raises ``ParamsError`` naming the key path."""
-    return load_dataclass(Params, data, source=source)
+    return load_dataclass(Params, data, source=source, error=ParamsError)
 
 
 def load_params(path: str | Path = DEFAULT_PARAMS) -> Params:

@@ -10,9 +10,9 @@ from typing import Any, Literal
 import pytest
 import yaml
 
+from ingest.typed import KeyPathError, load_dataclass
 from pipeline.errors import ParamsError
 from pipeline.params import Params, load_params, parse_params, read_yaml, section
-from pipeline.paramtypes import load_dataclass
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -148,9 +148,9 @@ def test_nested_mappings_and_fixed_tuples() -> None:
     obj = load_dataclass(_Outer, {"mode": "a", "table": {"x": {"k": [1, 2.5]}}})
     assert obj.table["x"].k == (1.0, 2.5)
     assert obj.table["x"].opt is None
-    with pytest.raises(ParamsError) as err:
+    with pytest.raises(KeyPathError) as err:
         load_dataclass(_Outer, {"mode": "a", "table": {"x": {"k": [1, 2, 3]}}})
     assert err.value.key_path == "table.x.k"
-    with pytest.raises(ParamsError) as err:
+    with pytest.raises(KeyPathError) as err:
         load_dataclass(_Outer, {"mode": "a", "table": {"x": {"k": [1, 2], "opt": 1.5}}})
     assert err.value.key_path == "table.x.opt"
