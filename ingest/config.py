@@ -104,11 +104,14 @@ class GnssConfig:
         topic: topic or message to read (default: automatic).
         instance: receiver instance (default: the first).
         lever_arm_m: antenna position relative to the IMU in body FRD, m.
+        latlon_units: ``rad`` scales lat/lon to degrees (recorded in provenance); ``deg``
+            accepts degrees as they are; ``auto`` refuses values that look like radians.
     """
 
     topic: str | None = None
     instance: int | None = None
     lever_arm_m: Vec3 = (0.0, 0.0, 0.0)
+    latlon_units: Literal["auto", "deg", "rad"] = "auto"
 
 
 @dataclass(frozen=True)
@@ -147,6 +150,12 @@ class CsvSource:
         scale: canonical column name -> factor applied after reading (e.g. 0.0174533 deg->rad).
         delimiter: field separator; ``whitespace`` for runs of blanks.
         comment: lines starting with this are skipped.
+        time_base: the clock of ``time_column`` (``ingest.timebase``): ``gps`` (since
+            1980-01-06), ``utc`` (POSIX) or ``recorder`` (boot time, unknown epoch).
+        frame: axis convention of vector columns: ``frd``/``ned`` (canonical) or
+            ``flu``/``enu`` (converted at ingest).
+        constants: canonical column name -> value for every row, for columns the file lacks
+            (e.g. ``fix_type: 3`` for a receiver log that only holds 3-D fixes).
     """
 
     path: str
@@ -157,6 +166,9 @@ class CsvSource:
     scale: dict[str, float] = field(default_factory=dict)
     delimiter: str = ","
     comment: str = "#"
+    time_base: Literal["gps", "utc", "recorder"] = "recorder"
+    frame: Literal["frd", "flu"] = "frd"
+    constants: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.table not in _TABLES:
