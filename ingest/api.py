@@ -210,7 +210,9 @@ def _ingest(
             if n == 0:
                 warnings.append(f"table {t} ({plans[TableName(t)].key}) is empty")
                 log.warning("table %s (%s) is empty", t, plans[TableName(t)].key)
+        checks = _cross_file_checks(sinks, names, warnings)
         report = _report(opened, plans, sinks, recon, options, warnings, names)
+        report["time_base"]["checks"] = checks
         meta = DatasetMeta(
             dataset=config.id,
             time_base=recon.base.value,
@@ -243,6 +245,41 @@ def _check_definitions(sinks: dict[TableName, TableSink], opened: list[_Log]) ->
                 hint="the log's message definition does not describe its payloads; exclude "
                 "the topic or fix the definition",
             )
+
+
+def _cross_file_checks(
+    sinks: dict[TableName, TableSink], names: list[str], warnings: list[str]
+) -> list[str]:
+    """Tables from different files must overlap in time once on one base.
+
+    Streams of one drive recorded by different devices (a bag and a receiver's RINEX) that do
+    not overlap at all were most likely put on the wrong clock (a UTC/GPS or boot-time
+    mix-up); the gap is reported as a warning with its size.
+    """
+    spans = []
+    for t, sink in sinks.items():
+        a = sink.audit
+        if a.first_t_ns is not None and a.last_t_ns is not None:
+            files = {names[s.file_index] for s in sink.plan.sources}
+            spans.append((t.value, files, a.first_t_ns, a.last_t_ns))
+    checks: list[str] = []
+    for i, (t1, f1, a1, b1) in enumerate(spans):
+        for t2, f2, a2, b2 in spans[i + 1 :]:
+            if f1 == f2:
+                continue
+            overlap = min(b1, b2) - max(a1, a2)
+            if overlap >= 0:
+                checks.append(f"{t1} and {t2} (different files) overlap for {overlap * 1e-9:.1f} s")
+                continue
+            text = (
+                f"{t1} ({', '.join(sorted(f1))}) and {t2} ({', '.join(sorted(f2))}) do not overlap "
+                f"in time: {-overlap * 1e-9:.3f} s apart on the dataset's time base; check their "
+                "clocks (UTC vs GPS, boot time) and time_base in dataset.yaml"
+            )
+            checks.append(text)
+            warnings.append(text)
+            log.warning("%s", text)
+    return checks
 
 
 def _file_order(opened: list[_Log]) -> list[int]:

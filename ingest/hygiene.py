@@ -169,39 +169,47 @@ class StreamCleaner:
 
     # ------------------------------------------------------------------------------ admission
     def _admit(self, rows: Rows, path: Path, *, final: bool) -> Rows | None:
-        """Drop late samples, re-base clock steps; return admitted rows (arrival order)."""
+        """Drop late samples, re-base clock steps; return admitted rows (arrival order).
+
+        One running maximum serves every decision of a pass (late samples never raise it);
+        only a clock step, which shifts what follows, starts a new pass. Cost: O(n) per batch
+        plus O(1) per late sample.
+        """
         keep = np.ones(len(rows), bool)
         start = 0
         while start < len(rows):
-            t = rows.t
-            prev = self._max_t if self._max_t is not None else int(t[start])
-            runmax = np.maximum.accumulate(np.concatenate([[prev], t[start:]]))
-            late = t[start:] < runmax[:-1] - self.window_ns
-            ooo = (t[start:] < runmax[:-1]) & ~late
-            if not late.any():
-                self.counts.reordered += int(ooo.sum())
-                if ooo.any():
-                    self._strict(
-                        path, rows.offsets[start + int(np.flatnonzero(ooo)[0])], "re-sorted"
-                    )
-                self._max_t = int(runmax[-1])
+            seg = rows.t[start:]
+            prev = self._max_t if self._max_t is not None else int(seg[0])
+            before = np.maximum.accumulate(np.concatenate([[prev], seg]))[:-1]
+            late = seg < before - self.window_ns
+            stop, step_at = len(rows), None
+            skip_until = 0
+            for i in (np.flatnonzero(late) + start).tolist():
+                if i < skip_until:
+                    continue
+                run = _late_run(rows.t, i, int(before[i - start]) - self.window_ns)
+                if run >= STEP_MIN_SAMPLES:
+                    stop = step_at = i
+                    break
+                if i + run == len(rows) and not final:  # undecided: wait for the next batch
+                    self._held = rows.take(np.arange(i, len(rows)))
+                    keep[i:] = False
+                    stop = i
+                    break
+                self._drop_late(rows, np.arange(i, i + run), path)
+                keep[i : i + run] = False
+                skip_until = i + run
+            n = stop - start
+            ooo = np.flatnonzero((seg[:n] < before[:n]) & ~late[:n])
+            if ooo.size:
+                self._strict(path, int(rows.offsets[start + int(ooo[0])]), "re-sorted")
+                self.counts.reordered += int(ooo.size)
+            if n:
+                self._max_t = max(int(before[n - 1]), int(seg[n - 1]))
+            if step_at is None:
                 break
-            i = start + int(np.flatnonzero(late)[0])
-            self.counts.reordered += int(ooo[: i - start].sum())
-            self._max_t = int(runmax[i - start])
-            run = _late_run(t, i, self._max_t - self.window_ns)
-            if i + run == len(rows) and run < STEP_MIN_SAMPLES and not final:
-                self._held = rows.take(np.arange(i, len(rows)))
-                self._held_path = str(path)
-                keep[i:] = False
-                break
-            if run >= STEP_MIN_SAMPLES:
-                self._step(rows, i, path)
-                start = i
-                continue
-            self._drop_late(rows, np.arange(i, i + run), path)
-            keep[i : i + run] = False
-            start = i + run
+            self._step(rows, step_at, path)
+            start = step_at
         if not keep.any():
             return None
         return rows.take(np.flatnonzero(keep)) if not keep.all() else rows
@@ -302,10 +310,11 @@ class StreamCleaner:
 
 
 def _late_run(t: I64Array, i: int, threshold: int) -> int:
-    """Length of the run from ``i`` of samples below ``threshold`` that do not decrease."""
-    n = len(t)
+    """Length of the run from ``i`` of samples below ``threshold`` that do not decrease,
+    counted up to ``STEP_MIN_SAMPLES`` (all that the step decision needs)."""
+    end = min(len(t), i + STEP_MIN_SAMPLES)
     j = i + 1
-    while j < n and t[j] < threshold and t[j] >= t[j - 1]:
+    while j < end and t[j] < threshold and t[j] >= t[j - 1]:
         j += 1
     return j - i
 

@@ -235,12 +235,18 @@ def write_mcap(
     return path
 
 
-def write_bag1(path: Path, streams: list[Stream], *, compression: str | None = None) -> Path:
+def write_bag1(
+    path: Path,
+    streams: list[Stream],
+    *,
+    compression: str | None = None,
+    chunk_threshold: int = 16 * 1024,
+) -> Path:
     """A ROS 1 bag through rosbags' writer (``compression``: None, ``bz2`` or ``lz4``)."""
     w = Bag1Writer(path)
     if compression is not None:
         w.set_compression(getattr(Bag1Writer.CompressionFormat, compression.upper()))
-    w.chunk_threshold = 16 * 1024
+    w.chunk_threshold = chunk_threshold
     with w:
         conns = [
             w.add_connection(

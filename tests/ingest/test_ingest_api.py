@@ -212,6 +212,37 @@ def test_utc_and_gps_time_streams_are_reconciled_with_leap_seconds(tmp_path: Pat
     imu_t = pq.read_table(tmp_path / "out" / "imu.parquet")["t_ns"].to_numpy()
     gnss_t = pq.read_table(tmp_path / "out" / "gnss.parquet")["t_ns"].to_numpy()
     np.testing.assert_array_equal(imu_t[::50], gnss_t)
+    assert tb["checks"] == ["imu and gnss (different files) overlap for 4.5 s"]
+    assert result.report["warnings"] == []
+
+
+def test_files_on_mismatched_clocks_are_flagged(tmp_path: Path) -> None:
+    # The receiver file claims UTC but is stamped on GPS time since 1980: far apart.
+    data = imu_data(200)
+    log = write_mcap(tmp_path / "a.mcap", [imu_stream(data)])
+    csv = tmp_path / "fix.csv"
+    t_gps = data.t_ns[::50] - GPS_EPOCH_UNIX_NS + 18 * NS_PER_S
+    csv.write_text("t,lat,lon,h\n" + "".join(f"{t},37.5,127.0,50.0\n" for t in t_gps.tolist()))
+    cfg = parse_dataset_config(
+        {
+            "id": "x",
+            "csv": [
+                {
+                    "path": "fix.csv",
+                    "table": "gnss",
+                    "time_column": "t",
+                    "time_unit": "ns",
+                    "time_base": "utc",
+                    "constants": {"fix_type": 3},
+                    "columns": {"lat_deg": "lat", "lon_deg": "lon", "alt_m": "h"},
+                }
+            ],
+        }
+    )
+    result = ingest([log, csv], tmp_path / "out", config=cfg, config_dir=tmp_path)
+    (warning,) = result.report["warnings"]
+    assert "do not overlap" in warning
+    assert "fix.csv" in warning
 
 
 NAV_TRUTH = """std_msgs/Header header
