@@ -17,15 +17,15 @@ Topics (``RosTopics``):
 
 Header stamps and log times are UTC nanoseconds since the Unix epoch, as a ROS system records:
 tables on the GPS time base are shifted by the GPS-UTC leap seconds. CDR (ROS 2) and ROS 1
-serialization are rosbags'; the MCAP container is written with the ``mcap`` library (zstd
-chunks, ``ros2msg`` schemas), the bag with ``rosbags.rosbag1`` (LZ4 chunks). Output is
-deterministic: the same tables give byte-identical files.
+serialization are rosbags' (``ingest.writers.rosserial`` replicates a rosbags-serialized
+template for the high-rate fixed-layout streams); the MCAP container is written with the
+``mcap`` library (zstd chunks, ``ros2msg`` schemas), the bag with ``rosbags.rosbag1`` (LZ4
+chunks). Output is deterministic: the same tables give byte-identical files.
 """
 
 from __future__ import annotations
 
-import heapq
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -39,8 +39,9 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from ingest.atomic import atomic_path
-from ingest.gpstime import NS_PER_S, utc_unix_ns_from_gps
+from ingest.gpstime import utc_unix_ns_from_gps
 from ingest.tables import package_version
+from ingest.writers.rosserial import Stream, encoder
 
 TRUTH_MSGTYPE = "navreplay_msgs/msg/NavTruth"
 _IMU, _FIX = "sensor_msgs/msg/Imu", "sensor_msgs/msg/NavSatFix"
@@ -102,65 +103,66 @@ def _col(table: pa.Table, name: str) -> np.ndarray:
     return np.asarray(table.column(name).to_numpy(zero_copy_only=False), dtype=np.float64)
 
 
-_Stream = tuple[str, str, np.ndarray, Callable[[int, Any], Any]]
-
-
-def _streams(
-    tables: Mapping[str, pa.Table], store: Typestore, opts: RosOptions, ros_version: int
-) -> list[_Stream]:
-    """(topic, msgtype, stamps, make(i, header) -> message) for each table present."""
+def _streams(tables: Mapping[str, pa.Table], store: Typestore, opts: RosOptions) -> list[Stream]:
+    """The ROS streams of the tables present, in a fixed topic order."""
     T = store.types
     tp = opts.topics
-    Vec, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
-    out: list[_Stream] = []
+    out: list[Stream] = []
     if "imu" in tables:
-        imu = tables["imu"]
-        a = np.stack([_col(imu, f"acc_{k}_mps2") for k in "xyz"], axis=-1) * [1.0, -1.0, -1.0]
-        w = np.stack([_col(imu, f"gyro_{k}_radps") for k in "xyz"], axis=-1) * [1.0, -1.0, -1.0]
-        ocov = np.zeros(9)
-        ocov[0] = -1.0
-        acov, gcov = (
-            np.eye(3).ravel() * opts.accel_var_m2ps4,
-            np.eye(3).ravel() * opts.gyro_var_rad2ps2,
-        )
-        quat = Quat(x=0.0, y=0.0, z=0.0, w=1.0)
-
-        def make_imu(i: int, hdr: Any) -> Any:
-            return T[_IMU](
-                header=hdr,
-                orientation=quat,
-                orientation_covariance=ocov,
-                angular_velocity=Vec(x=w[i, 0], y=w[i, 1], z=w[i, 2]),
-                angular_velocity_covariance=gcov,
-                linear_acceleration=Vec(x=a[i, 0], y=a[i, 1], z=a[i, 2]),
-                linear_acceleration_covariance=acov,
-            )
-
-        out.append((tp.imu, _IMU, imu.column("t_ns").to_numpy(), make_imu))
+        out.append(_imu_stream(tables["imu"], T, opts))
     if "gnss" in tables:
-        out.extend(_gnss_streams(tables["gnss"], T, tp))
+        out.extend(_gnss_streams(tables["gnss"], T, opts))
     if "truth" in tables:
         truth = tables["truth"]
         names = [f.name for f in truth.schema if f.name != "t_ns"]
         cols = np.stack([_col(truth, n) for n in names], axis=-1)
 
-        def make_truth(i: int, hdr: Any) -> Any:
-            return T[TRUTH_MSGTYPE](hdr, *cols[i].tolist())
+        def make_truth(v: np.ndarray, i: int, hdr: Any) -> Any:
+            return T[TRUTH_MSGTYPE](hdr, *v.tolist())
 
-        out.append((tp.truth, TRUTH_MSGTYPE, truth.column("t_ns").to_numpy(), make_truth))
+        stamps = _stamps(truth.column("t_ns").to_numpy(), opts.time_base)
+        out.append(Stream(tp.truth, TRUTH_MSGTYPE, stamps, tp.truth_frame, cols, make_truth, True))
     return out
 
 
-def _gnss_streams(gnss: pa.Table, T: Mapping[str, Any], tp: RosTopics) -> list[_Stream]:
-    lat, lon, alt = _col(gnss, "lat_deg"), _col(gnss, "lon_deg"), _col(gnss, "alt_m")
-    h_acc, v_acc = _col(gnss, "h_acc_m"), _col(gnss, "v_acc_m")
+def _imu_stream(imu: pa.Table, T: Mapping[str, Any], opts: RosOptions) -> Stream:
+    flu = np.array([1.0, -1.0, -1.0])
+    a = np.stack([_col(imu, f"acc_{k}_mps2") for k in "xyz"], axis=-1) * flu
+    w = np.stack([_col(imu, f"gyro_{k}_radps") for k in "xyz"], axis=-1) * flu
+    ocov = np.zeros(9)
+    ocov[0] = -1.0
+    acov = np.eye(3).ravel() * opts.accel_var_m2ps4
+    gcov = np.eye(3).ravel() * opts.gyro_var_rad2ps2
+    Vec = T["geometry_msgs/msg/Vector3"]
+    quat = T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
+
+    def make_imu(v: np.ndarray, i: int, hdr: Any) -> Any:
+        return T[_IMU](
+            header=hdr,
+            orientation=quat,
+            orientation_covariance=ocov,
+            angular_velocity=Vec(x=v[3], y=v[4], z=v[5]),
+            angular_velocity_covariance=gcov,
+            linear_acceleration=Vec(x=v[0], y=v[1], z=v[2]),
+            linear_acceleration_covariance=acov,
+        )
+
+    stamps = _stamps(imu.column("t_ns").to_numpy(), opts.time_base)
+    values = np.concatenate([a, w], axis=1)
+    return Stream(opts.topics.imu, _IMU, stamps, opts.topics.imu_frame, values, make_imu, True)
+
+
+def _gnss_streams(gnss: pa.Table, T: Mapping[str, Any], opts: RosOptions) -> list[Stream]:
+    tp = opts.topics
+    pos = np.stack([_col(gnss, n) for n in ("lat_deg", "lon_deg", "alt_m")], axis=-1)
+    acc = np.stack([_col(gnss, "h_acc_m"), _col(gnss, "v_acc_m")], axis=-1)
     vel = np.stack([_col(gnss, f"vel_{k}_mps") for k in "ned"], axis=-1)
     s_acc = (
         _col(gnss, "speed_acc_mps")
         if "speed_acc_mps" in gnss.column_names
         else np.full(gnss.num_rows, np.nan)
     )
-    fix_ok = np.isfinite(lat) & np.isfinite(lon) & (gnss.column("fix_type").to_numpy() >= 2)
+    fix_ok = np.isfinite(pos[:, :2]).all(axis=1) & (gnss.column("fix_type").to_numpy() >= 2)
     Status, Vec = T["sensor_msgs/msg/NavSatStatus"], T["geometry_msgs/msg/Vector3"]
     Twist, TwistCov = T["geometry_msgs/msg/Twist"], T["geometry_msgs/msg/TwistWithCovariance"]
     zero = Vec(x=0.0, y=0.0, z=0.0)
@@ -169,88 +171,73 @@ def _gnss_streams(gnss: pa.Table, T: Mapping[str, Any], tp: RosTopics) -> list[_
         Status(status=_STATUS_NO_FIX, service=_SERVICE_GPS),
     )
 
-    def make_fix(i: int, hdr: Any) -> Any:
+    def make_fix(v: np.ndarray, i: int, hdr: Any) -> Any:
         cov = np.zeros(9)
-        cov[0], cov[4], cov[8] = h_acc[i] ** 2, h_acc[i] ** 2, v_acc[i] ** 2
+        cov[0], cov[4], cov[8] = v[3] ** 2, v[3] ** 2, v[4] ** 2
         return T[_FIX](
             header=hdr,
             status=ok if fix_ok[i] else bad,
-            latitude=lat[i],
-            longitude=lon[i],
-            altitude=alt[i],
+            latitude=v[0],
+            longitude=v[1],
+            altitude=v[2],
             position_covariance=cov,
             position_covariance_type=_COV_DIAGONAL_KNOWN,
         )
 
-    def make_vel(i: int, hdr: Any) -> Any:
+    def make_vel(v: np.ndarray, i: int, hdr: Any) -> Any:
         cov = np.zeros(36)
-        cov[0] = cov[7] = cov[14] = s_acc[i] ** 2
-        lin = Vec(x=vel[i, 1], y=vel[i, 0], z=-vel[i, 2])
+        cov[0] = cov[7] = cov[14] = v[3] ** 2
+        lin = Vec(x=v[1], y=v[0], z=-v[2])
         return T[_VEL](
             header=hdr, twist=TwistCov(twist=Twist(linear=lin, angular=zero), covariance=cov)
         )
 
-    t = gnss.column("t_ns").to_numpy()
-    out: list[_Stream] = [(tp.fix, _FIX, t, make_fix)]
+    stamps = _stamps(gnss.column("t_ns").to_numpy(), opts.time_base)
+    fix_values = np.concatenate([pos, acc], axis=1)
+    out = [Stream(tp.fix, _FIX, stamps, tp.gnss_frame, fix_values, make_fix, False)]
     if not np.all(np.isnan(vel)):
-        out.append((tp.vel, _VEL, t, make_vel))
+        vel_values = np.concatenate([vel, s_acc[:, None]], axis=1)
+        out.append(Stream(tp.vel, _VEL, stamps, tp.gnss_frame, vel_values, make_vel, False))
     return out
 
 
-def _frame(topic: str, tp: RosTopics) -> str:
-    if topic == tp.imu:
-        return tp.imu_frame
-    if topic in (tp.fix, tp.vel):
-        return tp.gnss_frame
-    return tp.truth_frame
-
-
-def _keyed(stamps: np.ndarray, k: int) -> Iterator[tuple[int, int, int]]:
-    return ((int(t), k, i) for i, t in enumerate(stamps.tolist()))
-
-
 def _merged(
-    streams: list[_Stream], store: Typestore, opts: RosOptions, ros_version: int
-) -> Iterator[tuple[int, int, Any]]:
-    """(stream index, stamp ns, message) of all streams in time order (ties: stream order)."""
-    Header, Time = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
-    stamps = [_stamps(s[2], opts.time_base) for s in streams]
-    frames = [_frame(s[0], opts.topics) for s in streams]
-    order = heapq.merge(*(_keyed(st, k) for k, st in enumerate(stamps)))
-    for t, k, i in order:
-        sec, nsec = divmod(t, NS_PER_S)
-        stamp = Time(sec=sec, nanosec=nsec)
-        hdr = (
-            Header(seq=i, stamp=stamp, frame_id=frames[k])
-            if ros_version == 1
-            else Header(stamp=stamp, frame_id=frames[k])
-        )
-        yield k, t, streams[k][3](i, hdr)
+    streams: list[Stream], store: Typestore, ros_version: int
+) -> Iterator[tuple[int, int, bytes]]:
+    """(stream index, stamp ns, serialized message) of all streams in time order.
+
+    Ties in time go by stream order, then row order.
+    """
+    serialize = store.serialize_ros1 if ros_version == 1 else store.serialize_cdr
+    encode = [encoder(s, store.types, serialize, ros_version) for s in streams]
+    t = np.concatenate([s.stamps_ns for s in streams])
+    k = np.concatenate([np.full(len(s.stamps_ns), j) for j, s in enumerate(streams)])
+    i = np.concatenate([np.arange(len(s.stamps_ns)) for s in streams])
+    order = np.lexsort((i, k, t))
+    for kk, ii, tt in zip(k[order].tolist(), i[order].tolist(), t[order].tolist(), strict=True):
+        yield kk, tt, encode[kk](ii)
 
 
 def write_mcap(path: str | Path, tables: Mapping[str, pa.Table], opts: RosOptions) -> None:
     """Write the tables as a ROS 2 MCAP file (CDR messages, ``ros2msg`` schemas), atomically."""
     store = typestore(2, tables.get("truth"))
-    streams = _streams(tables, store, opts, 2)
+    streams = _streams(tables, store, opts)
     with atomic_path(path) as tmp, tmp.open("wb") as fh:
         writer = McapWriter(fh, compression=CompressionType.ZSTD, chunk_size=1 << 20)
         writer.start(profile="ros2", library=f"navreplay {package_version()}")
         channels = []
-        for topic, msgtype, _, _ in streams:
+        for s in streams:
             schema = writer.register_schema(
-                name=msgtype,
+                name=s.msgtype,
                 encoding="ros2msg",
-                data=store.generate_msgdef(msgtype, ros_version=2)[0].encode(),
+                data=store.generate_msgdef(s.msgtype, ros_version=2)[0].encode(),
             )
             channels.append(
-                writer.register_channel(topic=topic, message_encoding="cdr", schema_id=schema)
+                writer.register_channel(topic=s.topic, message_encoding="cdr", schema_id=schema)
             )
         seq = [0] * len(streams)
-        for k, t, msg in _merged(streams, store, opts, 2):
-            data = store.serialize_cdr(msg, streams[k][1])
-            writer.add_message(
-                channels[k], log_time=t, data=bytes(data), publish_time=t, sequence=seq[k]
-            )
+        for k, t, data in _merged(streams, store, 2):
+            writer.add_message(channels[k], log_time=t, data=data, publish_time=t, sequence=seq[k])
             seq[k] += 1
         writer.finish()  # type: ignore[no-untyped-call]
 
@@ -258,14 +245,11 @@ def write_mcap(path: str | Path, tables: Mapping[str, pa.Table], opts: RosOption
 def write_bag(path: str | Path, tables: Mapping[str, pa.Table], opts: RosOptions) -> None:
     """Write the tables as a ROS 1 bag (v2.0, LZ4-compressed chunks), atomically."""
     store = typestore(1, tables.get("truth"))
-    streams = _streams(tables, store, opts, 1)
+    streams = _streams(tables, store, opts)
     with atomic_path(path) as tmp:
         bag = Bag1Writer(tmp)
         bag.set_compression(Bag1Writer.CompressionFormat.LZ4)
         with bag:
-            conns = [
-                bag.add_connection(topic, msgtype, typestore=store)
-                for topic, msgtype, _, _ in streams
-            ]
-            for k, t, msg in _merged(streams, store, opts, 1):
-                bag.write(conns[k], t, store.serialize_ros1(msg, streams[k][1]))
+            conns = [bag.add_connection(s.topic, s.msgtype, typestore=store) for s in streams]
+            for k, t, data in _merged(streams, store, 1):
+                bag.write(conns[k], t, data)

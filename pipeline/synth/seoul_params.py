@@ -199,8 +199,10 @@ class SeoulCampusParams:
             raise FieldError("start_gps", f"not an ISO time: {err}") from err
         if stamp != stamp.astype("datetime64[s]"):
             raise FieldError("start_gps", "must be whole seconds")
-        if not 0 <= self.stationary_s < self.duration_s:
-            raise FieldError("stationary_s", "must be >= 0 and shorter than duration_s")
+        if self.duration_s <= 0:
+            raise FieldError("duration_s", "must be > 0")
+        if self.stationary_s < 0:
+            raise FieldError("stationary_s", "must be >= 0 (>= duration_s: at rest throughout)")
         if self.imu_rate_hz <= 0 or self.gnss_rate_hz <= 0:
             raise FieldError("imu_rate_hz", "rates must be positive")
         if self.imu_rate_hz % self.gnss_rate_hz or 1_000_000_000 % self.imu_rate_hz:

@@ -4,7 +4,7 @@ carry exactly the table values, in REP-103 axes and UTC stamps."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pyarrow as pa
@@ -15,7 +15,7 @@ from rosbags.highlevel import AnyReader
 
 from ingest.gpstime import NS_PER_S, gps_from_calendar
 from ingest.schema import from_columns
-from ingest.writers import ros
+from ingest.writers import ros, rosserial
 
 T0 = gps_from_calendar("2026-11-18T02:30:00")
 UTC0 = int(np.datetime64("2026-11-18T02:29:42", "ns").astype(np.int64))  # 18 leap seconds
@@ -170,3 +170,19 @@ def test_truth_definition_names_the_columns(tables: dict[str, pa.Table]) -> None
     text = ros.truth_msgdef(tables["truth"])
     assert text.splitlines()[0] == "std_msgs/Header header"
     assert "float64 clock_bias_m" in text.splitlines()
+
+
+@pytest.mark.parametrize("ros_version", [1, 2])
+def test_fast_serialization_equals_rosbags_message_by_message(
+    tables: dict[str, pa.Table], ros_version: Literal[1, 2]
+) -> None:
+    store = ros.typestore(ros_version, tables["truth"])
+    serialize = store.serialize_ros1 if ros_version == 1 else store.serialize_cdr
+    for stream in ros._streams(tables, store, OPTS):
+        if not stream.fixed:
+            continue
+        fast = rosserial.bulk_serialize(stream, store.types, serialize, ros_version)
+        assert fast is not None, stream.topic
+        slow = rosserial.encoder(stream._replace(fixed=False), store.types, serialize, ros_version)
+        for i in (0, 1, len(stream.stamps_ns) - 1):
+            assert fast[i].tobytes() == slow(i), (stream.topic, i)

@@ -266,3 +266,17 @@ def test_dataset_descriptors_repeat_the_simulated_sensors(repo_params: Params) -
         assert cfg.gnss.lever_arm_m == p.lever_arm_m
         assert cfg.logs == (f"raw/{name}.mcap", f"raw/{name}.obs", f"raw/{name}.nav")
         assert set(cfg.required) == {"imu", "gnss", "gnss_obs", "truth"}
+
+
+def test_a_drive_shorter_than_the_rest_stays_at_rest(seoul: SeoulCampusParams) -> None:
+    p = dataclasses.replace(seoul, duration_s=30.0, noise_free=True)  # stationary_s is 60
+    result = simulate(p, seed=3, variant="ccw")
+    truth, imu = result.tables["truth"], result.tables["imu"]
+    assert truth.num_rows == 3001
+    assert np.abs(_np(truth, "vel_n_mps", "vel_e_mps", "vel_d_mps")).max() == 0.0
+    f = _np(imu, "acc_x_mps2", "acc_y_mps2", "acc_z_mps2")
+    g = earth.gravity(math.radians(seoul.lat_deg), seoul.alt_m)
+    np.testing.assert_allclose(np.linalg.norm(f, axis=1), g, rtol=1e-12)
+    w = _np(imu, "gyro_x_radps", "gyro_y_radps", "gyro_z_radps")
+    np.testing.assert_allclose(np.linalg.norm(w, axis=1), earth.OMEGA_IE, rtol=1e-9)
+    assert result.tables["gnss_obs"].num_rows > 4 * 31
