@@ -6,18 +6,22 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pytest
 
 from ingest.config import load_dataset_config
+from ingest.gnss import C_MPS, Ephemeris, select, transmit_state
+from ingest.writers import rinex
 from pipeline.nav import earth, spp
 from pipeline.nav import mechanization as mech
 from pipeline.nav.rotations import euler_to_dcm, euler_to_quat
 from pipeline.params import Params
 from pipeline.synth import SynthResult
 from pipeline.synth.seoul_campus import SeoulCampusParams, route, simulate
+from tests.ingest.navfile import read_gps_nav
 from tests.pipeline.synth.conftest import REPO
 
 BIAS_COLUMNS = {
@@ -280,3 +284,27 @@ def test_a_drive_shorter_than_the_rest_stays_at_rest(seoul: SeoulCampusParams) -
     w = _np(imu, "gyro_x_radps", "gyro_y_radps", "gyro_z_radps")
     np.testing.assert_allclose(np.linalg.norm(w, axis=1), earth.OMEGA_IE, rtol=1e-9)
     assert result.tables["gnss_obs"].num_rows > 4 * 31
+
+
+def test_the_observables_are_reproducible_from_the_rinex_navigation_file(
+    short_clean: SynthResult, seoul: SeoulCampusParams, tmp_path: Path
+) -> None:
+    assert short_clean.ephemeris is not None
+    rinex.write_nav(tmp_path / "x.nav", short_clean.ephemeris)
+    back = read_gps_nav(tmp_path / "x.nav")
+    for name in Ephemeris._fields:  # exactly the broadcast elements the satellites flew
+        np.testing.assert_array_equal(getattr(back, name), getattr(short_clean.ephemeris, name))
+    obs, truth = short_clean.tables["gnss_obs"], short_clean.tables["truth"]
+    t = obs.column("t_ns").to_numpy()
+    rows = np.searchsorted(truth.column("t_ns").to_numpy(), t)
+    ant = _antenna_ecef(truth.take(pa.array(rows)), seoul.lever_arm_m)
+    prn = np.array([int(s[1:]) for s in obs.column("sv").to_pylist()])
+    state = transmit_state(back, select(back, prn, t), t, ant)
+    sat = _np(obs, "sat_x_m", "sat_y_m", "sat_z_m")
+    np.testing.assert_allclose(state.sat.pos_m, sat, atol=1e-6)
+    sat_clock = C_MPS * (state.sat.clock_s - state.sat.tgd_s)
+    np.testing.assert_allclose(sat_clock, _np(obs, "sat_clock_m"), atol=1e-6)
+    # the noise-free pseudorange is that range plus the receiver clock, to the 1 mm rounding
+    clock = _np(truth, "clock_bias_m")[rows]
+    residual = _np(obs, "pseudorange_m") - (state.range_m + clock - sat_clock)
+    assert np.abs(residual).max() <= 0.0005 + 1e-6
