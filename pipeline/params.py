@@ -16,6 +16,7 @@ import yaml
 
 from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
+from pipeline.synth.seoul_params import SeoulCampusParams
 
 DEFAULT_PARAMS = Path("params.yaml")
 _ID_RE = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -26,6 +27,7 @@ class SynthParams:
     """``synth``: the synthesized datasets. ``seed`` seeds every random draw."""
 
     seed: int
+    seoul_campus: SeoulCampusParams
 
 
 @dataclass(frozen=True)
