@@ -159,11 +159,12 @@ def _ingest(
 ) -> IngestResult:
     inventories = [o.inventory for o in opened]
     plans = select_streams(inventories, config)
-    bases = [(p.key, s.stream.time_base) for p in plans.values() for s in p.sources]
+    used = [q for p in plans.values() for q in (p, p.companion) if q is not None]
+    bases = [(q.key, s.stream.time_base) for q in used for s in q.sources]
     utc_starts = [
         s.stream.start_ns
-        for p in plans.values()
-        for s in p.sources
+        for q in used
+        for s in q.sources
         if s.stream.time_base == TimeBase.UTC and s.stream.start_ns is not None
     ]
     recon = reconcile(
@@ -179,7 +180,7 @@ def _ingest(
                 plan,
                 tmp,
                 base=recon.base,
-                sources=tuple(sources[i] for i in sorted({s.file_index for s in plan.sources})),
+                sources=tuple(sources[i] for i in sorted(_file_indices(plan))),
                 config=config,
                 params={"ingest": to_plain(options), "params": params},
                 window_ns=window_ns,
@@ -192,17 +193,21 @@ def _ingest(
         for index in _file_order(opened):
             o = opened[index]
             routes = {
-                p.key: (sinks[t], s.stream)
+                q.key: (sinks[t], s.stream, q is not p)
                 for t, p in plans.items()
-                for s in p.sources
+                for q in (p, p.companion)
+                if q is not None
+                for s in q.sources
                 if s.file_index == index
             }
             if not routes:
                 continue
-            selections = [Selection(k, sink.table) for k, (sink, _) in routes.items()]
+            selections = [Selection(k, sink.table) for k, (sink, _, _) in routes.items()]
             for batch in o.reader.read(selections):
-                sink, stream = routes[batch.key]
-                sink.push(batch, o.detected.path, stream.time_base, stream.frame)
+                sink, stream, companion = routes[batch.key]
+                sink.push(
+                    batch, o.detected.path, stream.time_base, stream.frame, companion=companion
+                )
         _check_definitions(sinks, opened)
         rows = {t.value: sink.finish() for t, sink in sinks.items()}
         stack.close()
@@ -280,6 +285,11 @@ def _cross_file_checks(
             warnings.append(text)
             log.warning("%s", text)
     return checks
+
+
+def _file_indices(plan: TablePlan) -> set[int]:
+    companion = plan.companion.sources if plan.companion is not None else ()
+    return {s.file_index for s in (*plan.sources, *companion)}
 
 
 def _file_order(opened: list[_Log]) -> list[int]:

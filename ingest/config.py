@@ -106,11 +106,14 @@ class GnssConfig:
         lever_arm_m: antenna position relative to the IMU in body FRD, m.
         latlon_units: ``rad`` scales lat/lon to degrees (recorded in provenance); ``deg``
             accepts degrees as they are; ``auto`` refuses values that look like radians.
+        velocity_topic: stream with the receiver's velocity, joined to the fixes by time
+            (default: automatic, e.g. a TwistWithCovarianceStamped on ``/gps/vel``).
     """
 
     topic: str | None = None
     instance: int | None = None
     lever_arm_m: Vec3 = (0.0, 0.0, 0.0)
+    velocity_topic: str | None = None
     latlon_units: Literal["auto", "deg", "rad"] = "auto"
 
 

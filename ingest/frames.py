@@ -58,6 +58,13 @@ def flu_to_frd(columns: dict[str, np.ndarray], table: str) -> list[str]:
     return changed
 
 
+def enu_to_ned(
+    e: FloatArray, n: FloatArray, u: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """ENU components -> (north, east, down)."""
+    return n, e, -u
+
+
 def dcm_from_rpy_deg(rpy_deg: Vec3) -> FloatArray:
     """``Rz(yaw) @ Ry(pitch) @ Rx(roll)`` for (roll, pitch, yaw) in degrees."""
     r, p, y = (math.radians(a) for a in rpy_deg)

@@ -12,6 +12,8 @@ For each table:
    key alphabetically). The alternatives are reported.
 3. The same key in several files of one drive (a split bag) is one stream, read file after
    file in order of first timestamp.
+4. ``gnss`` may also get a velocity companion (streams with role ``velocity``, or
+   ``gnss.velocity_topic``) whose columns are joined to the fixes by time.
 
 A table listed in ``required`` that gets no stream is E-FATAL naming it.
 """
@@ -39,13 +41,19 @@ class Source:
 
 @dataclass(frozen=True)
 class TablePlan:
-    """The stream chosen for a table and why."""
+    """The stream chosen for a table and why.
+
+    Attributes:
+        companion: a stream whose columns are joined to this one's rows by time (the GNSS
+            velocity of the fixes), or None.
+    """
 
     table: TableName
     key: str
     sources: tuple[Source, ...]
     reason: str
     alternatives: tuple[str, ...] = ()
+    companion: TablePlan | None = None
 
     @property
     def count(self) -> int | None:
@@ -75,6 +83,8 @@ def select_streams(
         plan = (
             _configured(inventories, table, topic) if topic else _auto(inventories, table, instance)
         )
+        if plan is not None and table == TableName.GNSS:
+            plan = _with_velocity(inventories, plan, config)
         if plan is not None:
             plans[table] = plan
     for name in config.required if config else ():
@@ -104,6 +114,11 @@ def _configured(inventories: Sequence[Inventory], table: TableName, topic: str) 
             hint="fix the topic in dataset.yaml; `navreplay ingest --list` shows the streams",
         )
     stream = sources[0].stream
+    if stream.role:
+        raise ConfigError(
+            f"{table.value}.topic {topic!r} is a {stream.role} stream, not the table's main one",
+            hint=f"name it as {table.value}.{stream.role}_topic in dataset.yaml",
+        )
     fits = stream.table == table or (stream.table in _TWINS and table in _TWINS)
     if not fits:
         why = stream.detail if stream.table is None else f"it feeds {stream.table.value}"
@@ -114,14 +129,40 @@ def _configured(inventories: Sequence[Inventory], table: TableName, topic: str) 
     return TablePlan(table, topic, sources, f"dataset.yaml {table.value}.topic")
 
 
-def _auto(
-    inventories: Sequence[Inventory], table: TableName, instance: int | None
-) -> TablePlan | None:
+def _candidates(inventories: Sequence[Inventory], table: TableName, role: str) -> dict[str, int]:
     counts: dict[str, int] = {}
     for inv in inventories:
         for s in inv.streams:
-            if s.table == table:
+            if s.table == table and s.role == role:
                 counts[s.key] = counts.get(s.key, 0) + (s.count or 0)
+    return counts
+
+
+def _with_velocity(
+    inventories: Sequence[Inventory], plan: TablePlan, config: DatasetConfig | None
+) -> TablePlan:
+    topic = config.gnss.velocity_topic if config is not None else None
+    if topic:
+        sources = _sources(inventories, topic)
+        if not sources or sources[0].stream.role != "velocity":
+            what = "not in the logs" if not sources else "not a velocity stream"
+            raise ConfigError(f"gnss.velocity_topic {topic!r} is {what}")
+        reason = "dataset.yaml gnss.velocity_topic"
+    else:
+        counts = _candidates(inventories, TableName.GNSS, "velocity")
+        if not counts:
+            return plan
+        topic = min(counts, key=lambda k: (-counts[k], k))
+        sources = _sources(inventories, topic)
+        reason = "automatic: GNSS velocity stream"
+    companion = TablePlan(TableName.GNSS, topic, sources, reason)
+    return TablePlan(plan.table, plan.key, plan.sources, plan.reason, plan.alternatives, companion)
+
+
+def _auto(
+    inventories: Sequence[Inventory], table: TableName, instance: int | None
+) -> TablePlan | None:
+    counts = _candidates(inventories, table, "")
     if not counts:
         return None
     keys = sorted(counts)

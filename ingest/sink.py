@@ -2,8 +2,9 @@
 
 A ``TableSink`` receives its stream's batches (from one or several files) and, per batch:
 converts ``t_ns`` to the dataset's time base; converts FLU/ENU vectors to FRD/NED; passes the
-rows through ``StreamCleaner`` (reorder, duplicates, clock steps). Final rows gather into
-blocks of ``block_rows``. The first block decides units and the IMU mounting
+rows through ``StreamCleaner`` (reorder, duplicates, clock steps). A companion stream (the
+GNSS velocity of the fixes) is cleaned alongside and joined by time (``ingest.companion``).
+Final rows gather into blocks of ``block_rows``. The first block decides units and the IMU mounting
 (``ingest.plausibility``) before anything is written, so the Parquet provenance can record
 those decisions; every block is then scaled/rotated, audited (``StreamAudit``) and appended
 through ``TableWriter``.
@@ -16,9 +17,11 @@ import logging
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pyarrow as pa
 
 from ingest.audit import StreamAudit
+from ingest.companion import TOLERANCE_NS, Companion
 from ingest.config import DatasetConfig
 from ingest.frames import flu_to_frd
 from ingest.hygiene import Rows, StreamCleaner
@@ -30,6 +33,8 @@ from ingest.tables import Provenance, SourceFile, TableWriter
 from ingest.timebase import TimeBase, convert
 
 log = logging.getLogger(__name__)
+
+_VELOCITY = ("vel_n_mps", "vel_e_mps", "vel_d_mps", "speed_acc_mps")
 
 
 class TableSink:
@@ -76,13 +81,39 @@ class TableSink:
         self.conversions: list[str] = []
         self.imu: ImuDecision | None = None
         self.gnss: GnssDecision | None = None
+        self.companion = (
+            Companion(plan.companion.key, _VELOCITY, window_ns, strict=strict)
+            if plan.companion is not None
+            else None
+        )
         self._block: list[Rows] = []
         self._block_len = 0
         self._writer: TableWriter | None = None
         self._last_path = Path()
 
-    def push(self, batch: Batch, path: Path, source_base: TimeBase, frame: str | None) -> None:
+    def push(
+        self,
+        batch: Batch,
+        path: Path,
+        source_base: TimeBase,
+        frame: str | None,
+        *,
+        companion: bool = False,
+    ) -> None:
+        """Take a batch of the table's stream (or, with ``companion``, of its companion)."""
         self._last_path = path
+        if companion:
+            assert self.companion is not None
+            cols = batch.columns
+            if source_base != self.base:
+                cols["t_ns"] = convert(cols["t_ns"], source_base, self.base)
+            note = f"{self.table.value}: velocity {batch.info.get('velocity', 'as recorded')}"
+            if note not in self.conversions:
+                self.conversions.append(note)
+            self.companion.push(Rows(cols, batch.offsets, dict(batch.nulls)), path)
+            if self._block_len >= self.block_rows:
+                self._flush()
+            return
         for name, n in batch.counters.items():
             self.counters[name] = self.counters.get(name, 0) + n
         for name, value in batch.info.items():
@@ -99,26 +130,35 @@ class TableSink:
         out = self.cleaner.push(Rows(cols, batch.offsets, dict(batch.nulls)), path)
         self._add(out)
 
-    def _add(self, rows: Rows) -> None:
+    def _add(self, rows: Rows, *, final: bool = False) -> None:
         if len(rows):
             self._block.append(rows)
             self._block_len += len(rows)
-        if self._block_len >= self.block_rows:
+        if self._block_len >= self.block_rows and not final:
             self._flush()
 
     def finish(self) -> int:
         """Flush everything; returns the number of rows written."""
-        self._add(self.cleaner.finish(self._last_path))
-        self._flush()
+        self._add(self.cleaner.finish(self._last_path), final=True)
+        if self.companion is not None:
+            self.companion.finish(self._last_path)
+        self._flush(final=True)
+        if self.companion is not None:
+            self.companion.discard_rest()
         if self._writer is None:
             self._open()
         return self.audit.rows
 
-    def _flush(self) -> None:
+    def _flush(self, *, final: bool = False) -> None:
         if not self._block_len:
             return
         rows = Rows.concat(self._block)
         self._block, self._block_len = [], 0
+        if self.companion is not None:
+            rows = self._ready_for_join(rows, final=final)
+            if not len(rows):
+                return
+            self.companion.join(rows, final=final and not self._block_len)
         if self._writer is None:
             self._decide(rows)
             self._open()
@@ -129,6 +169,19 @@ class TableSink:
         self.audit.observe(rows.columns, rows.offsets)
         assert self._writer is not None
         self._writer.write(self._arrow(rows))
+
+    def _ready_for_join(self, rows: Rows, *, final: bool) -> Rows:
+        """Rows whose companion rows have all arrived; the rest wait in the block (up to 4
+        blocks, after which the join proceeds with what has arrived)."""
+        assert self.companion is not None
+        wm = self.companion.watermark
+        if final or self._block_len + len(rows) >= 4 * self.block_rows:
+            return rows
+        cut = 0 if wm is None else int(np.searchsorted(rows.t, wm - TOLERANCE_NS, side="right"))
+        if cut < len(rows):
+            self._block = [rows.take(np.arange(cut, len(rows)))]
+            self._block_len = len(rows) - cut
+        return rows.take(np.arange(cut))
 
     def _decide(self, rows: Rows) -> None:
         if self.table == TableName.IMU:
@@ -173,6 +226,8 @@ class TableSink:
             "counters": dict(sorted(self.counters.items())),
             "info": self.info,
         }
+        if self.companion is not None:
+            out["companion"] = self.companion.report()
         if self.imu is not None:
             out["plausibility"] = self.imu.report
         if self.gnss is not None:

@@ -12,7 +12,9 @@ Every canonical table counts ``t_ns`` (int64 nanoseconds) on one declared base:
 
 A dataset merged from several files is put on one base (``reconcile``): GPS when any stream is
 on GPS time (UTC streams convert exactly with the leap-second table), else UTC, else recorder.
-The leap-second count used is written to the report.
+The leap-second count used is written to the report. GPS-side conversions are those of
+``ingest.gpstime`` (which the log writers use); this module adds the UTC-side view of the same
+IERS leap-second list, so a POSIX stamp converts to GPS time without iterating.
 """
 
 from __future__ import annotations
@@ -25,11 +27,9 @@ import numpy as np
 import numpy.typing as npt
 
 from ingest.errors import IngestError
+from ingest.gpstime import GPS_EPOCH_UNIX_NS, NS_PER_S, SECONDS_PER_WEEK, utc_unix_ns_from_gps
 
-NS_PER_S = 1_000_000_000
-SECONDS_PER_WEEK = 604_800
-GPS_EPOCH_UNIX_S = 315_964_800  # 1980-01-06T00:00:00Z as POSIX seconds
-GPS_EPOCH_UNIX_NS = GPS_EPOCH_UNIX_S * NS_PER_S
+__all__ = ["GPS_EPOCH_UNIX_NS", "NS_PER_S", "SECONDS_PER_WEEK"]
 
 # POSIX second at which GPS - UTC became the given count (IERS Bulletin C; 18 since 2017-01-01).
 _LEAP_STEPS_UNIX_S = np.array(
@@ -84,12 +84,12 @@ def utc_to_gps_ns(utc_ns: IntArray) -> IntArray:
 
 
 def gps_to_utc_ns(gps_ns: IntArray) -> IntArray:
-    """GPS nanoseconds since the GPS epoch -> POSIX UTC nanoseconds (inverse of utc_to_gps_ns)."""
-    gps = np.asarray(gps_ns, dtype=np.int64)
-    approx = gps + GPS_EPOCH_UNIX_NS
-    # The leap count at the UTC instant: try the count at the approximate instant, then fix up.
-    leap = leap_seconds_at_utc(approx - leap_seconds_at_utc(approx) * NS_PER_S)
-    return approx - leap.astype(np.int64) * NS_PER_S
+    """GPS nanoseconds since the GPS epoch -> POSIX UTC nanoseconds (``ingest.gpstime``).
+
+    The inverse of ``utc_to_gps_ns`` except inside an inserted leap second, which POSIX time
+    cannot represent.
+    """
+    return utc_unix_ns_from_gps(np.asarray(gps_ns, dtype=np.int64))
 
 
 def gps_week_tow_to_ns(week: npt.ArrayLike, tow_ns: npt.ArrayLike) -> IntArray:

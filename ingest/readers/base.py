@@ -182,6 +182,8 @@ class StreamInfo:
             ``flu``/``enu`` (REP-103); None when the stream has no vectors.
         instance: sensor instance number for multi-instance sensors, else None.
         detail: anything else worth showing (encoding, frame_id ...).
+        role: ``""`` for a stream that can be a table's primary stream; ``velocity`` for a
+            GNSS velocity stream joined to the fixes by time (``ingest.sink``).
     """
 
     key: str
@@ -194,6 +196,7 @@ class StreamInfo:
     frame: str | None = None
     instance: int | None = None
     detail: str = ""
+    role: str = ""
 
     @property
     def rate_hz(self) -> float | None:

@@ -87,7 +87,7 @@ def make_channel(
             f"definition mismatch: md5 of the embedded definition is {have}, the connection "
             f"declares {md5sum}",
         )
-    conversion, problem = conversion_for(decoder)
+    conversion, problem = conversion_for(decoder, topic)
     return RosChannel(topic, name, enc, decoder, conversion, problem)
 
 
@@ -125,6 +125,7 @@ def stream_info(
         time_base=time_base_of(start_ns),
         frame=channel.conversion.frame if channel.conversion else None,
         detail=detail,
+        role=channel.conversion.role if channel.conversion else "",
     )
 
 

@@ -18,6 +18,10 @@ sensor_msgs/NavSatFix                             gnss       lat_deg, lon_deg, a
 nav_msgs/Odometry, geometry_msgs/TwistStamped,    vehicle    speed_mps <- twist.linear.x,
 geometry_msgs/TwistWithCovarianceStamped                     yaw_rate_radps <- twist.angular.z
                                                              (FLU: ``ingest.frames`` negates it)
+geometry_msgs/TwistWithCovarianceStamped on a     gnss       vel_{n,e,d}_mps from the ENU linear
+GNSS topic (name with gps, gnss, fix, navsat or   (velocity  twist; speed_acc_mps = sqrt of the mean
+ublox: a receiver's velocity, e.g. ``/gps/vel``)  companion) linear variance (null when all 0);
+                                                             joined to the fixes by time
 any type with float64 lat_deg, lon_deg, alt_m     truth      every top-level float64 field
 (e.g. navreplay_msgs/msg/NavTruth)                           under its own name (truth columns
                                                              and sensor biases)
@@ -34,12 +38,14 @@ and fixed, so the weaker of the two is claimed), anything else -> 1 NO_FIX.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
+from ingest.frames import enu_to_ned
 from ingest.readers.rosmsg import Decoded, LeafKind, MessageDecoder
 from ingest.schema import FixType, TableName, spec
 
@@ -48,6 +54,7 @@ Columns = dict[str, np.ndarray]
 Nulls = dict[str, npt.NDArray[np.bool_]]
 
 _STAMP = ("header.stamp.sec", "header.stamp.nanosec")
+_TWIST_COV = "geometry_msgs/msg/TwistWithCovarianceStamped"
 _VEC = ("x", "y", "z")
 _TRUTH_REQUIRED = ("lat_deg", "lon_deg", "alt_m")
 
@@ -72,6 +79,8 @@ class RosConversion:
         wants: leaves the decoder must return.
         convert: (decoded leaves, log times) -> Converted.
         optional: leaves among ``wants`` the conversion does without.
+        role: ``""`` for a table's primary stream; ``velocity`` for a GNSS velocity stream
+            whose columns are joined to the fixes.
     """
 
     table: TableName
@@ -79,12 +88,21 @@ class RosConversion:
     wants: tuple[str, ...]
     convert: Callable[[Decoded, I64Array], Converted]
     optional: tuple[str, ...] = ("header.frame_id",)
+    role: str = ""
 
 
-def conversion_for(decoder: MessageDecoder) -> tuple[RosConversion | None, str | None]:
-    """The conversion of ``decoder``'s message type (None if it feeds no table), and why a
-    known type cannot be converted (its definition lacks a field the conversion needs)."""
-    conv = _conversion(decoder)
+GNSS_TOPIC = re.compile(r"gps|gnss|fix|navsat|ublox", re.IGNORECASE)
+
+
+def conversion_for(
+    decoder: MessageDecoder, topic: str = ""
+) -> tuple[RosConversion | None, str | None]:
+    """The conversion of ``decoder``'s message type on ``topic`` (None if it feeds no table),
+    and why a known type cannot be converted (its definition lacks a field it needs)."""
+    if decoder.msgtype == _TWIST_COV and GNSS_TOPIC.search(topic):
+        conv: RosConversion | None = _gnss_velocity(decoder)
+    else:
+        conv = _conversion(decoder)
     if conv is None:
         return None, None
     missing = [p for p in conv.wants if p not in conv.optional and decoder.leaf(p) is None]
@@ -101,7 +119,7 @@ def _conversion(decoder: MessageDecoder) -> RosConversion | None:
         return _navsatfix(decoder)
     if name == "nav_msgs/msg/Odometry":
         return _twist(decoder, "twist.twist")
-    if name == "geometry_msgs/msg/TwistWithCovarianceStamped":
+    if name == _TWIST_COV:
         return _twist(decoder, "twist.twist")
     if name == "geometry_msgs/msg/TwistStamped":
         return _twist(decoder, "twist")
@@ -227,6 +245,33 @@ def _twist(decoder: MessageDecoder, base: str) -> RosConversion | None:
         )
 
     return RosConversion(TableName.VEHICLE, "flu", wants, convert)
+
+
+def _gnss_velocity(decoder: MessageDecoder) -> RosConversion | None:
+    tl = _time(decoder)
+    lin = tuple(f"twist.twist.linear.{a}" for a in _VEC)
+    wants = (*tl, *lin, "twist.covariance", "header.frame_id")
+
+    def convert(d: Decoded, log_ns: I64Array) -> Converted:
+        t, fallback = _t_ns(d, tl, log_ns)
+        e, n, u = (d.values[p].astype(np.float64) for p in lin)
+        vn, ve, vd = enu_to_ned(e, n, u)
+        cov = d.values["twist.covariance"].astype(np.float64)
+        unknown = (cov[:, [0, 7, 14]] == 0.0).all(axis=1)
+        with np.errstate(invalid="ignore"):
+            s_acc = np.sqrt(cov[:, [0, 7, 14]].mean(axis=1))
+        cols: Columns = {
+            "t_ns": t,
+            "vel_n_mps": vn,
+            "vel_e_mps": ve,
+            "vel_d_mps": vd,
+            "speed_acc_mps": s_acc,
+        }
+        nulls: Nulls = {"speed_acc_mps": unknown} if unknown.any() else {}
+        info = {"frame_id": d.strings.get("header.frame_id", ""), "velocity": "ENU -> NED"}
+        return Converted(cols, nulls, {"time_from_log": fallback}, info)
+
+    return RosConversion(TableName.GNSS, None, wants, convert, role="velocity")
 
 
 def truth_fields(decoder: MessageDecoder) -> list[str]:

@@ -114,14 +114,14 @@ def run(args: argparse.Namespace) -> int:
 def format_listing(inventories: list, plans: dict) -> str:  # type: ignore[type-arg]
     """The --list text: every stream of every file, and which one each table gets."""
     lines: list[str] = []
-    chosen = {(p.key, t.value) for t, p in plans.items()}
+    chosen = {q.key for p in plans.values() for q in (p, p.companion) if q is not None}
     for inv in inventories:
         lines.append(f"{inv.path}  [{inv.format.value}]")
         for s in inv.streams:
             rate = f"{s.rate_hz:8.2f} Hz" if s.rate_hz is not None else "       ? Hz"
             count = f"{s.count:>9}" if s.count is not None else "        ?"
             table = s.table.value if s.table is not None else "-"
-            mark = "*" if any(k == s.key for k, _ in chosen) else " "
+            mark = "*" if s.key in chosen else " "
             lines.append(
                 f" {mark} {s.key:<40} {s.msgtype:<36} {count} {rate}  -> {table:<9} {s.detail}"
             )
@@ -129,6 +129,8 @@ def format_listing(inventories: list, plans: dict) -> str:  # type: ignore[type-
     lines.append("selection:")
     for t, p in plans.items():
         lines.append(f"  {t.value:<9} <- {p.key} ({p.reason})")
+        if p.companion is not None:
+            lines.append(f"  {'':<9}  + {p.companion.key} ({p.companion.reason}, joined by time)")
     return "\n".join(lines) + "\n"
 
 

@@ -291,3 +291,52 @@ def test_truth_messages_fill_the_truth_table_by_field_name(tmp_path: Path) -> No
     assert truth["acc_bias_x_mps2"].to_numpy()[0] == 0.003
     assert truth["clock_drift_mps"].to_numpy()[0] == -0.4
     assert truth["t_ns"].to_numpy()[1] - truth["t_ns"].to_numpy()[0] == 10**8
+
+
+def _twist_cov(t_ns: int, lin: tuple[float, float, float], var: float) -> bytes:
+    t = ROS2.types
+    cov = np.zeros(36)
+    cov[0] = cov[7] = cov[14] = var
+    msg = t["geometry_msgs/msg/TwistWithCovarianceStamped"](
+        header=header(False, t_ns, "gps"),
+        twist=t["geometry_msgs/msg/TwistWithCovariance"](
+            twist=t["geometry_msgs/msg/Twist"](
+                linear=t["geometry_msgs/msg/Vector3"](x=lin[0], y=lin[1], z=lin[2]),
+                angular=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.25),
+            ),
+            covariance=cov,
+        ),
+    )
+    return bytes(ROS2.serialize_cdr(msg, msg.__msgtype__))
+
+
+def test_gnss_velocity_topic_is_joined_to_the_fixes_in_ned(tmp_path: Path) -> None:
+    fixes = fix_stream(20)
+    stamps = [t for t, _ in fixes.messages]
+    vel = Stream("/gps/vel", "geometry_msgs/msg/TwistWithCovarianceStamped")
+    for i, t in enumerate(stamps):
+        if i == 5:
+            continue  # a fix without velocity
+        jitter = 2_000_000 if i % 2 else 0  # stamped 2 ms apart: still the same epoch
+        vel.messages.append((t + jitter, _twist_cov(t + jitter, (1.0, 2.0, 0.5), 0.04)))
+    vel.messages.append(
+        (stamps[-1] + 100_000_000, _twist_cov(stamps[-1] + 100_000_000, (0, 0, 0), 0))
+    )
+    wheel = Stream("/wheel/twist", "geometry_msgs/msg/TwistWithCovarianceStamped")
+    wheel.messages = [(t, _twist_cov(t, (3.0, 0.0, 0.0), 0.0)) for t in stamps]
+    log = write_mcap(tmp_path / "a.mcap", [fixes, vel, wheel])
+    result = ingest([log], tmp_path / "out")
+    assert result.tables == {"gnss": 20, "vehicle": 20}
+    comp = result.report["tables"]["gnss"]["companion"]
+    assert (comp["stream"], comp["joined"], comp["rows_without_companion"]) == ("/gps/vel", 19, 1)
+    assert comp["companion_rows_without_row_dropped"] == 1
+    gnss = pq.read_table(tmp_path / "out" / "gnss.parquet")
+    # ENU (east 1, north 2, up 0.5) -> NED (2, 1, -0.5); sigma 0.2 m/s.
+    assert gnss["vel_n_mps"].to_pylist()[:2] == [2.0, 2.0]
+    assert gnss["vel_e_mps"].to_pylist()[0] == 1.0
+    assert gnss["vel_d_mps"].to_pylist()[0] == -0.5
+    assert gnss["speed_acc_mps"].to_pylist()[0] == pytest.approx(0.2)
+    assert gnss["vel_n_mps"].to_pylist()[5] is None  # not provided, not invalid
+    veh = pq.read_table(tmp_path / "out" / "vehicle.parquet")
+    assert veh["speed_mps"].to_pylist()[0] == 3.0
+    assert veh["yaw_rate_radps"].to_pylist()[0] == -0.25  # FLU -> FRD

@@ -72,3 +72,13 @@ def test_recorder_clock_cannot_merge_with_wall_clock() -> None:
     with pytest.raises(IngestError, match="recorder clock"):
         reconcile([("IMU", TimeBase.RECORDER), ("/fix", TimeBase.UTC)])
     assert reconcile([("IMU", TimeBase.RECORDER)]).base == TimeBase.RECORDER
+
+
+def test_utc_side_table_agrees_with_gpstime_outside_leap_seconds() -> None:
+    from ingest import gpstime
+
+    rng = np.random.default_rng(0)
+    gps = rng.integers(0, 46 * 365 * 86400, 5000).astype(np.int64) * NS_PER_S + 123
+    np.testing.assert_array_equal(utc_to_gps_ns(gpstime.utc_unix_ns_from_gps(gps)), gps)
+    utc = gpstime.utc_unix_ns_from_gps(gps)
+    np.testing.assert_array_equal(leap_seconds_at_utc(utc), gpstime.leap_seconds(gps))
