@@ -13,6 +13,27 @@ is ever loaded whole. Files are read one after the other in order of their first
 so a stream split over several files (a split bag) continues across them.
 
 ``inspect(logs, ...)`` is what ``--list`` prints: every file's inventory and the selection.
+
+``ingest_report.json`` (also ``meta.json``'s ``audit``)::
+
+    package_version, options {strict, reorder_window_s, gap_factor}
+    time_base {base, leap_seconds, decisions[], checks[]}        cross-file overlap checks
+    files[]   {name, format, variant, streams[] (the inventory), inventory_notes[],
+               completeness[] ("complete", "truncated", "corrupt_chunks_skipped", ...),
+               defects[] {kind, reason, offset, messages_lost, messages_recovered,
+                          time_range_ns, bytes_skipped}, notes[], counters{}}
+    tables{}  {stream, msgtype, selection, alternatives[], files[], time_base,
+               frame_conversions[], counters{} (time_from_log, no_fix, payloads_malformed_...),
+               info{} (frame_id ...),
+               hygiene {rows_in, rows_out, reordered, dropped_late(+offsets),
+                        duplicates_exact_dropped, duplicates_conflicting_dropped(+offsets),
+                        clock_steps_backward[]},
+               stats {rows, first/last_t_ns, duration_s, rate_hz, median_dt_ms, jitter_ms,
+                      max_dt_ms, gaps {threshold_ms, count, total_s, longest_s, first[]},
+                      segments[], nonfinite{column: {nan, inf}}},
+               plausibility {...} (imu: rest, gravity, gyro bias, mounting; gnss: ranges),
+               companion {...} (gnss velocity join)}
+    warnings[]
 """
 
 from __future__ import annotations

@@ -28,10 +28,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-import lz4.frame
 import numpy as np
 import numpy.typing as npt
-import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
@@ -39,6 +37,7 @@ from mcap.records import Channel, ChunkIndex, Schema, Statistics
 
 from ingest.detect import MCAP_MAGIC, Detected, Format
 from ingest.errors import CorruptLogError
+from ingest.readers._compression import MAX_CHUNK_BYTES, DecompressError, decompress
 from ingest.readers._walk import INCOMPLETE, OK, TOO_LONG, mcap_records
 from ingest.readers.base import (
     Batch,
@@ -57,7 +56,6 @@ U8Array = npt.NDArray[np.uint8]
 I64Array = npt.NDArray[np.int64]
 
 BLOCK_BYTES = 4 << 20
-MAX_CHUNK_BYTES = 1 << 31  # a larger uncompressed size is taken as a corrupt header
 _FOOTER_BYTES = 1 + 8 + 20 + len(MCAP_MAGIC)
 _AR2 = np.arange(2, dtype=np.int64)
 _AR8 = np.arange(8, dtype=np.int64)
@@ -388,8 +386,8 @@ class McapReader(LogReader):
         start_t, end_t, usize, crc, compression, rec_at, rec_len = header
         records = content[rec_at : rec_at + rec_len]
         try:
-            raw = _decompress(compression, records, usize)
-        except _DecompressError as err:
+            raw = decompress(compression, records.tobytes(), usize)
+        except DecompressError as err:
             state.pending = _Pending(offset, f"chunk does not decompress ({err})", (start_t, end_t))
             return None
         if crc == 0:
@@ -483,8 +481,8 @@ class McapReader(LogReader):
         _s, _e, usize, _crc, compression, rec_at, rec_len = header
         records = content[rec_at : rec_at + rec_len]
         try:
-            raw = _decompress(compression, records, usize, partial=True)
-        except _DecompressError:
+            raw = decompress(compression, records.tobytes(), usize, partial=True)
+        except DecompressError:
             return None
         arr = np.frombuffer(raw, np.uint8)
         ops, pos, lens, _stop, _status, _ = mcap_records(arr, 0, len(raw))
@@ -528,10 +526,6 @@ class _WalkState:
     pending: _Pending | None = None
 
 
-class _DecompressError(Exception):
-    pass
-
-
 def _parse_chunk_header(
     content: U8Array, *, partial: bool = False
 ) -> tuple[int, int, int, int, str, int, int] | None:
@@ -554,27 +548,3 @@ def _parse_chunk_header(
     if usize > MAX_CHUNK_BYTES:
         return None
     return start_t, end_t, usize, crc, compression, at, rec_len
-
-
-def _decompress(compression: str, data: U8Array, usize: int, *, partial: bool = False) -> bytes:
-    raw = data.tobytes() if compression else bytes(data)
-    try:
-        if compression == "":
-            out = raw
-        elif compression == "zstd":
-            if partial:
-                out = zstandard.ZstdDecompressor().decompressobj().decompress(raw)
-            else:
-                out = zstandard.ZstdDecompressor().decompress(raw, max_output_size=usize)
-        elif compression == "lz4":
-            if partial:
-                out = lz4.frame.LZ4FrameDecompressor().decompress(raw)
-            else:
-                out = lz4.frame.decompress(raw)
-        else:
-            raise _DecompressError(f"unsupported compression {compression!r}")
-    except (zstandard.ZstdError, RuntimeError, ValueError, OSError) as err:
-        raise _DecompressError(str(err)) from err
-    if not partial and len(out) != usize:
-        raise _DecompressError(f"{len(out)} bytes decompressed, header says {usize}")
-    return bytes(out)

@@ -15,18 +15,17 @@ uncompressed chunk cannot be detected, which the report says.
 
 from __future__ import annotations
 
-import bz2
 import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import BinaryIO
 
-import lz4.frame
 import numpy as np
 import numpy.typing as npt
 
 from ingest.detect import ROSBAG_MAGIC, Detected, Format
 from ingest.errors import CorruptLogError
+from ingest.readers._compression import DecompressError, decompress
 from ingest.readers._walk import BAD_HEADER, INCOMPLETE, OK, TOO_LONG, ros1_records
 from ingest.readers.base import (
     Batch,
@@ -45,7 +44,6 @@ U8Array = npt.NDArray[np.uint8]
 I64Array = npt.NDArray[np.int64]
 
 BLOCK_BYTES = 4 << 20
-MAX_CHUNK_BYTES = 1 << 31
 OP_MSG, OP_BAG_HEADER, OP_INDEX, OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION = 2, 3, 4, 5, 6, 7
 _REINDEX = "run `rosbag reindex` on a copy of the bag to rebuild its index"
 
@@ -354,8 +352,8 @@ class Ros1BagReader(LogReader):
             state.lost_chunk = (offset, "chunk header is malformed")
             return None
         try:
-            raw = _decompress(compression, arr[d0 : d0 + dl].tobytes(), size, partial=partial)
-        except _DecompressError as err:
+            raw = decompress(compression, arr[d0 : d0 + dl].tobytes(), size, partial=partial)
+        except DecompressError as err:
             state.lost_chunk = (offset, f"chunk ({compression}) does not decompress: {err}")
             return None
         buf = np.frombuffer(raw, np.uint8)
@@ -445,32 +443,6 @@ class Ros1BagReader(LogReader):
         return self._chunk(
             arr, stop + 4, hl, d0, len(arr) - d0, base + stop, base, state, partial=True
         )
-
-
-class _DecompressError(Exception):
-    pass
-
-
-def _decompress(compression: str, data: bytes, size: int, *, partial: bool) -> bytes:
-    if size > MAX_CHUNK_BYTES:
-        raise _DecompressError(f"declared size {size} is implausible")
-    try:
-        if compression == "none":
-            out = data
-        elif compression == "bz2":
-            out = bz2.BZ2Decompressor().decompress(data) if partial else bz2.decompress(data)
-        elif compression == "lz4":
-            if partial:
-                out = lz4.frame.LZ4FrameDecompressor().decompress(data)
-            else:
-                out = lz4.frame.decompress(data)
-        else:
-            raise _DecompressError(f"unsupported compression {compression!r}")
-    except (OSError, ValueError, RuntimeError, EOFError) as err:
-        raise _DecompressError(str(err)) from err
-    if not partial and len(out) != size:
-        raise _DecompressError(f"{len(out)} bytes decompressed, header says {size}")
-    return bytes(out)
 
 
 def _time(raw: bytes) -> int:

@@ -190,3 +190,15 @@ def test_any_input_leaves_strictly_increasing_and_every_row_accounted(
     assert c.rows_in == len(t)
     assert c.rows_out == len(rows)
     assert len(t) == len(rows) + c.dropped_late + c.duplicates_exact + c.duplicates_conflicting
+
+
+def test_decimated_jittery_stream_reports_its_actual_rate_and_jitter() -> None:
+    # Case 34: logged at 50 Hz from 400 Hz, with +-2 ms of timing jitter.
+    rng = np.random.default_rng(3)
+    t, v = _series(8000)
+    t = t[::8] + rng.integers(-2_000_000, 2_000_001, 1000)
+    _, _, audit = clean(t, v[::8])
+    rep = audit.report(5.0)
+    assert rep["rate_hz"] == pytest.approx(12.5, rel=0.02)  # 100 Hz base series / 8
+    assert 0.5 < rep["jitter_ms"] < 3.0
+    assert rep["gaps"]["count"] == 0

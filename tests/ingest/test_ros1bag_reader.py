@@ -167,3 +167,16 @@ def test_definition_whose_md5_disagrees_is_not_decoded(tmp_path: Path) -> None:
     assert stream.table is None
     assert "md5" in stream.detail
     assert TableName.IMU not in plans
+
+
+@pytest.mark.parametrize("back", [200, 120, 60])
+def test_damaged_index_does_not_stop_the_linear_read(tmp_path: Path, back: int) -> None:
+    # Case 10: a byte flipped near the end, inside the index section. The read never uses
+    # the index, so every message still comes out; no raw decode error escapes.
+    data = imu_data(800)
+    path = write_bag1(tmp_path / "a.bag", [imu_stream(data, ros1=True)], compression="lz4")
+    raw = bytearray(path.read_bytes())
+    raw[-back] ^= 0xFF
+    path.write_bytes(bytes(raw))
+    result = ingest([path], tmp_path / "out")
+    assert result.tables["imu"] == 800
