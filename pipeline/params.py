@@ -16,6 +16,9 @@ import yaml
 
 from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
+from pipeline.synth.car import CarSpeedRampParams
+from pipeline.synth.fwekf import FwekfReferenceParams
+from pipeline.synth.tractor import TractorStraightParams
 
 DEFAULT_PARAMS = Path("params.yaml")
 _ID_RE = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -26,6 +29,9 @@ class SynthParams:
     """``synth``: the synthesized datasets. ``seed`` seeds every random draw."""
 
     seed: int
+    tractor_straight: TractorStraightParams
+    fwekf_reference: FwekfReferenceParams
+    car_speed_ramp: CarSpeedRampParams
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,92 @@
+"""What a synthesizer returns, its random streams, and its reference tables on disk.
+
+Every synthesizer is a pure function ``synthesize(params, seed) -> SynthResult``; a separate
+``write`` turns the result into the log files a user's own tools open, plus the synthesizer's
+canonical tables as Parquet under ``reference/`` for round-trip tests. Measurement tables in a
+result hold the values exactly as the log files encode them (quantized to the format's
+resolution), so a reader must reproduce them; truth is kept at full precision.
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
+from ingest.tables import Provenance, sha256_file, write_table
+
+REFERENCE_DIR = "reference"
+
+
+@dataclass(frozen=True)
+class SynthResult:
+    """A synthesized dataset in memory.
+
+    Attributes:
+        dataset: dataset id (``tractor_straight`` ...).
+        tables: canonical table name -> table (``ingest.schema`` validated).
+        sensors: sensor metadata the filters use.
+        time_base: the clock of ``t_ns`` (``utc``: UNIX time).
+    """
+
+    dataset: str
+    tables: Mapping[str, pa.Table]
+    sensors: SensorMeta
+    time_base: str = "utc"
+
+
+def dataset_seed(seed: int, dataset: str) -> np.random.SeedSequence:
+    """The seed of one dataset: ``synth.seed`` mixed with a hash of the dataset id.
+
+    Datasets drawn from one ``synth.seed`` are independent of each other, and each is
+    reproducible on its own.
+    """
+    return np.random.SeedSequence([seed, zlib.crc32(dataset.encode())])
+
+
+def dataset_rng(seed: int, dataset: str) -> np.random.Generator:
+    """A generator on ``dataset_seed(seed, dataset)``."""
+    return np.random.default_rng(dataset_seed(seed, dataset))
+
+
+def write_reference(
+    out_dir: Path,
+    result: SynthResult,
+    *,
+    sources: Sequence[tuple[Path, str]],
+    params: Mapping[str, Any],
+) -> list[Path]:
+    """Write ``result``'s tables and ``meta.json`` under ``out_dir/reference``.
+
+    Args:
+        out_dir: the synthesizer's output folder.
+        result: the synthesized dataset.
+        sources: the log files written (path, format name); recorded with their sha256.
+        params: the plain parameters that produced the dataset (hashed into provenance).
+
+    Returns:
+        the files written.
+    """
+    ref = out_dir / REFERENCE_DIR
+    written: list[Path] = []
+    for name, table in sorted(result.tables.items()):
+        path = ref / f"{name}.parquet"
+        prov = Provenance.create(name, sources=[p for p, _ in sources], params=params)
+        write_table(path, name, table, prov)
+        written.append(path)
+    meta = DatasetMeta(
+        dataset=result.dataset,
+        time_base=result.time_base,
+        sources=tuple(SourceRecord(p.name, sha256_file(p), fmt) for p, fmt in sources),
+        tables={name: t.num_rows for name, t in sorted(result.tables.items())},
+        sensors=result.sensors,
+        frame_conversions=(),
+    )
+    written.append(write_meta(ref, meta))
+    return written
