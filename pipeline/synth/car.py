@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -45,7 +46,10 @@ from ingest.writers.csv import CsvColumn, quantize, write_csv
 from pipeline.nav.earth import OMEGA_IE, radii
 from pipeline.nav.local import LocalFrame
 from pipeline.synth.bicycle import COLUMNS, VehicleParams, simulate
-from pipeline.synth.result import SynthResult, dataset_rng, write_reference
+from pipeline.synth.result import SynthResult, dataset_rng, write_dataset_dir
+
+if TYPE_CHECKING:
+    from pipeline.params import SynthParams
 
 F64 = npt.NDArray[np.float64]
 
@@ -331,17 +335,25 @@ def synthesize(params: CarSpeedRampParams, seed: int) -> SynthResult:
 
 
 def write(params: CarSpeedRampParams, seed: int, out_dir: str | Path) -> list[Path]:
-    """Write the CSV logs and the reference tables into ``out_dir``; returns the files."""
-    out = Path(out_dir)
+    """Write the CSV logs and ``reference/`` as the folder ``out_dir``; returns the files."""
     cols = _csv_columns(params, seed)
     comment = f"navreplay synthesized {DATASET} (paper 003): linear-tire bicycle model, seed {seed}"
-    logs: list[tuple[Path, str]] = []
-    for name, columns in cols.items():
-        path = out / f"{DATASET}_{name}.csv"
-        write_csv(path, columns, comment=comment)
-        logs.append((path, "csv"))
+
+    def write_logs(folder: Path) -> list[tuple[Path, str]]:
+        logs = []
+        for name, columns in cols.items():
+            path = folder / f"{DATASET}_{name}.csv"
+            write_csv(path, columns, comment=comment)
+            logs.append((path, "csv"))
+        return logs
+
     result = SynthResult(DATASET, _tables(cols), _sensor_meta(params))
-    ref = write_reference(
-        out, result, sources=logs, params={"seed": seed, DATASET: to_plain(params)}
-    )
-    return [p for p, _ in logs] + ref
+    plain = {"seed": seed, DATASET: to_plain(params)}
+    return write_dataset_dir(out_dir, result, write_logs, params=plain)
+
+
+def write_dataset(name: str, synth: SynthParams, out_dir: Path) -> list[Path]:
+    """The synth registry's entry point: ``car_speed_ramp`` from ``params.synth``."""
+    if name != DATASET:
+        raise ValueError(f"{__name__} makes {DATASET!r}, not {name!r}")
+    return write(synth.car_speed_ramp, synth.seed, out_dir)

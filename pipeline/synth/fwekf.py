@@ -36,6 +36,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -50,7 +51,10 @@ from pipeline.nav.earth import radii
 from pipeline.nav.local import LocalFrame
 from pipeline.nav.mechanization import NAV_DIM, imu_from_motion
 from pipeline.nav.rotations import euler_to_quat
-from pipeline.synth.result import SynthResult, dataset_rng, write_reference
+from pipeline.synth.result import SynthResult, dataset_rng, write_dataset_dir
+
+if TYPE_CHECKING:
+    from pipeline.params import SynthParams
 
 F64 = npt.NDArray[np.float64]
 
@@ -312,19 +316,22 @@ def synthesize(params: FwekfReferenceParams, seed: int, *, noise_free: bool = Fa
 def write(
     params: FwekfReferenceParams, seed: int, out_dir: str | Path, *, noise_free: bool = False
 ) -> list[Path]:
-    """Write ``<dataset>.tlog`` and the reference tables into ``out_dir``; returns the files."""
-    out = Path(out_dir)
+    """Write ``<dataset>.tlog`` and ``reference/`` as the folder ``out_dir``; returns the files."""
     dataset = NOISE_FREE_DATASET if noise_free else DATASET
     raw = raw_tables(params, seed, noise_free=noise_free)
-    tlog = out / f"{dataset}.tlog"
-    write_tlog(
-        tlog,
-        imu=raw["imu"],
-        gnss=raw["gnss"],
-        truth=raw["truth"],
-        truth_imu=raw["truth_imu"],
-        mav_type=MAV_TYPE_FIXED_WING,
-    )
+
+    def write_logs(folder: Path) -> list[tuple[Path, str]]:
+        tlog = folder / f"{dataset}.tlog"
+        write_tlog(
+            tlog,
+            imu=raw["imu"],
+            gnss=raw["gnss"],
+            truth=raw["truth"],
+            truth_imu=raw["truth_imu"],
+            mav_type=MAV_TYPE_FIXED_WING,
+        )
+        return [(tlog, "mavlink_tlog")]
+
     tables = {
         "imu": as_logged_imu(raw["imu"]),
         "gnss": as_logged_gnss(raw["gnss"]),
@@ -332,7 +339,11 @@ def write(
     }
     result = SynthResult(dataset, tables, sensor_meta(params, noise_free=noise_free))
     plain = to_plain(params if not noise_free else dataclasses.replace(params, noise=NO_NOISE))
-    ref = write_reference(
-        out, result, sources=[(tlog, "mavlink_tlog")], params={"seed": seed, DATASET: plain}
-    )
-    return [tlog, *ref]
+    return write_dataset_dir(out_dir, result, write_logs, params={"seed": seed, DATASET: plain})
+
+
+def write_dataset(name: str, synth: SynthParams, out_dir: Path) -> list[Path]:
+    """The synth registry's entry point: either noise case from ``params.synth``."""
+    if name not in (DATASET, NOISE_FREE_DATASET):
+        raise ValueError(f"{__name__} makes {DATASET!r} and {NOISE_FREE_DATASET!r}, not {name!r}")
+    return write(synth.fwekf_reference, synth.seed, out_dir, noise_free=name == NOISE_FREE_DATASET)

@@ -10,7 +10,7 @@ resolution), so a reader must reproduce them; truth is kept at full precision.
 from __future__ import annotations
 
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from ingest.atomic import atomic_directory
 from ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
 from ingest.tables import Provenance, sha256_file, write_table
 
@@ -90,3 +91,28 @@ def write_reference(
     )
     written.append(write_meta(ref, meta))
     return written
+
+
+def write_dataset_dir(
+    out_dir: str | Path,
+    result: SynthResult,
+    write_logs: Callable[[Path], Sequence[tuple[Path, str]]],
+    *,
+    params: Mapping[str, Any],
+) -> list[Path]:
+    """Write a dataset's folder: its log files and ``reference/``, replacing ``out_dir`` whole.
+
+    Args:
+        out_dir: the dataset's ``raw/`` folder; it appears complete or not at all.
+        result: the synthesized dataset (its tables go to ``reference/``).
+        write_logs: writes the log files into the folder it is given; returns (path, format).
+        params: the plain parameters that produced the dataset.
+
+    Returns:
+        the final paths of the log files, then of the reference files.
+    """
+    out = Path(out_dir)
+    with atomic_directory(out) as tmp:
+        logs = list(write_logs(tmp))
+        ref = write_reference(tmp, result, sources=logs, params=params)
+    return [out / p.relative_to(tmp) for p, _ in logs] + [out / p.relative_to(tmp) for p in ref]

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -31,13 +32,16 @@ from ingest.schema import FixType, from_columns
 from ingest.typed import to_plain
 from ingest.writers.csv import CsvColumn, quantize, write_csv
 from pipeline.control.lqr import lqr_command, tractor_lqr_gain
-from pipeline.synth.result import SynthResult, dataset_seed, write_reference
+from pipeline.synth.result import SynthResult, dataset_seed, write_dataset_dir
 from pipeline.synth.tractor import (
     TractorMeasurement,
     TractorSim,
     TractorState,
     TractorStraightParams,
 )
+
+if TYPE_CHECKING:
+    from pipeline.params import SynthParams
 
 F64 = npt.NDArray[np.float64]
 
@@ -194,24 +198,32 @@ def synthesize(params: TractorStraightParams, seed: int) -> SynthResult:
 
 
 def write(params: TractorStraightParams, seed: int, out_dir: str | Path) -> list[Path]:
-    """Write the CSV logs and the reference tables into ``out_dir``; returns the files.
+    """Write the CSV logs and ``reference/`` as the folder ``out_dir``; returns the files.
 
     Byte-identical for the same parameters and seed.
     """
-    out = Path(out_dir)
     rec = record(params, seed)
     cols = _csv_columns(params, rec)
     comment = (
         f"navreplay synthesized {DATASET} (paper 000): John Deere 8400 model, "
         f"{params.rate_hz:g} Hz, seed {seed}"
     )
-    logs: list[tuple[Path, str]] = []
-    for name, columns in cols.items():
-        path = out / f"{DATASET}_{name}.csv"
-        write_csv(path, columns, comment=comment)
-        logs.append((path, "csv"))
+
+    def write_logs(folder: Path) -> list[tuple[Path, str]]:
+        logs = []
+        for name, columns in cols.items():
+            path = folder / f"{DATASET}_{name}.csv"
+            write_csv(path, columns, comment=comment)
+            logs.append((path, "csv"))
+        return logs
+
     result = SynthResult(DATASET, _tables(cols), SensorMeta())
-    ref = write_reference(
-        out, result, sources=logs, params={"seed": seed, DATASET: to_plain(params)}
-    )
-    return [p for p, _ in logs] + ref
+    plain = {"seed": seed, DATASET: to_plain(params)}
+    return write_dataset_dir(out_dir, result, write_logs, params=plain)
+
+
+def write_dataset(name: str, synth: SynthParams, out_dir: Path) -> list[Path]:
+    """The synth registry's entry point: ``tractor_straight`` from ``params.synth``."""
+    if name != DATASET:
+        raise ValueError(f"{__name__} makes {DATASET!r}, not {name!r}")
+    return write(synth.tractor_straight, synth.seed, out_dir)

@@ -11,7 +11,9 @@ import pandas as pd
 import pytest
 
 from ingest.config import CsvSource, load_dataset_config
+from ingest.meta import read_meta
 from ingest.tables import read_table
+from pipeline.params import load_params
 from pipeline.synth import car, tractor_log
 from pipeline.synth.tractor import TractorStraightParams
 
@@ -85,3 +87,24 @@ def test_same_seed_gives_byte_identical_files_another_seed_other_noise(
         ours = (raw / name).read_text().splitlines()[1:]
         theirs = (tmp_path / "other" / name).read_text().splitlines()[1:]
         assert (ours != theirs) is (not name.endswith("truth.csv")), name
+
+
+def test_write_dataset_takes_its_section_of_params_and_replaces_the_folder(tmp_path: Path) -> None:
+    synth = load_params(REPO / "params.yaml").synth
+    short = dataclasses.replace(
+        synth, tractor_straight=dataclasses.replace(synth.tractor_straight, duration_s=2.0)
+    )
+    out = tmp_path / "raw"
+    out.mkdir()
+    (out / "stale.csv").write_text("left over from another run\n")
+    files = tractor_log.write_dataset("tractor_straight", short, out)
+    assert sorted(p.name for p in out.iterdir()) == [
+        "reference",
+        "tractor_straight_gnss.csv",
+        "tractor_straight_truth.csv",
+        "tractor_straight_vehicle.csv",
+    ]
+    assert all(p.exists() for p in files)
+    assert read_meta(out / "reference").tables == {"gnss": 101, "truth": 101, "vehicle": 101}
+    with pytest.raises(ValueError, match="not 'car_speed_ramp'"):
+        tractor_log.write_dataset("car_speed_ramp", short, out)
