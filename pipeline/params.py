@@ -18,6 +18,7 @@ from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
 from pipeline.synth.car import CarSpeedRampParams
 from pipeline.synth.fwekf import FwekfReferenceParams
+from pipeline.synth.seoul_params import SeoulCampusParams
 from pipeline.synth.tractor import TractorStraightParams
 
 DEFAULT_PARAMS = Path("params.yaml")
@@ -29,6 +30,7 @@ class SynthParams:
     """``synth``: the synthesized datasets. ``seed`` seeds every random draw."""
 
     seed: int
+    seoul_campus: SeoulCampusParams
     tractor_straight: TractorStraightParams
     fwekf_reference: FwekfReferenceParams
     car_speed_ramp: CarSpeedRampParams

@@ -45,8 +45,9 @@ from ingest.typed import FieldError, to_plain
 from ingest.writers.csv import CsvColumn, quantize, write_csv
 from pipeline.nav.earth import OMEGA_IE, radii
 from pipeline.nav.local import LocalFrame
+from pipeline.synth import SynthResult
 from pipeline.synth.bicycle import COLUMNS, VehicleParams, simulate
-from pipeline.synth.result import SynthResult, dataset_rng, write_dataset_dir
+from pipeline.synth.output import dataset_rng, write_dataset_dir
 
 if TYPE_CHECKING:
     from pipeline.params import SynthParams
@@ -331,7 +332,7 @@ def _sensor_meta(params: CarSpeedRampParams) -> SensorMeta:
 
 def synthesize(params: CarSpeedRampParams, seed: int) -> SynthResult:
     """The ``car_speed_ramp`` dataset in memory."""
-    return SynthResult(DATASET, _tables(_csv_columns(params, seed)), _sensor_meta(params))
+    return SynthResult(_tables(_csv_columns(params, seed)), _sensor_meta(params), time_base="utc")
 
 
 def write(params: CarSpeedRampParams, seed: int, out_dir: str | Path) -> list[Path]:
@@ -347,9 +348,9 @@ def write(params: CarSpeedRampParams, seed: int, out_dir: str | Path) -> list[Pa
             logs.append((path, "csv"))
         return logs
 
-    result = SynthResult(DATASET, _tables(cols), _sensor_meta(params))
+    result = SynthResult(_tables(cols), _sensor_meta(params), time_base="utc")
     plain = {"seed": seed, DATASET: to_plain(params)}
-    return write_dataset_dir(out_dir, result, write_logs, params=plain)
+    return write_dataset_dir(out_dir, DATASET, result, write_logs, params=plain)
 
 
 def write_dataset(name: str, synth: SynthParams, out_dir: Path) -> list[Path]:

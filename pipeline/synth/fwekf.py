@@ -51,7 +51,8 @@ from pipeline.nav.earth import radii
 from pipeline.nav.local import LocalFrame
 from pipeline.nav.mechanization import NAV_DIM, imu_from_motion
 from pipeline.nav.rotations import euler_to_quat
-from pipeline.synth.result import SynthResult, dataset_rng, write_dataset_dir
+from pipeline.synth import SynthResult
+from pipeline.synth.output import dataset_rng, write_dataset_dir
 
 if TYPE_CHECKING:
     from pipeline.params import SynthParams
@@ -309,8 +310,7 @@ def synthesize(params: FwekfReferenceParams, seed: int, *, noise_free: bool = Fa
         "gnss": as_logged_gnss(raw["gnss"]),
         "truth": raw["truth"],
     }
-    dataset = NOISE_FREE_DATASET if noise_free else DATASET
-    return SynthResult(dataset, tables, sensor_meta(params, noise_free=noise_free))
+    return SynthResult(tables, sensor_meta(params, noise_free=noise_free), time_base="utc")
 
 
 def write(
@@ -337,9 +337,11 @@ def write(
         "gnss": as_logged_gnss(raw["gnss"]),
         "truth": raw["truth"],
     }
-    result = SynthResult(dataset, tables, sensor_meta(params, noise_free=noise_free))
+    result = SynthResult(tables, sensor_meta(params, noise_free=noise_free), time_base="utc")
     plain = to_plain(params if not noise_free else dataclasses.replace(params, noise=NO_NOISE))
-    return write_dataset_dir(out_dir, result, write_logs, params={"seed": seed, DATASET: plain})
+    return write_dataset_dir(
+        out_dir, dataset, result, write_logs, params={"seed": seed, DATASET: plain}
+    )
 
 
 def write_dataset(name: str, synth: SynthParams, out_dir: Path) -> list[Path]:

@@ -32,7 +32,8 @@ from ingest.schema import FixType, from_columns
 from ingest.typed import to_plain
 from ingest.writers.csv import CsvColumn, quantize, write_csv
 from pipeline.control.lqr import lqr_command, tractor_lqr_gain
-from pipeline.synth.result import SynthResult, dataset_seed, write_dataset_dir
+from pipeline.synth import SynthResult
+from pipeline.synth.output import dataset_seed, write_dataset_dir
 from pipeline.synth.tractor import (
     TractorMeasurement,
     TractorSim,
@@ -194,7 +195,7 @@ def synthesize(params: TractorStraightParams, seed: int) -> SynthResult:
     """The ``tractor_straight`` dataset in memory (see the module docstring)."""
     rec = record(params, seed)
     tables = _tables(_csv_columns(params, rec))
-    return SynthResult(DATASET, tables, SensorMeta())
+    return SynthResult(tables, SensorMeta(), time_base="utc")
 
 
 def write(params: TractorStraightParams, seed: int, out_dir: str | Path) -> list[Path]:
@@ -217,9 +218,9 @@ def write(params: TractorStraightParams, seed: int, out_dir: str | Path) -> list
             logs.append((path, "csv"))
         return logs
 
-    result = SynthResult(DATASET, _tables(cols), SensorMeta())
+    result = SynthResult(_tables(cols), SensorMeta(), time_base="utc")
     plain = {"seed": seed, DATASET: to_plain(params)}
-    return write_dataset_dir(out_dir, result, write_logs, params=plain)
+    return write_dataset_dir(out_dir, DATASET, result, write_logs, params=plain)
 
 
 def write_dataset(name: str, synth: SynthParams, out_dir: Path) -> list[Path]:

@@ -10,9 +10,8 @@ import pytest
 
 from pipeline.nav.earth import OMEGA_IE
 from pipeline.params import load_params
-from pipeline.synth import car
+from pipeline.synth import SynthResult, car
 from pipeline.synth.bicycle import COLUMNS, VehicleParams, simulate
-from pipeline.synth.result import SynthResult
 
 REPO = Path(__file__).resolve().parents[3]
 PAPER = car.CarSpeedRampParams()

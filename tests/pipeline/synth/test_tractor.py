@@ -12,7 +12,7 @@ from scipy.integrate import solve_ivp
 from pipeline.control.lqr import YawSteerModel, lqr_command, tractor_lqr_gain
 from pipeline.params import load_params
 from pipeline.synth import tractor_log
-from pipeline.synth.result import dataset_seed
+from pipeline.synth.output import dataset_seed
 from pipeline.synth.tractor import (
     TractorMeasurement,
     TractorSim,

@@ -1,45 +1,28 @@
-"""What a synthesizer returns, its random streams, and its reference tables on disk.
+"""Random streams and the output folder of the vehicle synthesizers (tractor, fwekf, car).
 
-Every synthesizer is a pure function ``synthesize(params, seed) -> SynthResult``; a separate
-``write`` turns the result into the log files a user's own tools open, plus the synthesizer's
-canonical tables as Parquet under ``reference/`` for round-trip tests. Measurement tables in a
-result hold the values exactly as the log files encode them (quantized to the format's
-resolution), so a reader must reproduce them; truth is kept at full precision.
+Each of these synthesizers is a pure function ``synthesize(params, seed) -> SynthResult``; a
+separate ``write`` turns the result into the log files a user's own tools open (CSV, MAVLink
+tlog), plus the synthesizer's canonical tables as Parquet under ``reference/`` (the layout of
+``pipeline.synth.files``) for round-trip tests. Measurement tables in a result hold the values
+exactly as the log files encode them (quantized to the format's resolution), so a reader must
+reproduce them; truth is kept at full precision.
 """
 
 from __future__ import annotations
 
 import zlib
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
 
 from ingest.atomic import atomic_directory
-from ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
+from ingest.meta import DatasetMeta, SourceRecord, write_meta
 from ingest.tables import Provenance, sha256_file, write_table
+from pipeline.synth import SynthResult
 
-REFERENCE_DIR = "reference"
-
-
-@dataclass(frozen=True)
-class SynthResult:
-    """A synthesized dataset in memory.
-
-    Attributes:
-        dataset: dataset id (``tractor_straight`` ...).
-        tables: canonical table name -> table (``ingest.schema`` validated).
-        sensors: sensor metadata the filters use.
-        time_base: the clock of ``t_ns`` (``utc``: UNIX time).
-    """
-
-    dataset: str
-    tables: Mapping[str, pa.Table]
-    sensors: SensorMeta
-    time_base: str = "utc"
+REFERENCE_DIR = "reference"  # as in pipeline.synth.files
 
 
 def dataset_seed(seed: int, dataset: str) -> np.random.SeedSequence:
@@ -58,6 +41,7 @@ def dataset_rng(seed: int, dataset: str) -> np.random.Generator:
 
 def write_reference(
     out_dir: Path,
+    dataset: str,
     result: SynthResult,
     *,
     sources: Sequence[tuple[Path, str]],
@@ -67,6 +51,7 @@ def write_reference(
 
     Args:
         out_dir: the synthesizer's output folder.
+        dataset: the dataset id.
         result: the synthesized dataset.
         sources: the log files written (path, format name); recorded with their sha256.
         params: the plain parameters that produced the dataset (hashed into provenance).
@@ -78,11 +63,16 @@ def write_reference(
     written: list[Path] = []
     for name, table in sorted(result.tables.items()):
         path = ref / f"{name}.parquet"
-        prov = Provenance.create(name, sources=[p for p, _ in sources], params=params)
+        prov = Provenance.create(
+            name,
+            sources=[p for p, _ in sources],
+            params=params,
+            extra={"synthesizer": dataset},
+        )
         write_table(path, name, table, prov)
         written.append(path)
     meta = DatasetMeta(
-        dataset=result.dataset,
+        dataset=dataset,
         time_base=result.time_base,
         sources=tuple(SourceRecord(p.name, sha256_file(p), fmt) for p, fmt in sources),
         tables={name: t.num_rows for name, t in sorted(result.tables.items())},
@@ -95,6 +85,7 @@ def write_reference(
 
 def write_dataset_dir(
     out_dir: str | Path,
+    dataset: str,
     result: SynthResult,
     write_logs: Callable[[Path], Sequence[tuple[Path, str]]],
     *,
@@ -104,6 +95,7 @@ def write_dataset_dir(
 
     Args:
         out_dir: the dataset's ``raw/`` folder; it appears complete or not at all.
+        dataset: the dataset id.
         result: the synthesized dataset (its tables go to ``reference/``).
         write_logs: writes the log files into the folder it is given; returns (path, format).
         params: the plain parameters that produced the dataset.
@@ -114,5 +106,5 @@ def write_dataset_dir(
     out = Path(out_dir)
     with atomic_directory(out) as tmp:
         logs = list(write_logs(tmp))
-        ref = write_reference(tmp, result, sources=logs, params=params)
+        ref = write_reference(tmp, dataset, result, sources=logs, params=params)
     return [out / p.relative_to(tmp) for p, _ in logs] + [out / p.relative_to(tmp) for p in ref]
