@@ -22,6 +22,10 @@ if TYPE_CHECKING:
 DATASETS: dict[str, str] = {
     "seoul_campus_cw": "pipeline.synth.seoul_campus",
     "seoul_campus_ccw": "pipeline.synth.seoul_campus",
+    "tractor_straight": "pipeline.synth.tractor_log",
+    "fwekf_reference": "pipeline.synth.fwekf",
+    "fwekf_reference_noise_free": "pipeline.synth.fwekf",
+    "car_speed_ramp": "pipeline.synth.car",
 }
 
 
@@ -34,7 +38,8 @@ class SynthResult:
             validated against ``ingest.schema``; t_ns on ``time_base``.
         sensors: sensor metadata matching the simulation (IMU noise model, lever arm).
         ephemeris: the broadcast ephemerides the satellites used, if any.
-        time_base: the clock of ``t_ns`` (``gps``: ns since 1980-01-06, no leap seconds).
+        time_base: the clock of ``t_ns`` (``gps``: ns since 1980-01-06, no leap seconds;
+            ``utc``: UNIX time, as the MAVLink and CSV datasets use).
     """
 
     tables: Mapping[str, pa.Table]
