@@ -154,7 +154,8 @@ class CsvSource:
         delimiter: field separator; ``whitespace`` for runs of blanks.
         comment: lines starting with this are skipped.
         time_base: the clock of ``time_column`` (``ingest.timebase``): ``gps`` (since
-            1980-01-06), ``utc`` (POSIX) or ``recorder`` (boot time, unknown epoch).
+            1980-01-06), ``utc`` (POSIX) or ``recorder`` (boot time, unknown epoch); default:
+            the dataset's ``time_base`` (``recorder`` when that is ``auto``).
         frame: axis convention of vector columns: ``frd``/``ned`` (canonical) or
             ``flu``/``enu`` (converted at ingest).
         constants: canonical column name -> value for every row, for columns the file lacks
@@ -169,7 +170,7 @@ class CsvSource:
     scale: dict[str, float] = field(default_factory=dict)
     delimiter: str = ","
     comment: str = "#"
-    time_base: Literal["gps", "utc", "recorder"] = "recorder"
+    time_base: Literal["gps", "utc", "recorder"] | None = None
     frame: Literal["frd", "flu"] = "frd"
     constants: dict[str, float] = field(default_factory=dict)
 
@@ -231,3 +232,14 @@ def log_paths(config: DatasetConfig, descriptor: str | Path) -> list[Path]:
     """The descriptor's ``logs`` as paths, resolved against the descriptor's folder."""
     base = Path(descriptor).parent
     return [p if (p := Path(s)).is_absolute() else base / p for s in config.logs]
+
+
+def input_paths(config: DatasetConfig, descriptor: str | Path) -> list[Path]:
+    """Every file the descriptor names: its ``logs``, then the ``csv:`` files not among them."""
+    base = Path(descriptor).parent
+    paths = log_paths(config, descriptor)
+    for src in config.csv:
+        p = Path(src.path) if Path(src.path).is_absolute() else base / src.path
+        if p not in paths:
+            paths.append(p)
+    return paths

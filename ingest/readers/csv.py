@@ -93,6 +93,12 @@ class CsvReader(LogReader):
                     return [f.strip() for f in text.split(delimiter)]
         return []
 
+    def _time_base(self, src: CsvSource) -> TimeBase:
+        if src.time_base is not None:
+            return TimeBase(src.time_base)
+        declared = self.ctx.config.time_base if self.ctx.config is not None else "auto"
+        return TimeBase.RECORDER if declared == "auto" else TimeBase(declared)
+
     def inventory(self) -> Inventory:
         streams = tuple(
             StreamInfo(
@@ -102,7 +108,7 @@ class CsvReader(LogReader):
                 start_ns=None,
                 end_ns=None,
                 table=TableName(src.table),
-                time_base=TimeBase(src.time_base),
+                time_base=self._time_base(src),
                 frame=src.frame,
                 detail=", ".join(f"{k}<-{v}" for k, v in src.columns.items()),
             )

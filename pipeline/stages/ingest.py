@@ -72,7 +72,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ingest.api import IngestOptions, ingest, inspect
-    from ingest.config import load_dataset_config, log_paths
+    from ingest.config import input_paths, load_dataset_config
     from pipeline.params import load_params
 
     config = None
@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         config = load_dataset_config(args.dataset_config)
         config_dir = args.dataset_config.parent
         if not logs:
-            logs = log_paths(config, args.dataset_config)
+            logs = input_paths(config, args.dataset_config)
     if not logs:
         raise ParamsError("logs", "no LOG given and no dataset descriptor listing `logs`")
     params_path = args.params if args.params is not None else Path("params.yaml")
