@@ -5,11 +5,11 @@ through rosbags.
   same speed). A directory without ``metadata.yaml`` but with MCAP storage is read that way
   too, and the missing metadata is recorded as a recoverable defect (catalogue case 11);
   ``.db3`` storage without metadata is refused by ``ingest.detect``.
-- sqlite3 storage: rosbags gives the connections and their definitions; the rows are fetched
-  straight from the database in blocks (read-only, immutable: the bag is never touched) and
-  decoded column-wise. File- or message-compressed bags go through ``rosbags.rosbag2.Reader``
-  entirely. SQLite errors ("database disk image is malformed") are E-FATAL naming the file
-  (case 12).
+- sqlite3 storage and file- or message-compressed bags are read with
+  ``rosbags.rosbag2.Reader`` (its row generator costs about what fetching the rows with
+  ``sqlite3`` directly costs: measured, so the library is kept); rows are gathered into
+  batches and decoded column-wise. SQLite errors ("database disk image is malformed") are
+  E-FATAL naming the file (case 12).
 
 Message definitions come from the bag (``message_definitions`` table, MCAP schemas); a bag
 without them is decoded with rosbags' standard ROS 2 types, which the report notes.
@@ -197,15 +197,11 @@ class Ros2BagReader(LogReader):
         if self._known is None:
             self._rosbags_inventory()
         assert self._known is not None
-        connections, channels, compression = self._known
+        connections, channels, _compression = self._known
         wanted = [
             c for c in connections if c.topic in keys and channels[c.id].conversion is not None
         ]
         if not wanted:
-            return
-        plain_sqlite = self.detected.variant == "sqlite3" and not compression
-        if plain_sqlite and all(_has_magic(f, SQLITE_MAGIC) for f in self.detected.files):
-            yield from self._sqlite_read({c.topic: channels[c.id] for c in wanted})
             return
         reader = self._open()
         try:
@@ -240,62 +236,6 @@ class Ros2BagReader(LogReader):
         finally:
             reader.close()
 
-    def _sqlite_read(self, channels: dict[str, RosChannel]) -> Iterator[Batch]:
-        """Rows straight from the sqlite3 storage, fetched in blocks (no Python per row).
-
-        Rows are read in storage (insertion) order, a sequential scan: the recorder inserts
-        in arrival order, and each topic is re-sorted by its own hygiene anyway, so sorting
-        the whole table in SQLite (a temporary B-tree as large as the bag) buys nothing.
-        Row ids stand in for byte offsets in batches and errors.
-        """
-        for f in self.detected.files:
-            try:
-                con = sqlite3.connect(f"file:{f}?mode=ro&immutable=1", uri=True)
-            except sqlite3.Error as err:
-                raise CorruptLogError(f"SQLite error: {err}", path=f) from err
-            try:
-                yield from self._sqlite_rows(f, con, channels)
-            finally:
-                con.close()
-
-    def _sqlite_rows(
-        self, f: Path, con: sqlite3.Connection, channels: dict[str, RosChannel]
-    ) -> Iterator[Batch]:
-        last_id = 0
-        try:
-            topics = {
-                tid: channels[name]
-                for tid, name in con.execute("SELECT id, name FROM topics")
-                if name in channels
-            }
-            if not topics:
-                return
-            marks = ",".join("?" * len(topics))
-            cur = con.execute(
-                f"SELECT id, topic_id, timestamp, data FROM messages WHERE topic_id IN ({marks})",
-                tuple(topics),
-            )
-            while rows := cur.fetchmany(self.ctx.batch_rows):
-                ids, tids, stamps, datas = zip(*rows, strict=True)
-                last_id = ids[-1]
-                tid_arr = np.asarray(tids, np.int64)
-                for tid in np.unique(tid_arr).tolist():
-                    sel = np.flatnonzero(tid_arr == tid).tolist()
-                    yield self._batch(
-                        topics[tid],
-                        [datas[i] for i in sel],
-                        [stamps[i] for i in sel],
-                        [ids[i] for i in sel],
-                    )
-        except sqlite3.Error as err:
-            raise CorruptLogError(
-                f"SQLite error after message row {last_id}: {err}",
-                path=f,
-                record=f"row {last_id}",
-                hint="recover the database outside the pipeline (sqlite3 .recover), then "
-                "`ros2 bag reindex` the copy",
-            ) from err
-
     def _batch(
         self, ch: RosChannel, datas: list[bytes], stamps: list[int], ordinals: list[int]
     ) -> Batch:
@@ -303,7 +243,7 @@ class Ros2BagReader(LogReader):
         ends = np.cumsum(lens)
         starts = ends - lens
         buf = np.frombuffer(b"".join(datas), np.uint8)
-        # sqlite rows have no byte offset: the row id (or the message's index) stands in.
+        # sqlite rows have no byte offset: the message's index in the bag stands in for it.
         return decode_batch(
             self.path,
             ch,
