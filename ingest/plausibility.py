@@ -99,6 +99,10 @@ def decide_imu(
     if config.gyro_units == "degps":
         d.gyro_scale = math.pi / 180.0
         d.provenance["imu_gyro_units"] = "deg/s (scaled to rad/s, from dataset.yaml)"
+    if config.accel_units == "mps2":
+        d.provenance["imu_accel_units"] = "m/s^2 (declared in dataset.yaml, check not enforced)"
+    if config.gyro_units == "radps":
+        d.provenance["imu_gyro_units"] = "rad/s (declared in dataset.yaml, check not enforced)"
     acc, gyro = acc * d.accel_scale, gyro * d.gyro_scale
     wins = _windows(t)
     rest = [w for w in wins if float(np.linalg.norm(acc[w].std(axis=0))) < REST_ACC_STD_MPS2]
@@ -212,6 +216,8 @@ def decide_gnss(
     if config.latlon_units == "rad":
         d.latlon_scale = 180.0 / math.pi
         d.provenance["gnss_latlon_units"] = "rad (scaled to deg, from dataset.yaml)"
+    elif config.latlon_units == "deg":
+        d.provenance["gnss_latlon_units"] = "deg (declared in dataset.yaml, check not enforced)"
     lat = columns["lat_deg"] * d.latlon_scale
     lon = columns["lon_deg"] * d.latlon_scale
     fix = columns.get("fix_type")

@@ -122,6 +122,8 @@ class TableSink:
         if source_base != self.base:
             cols["t_ns"] = convert(cols["t_ns"], source_base, self.base)
         frame = batch.frame or frame
+        if self.table == TableName.IMU and self.config.imu.frame != "auto":
+            frame = self.config.imu.frame  # the descriptor knows better than the log
         if frame in ("flu", "enu"):
             changed = flu_to_frd(cols, self.table.value)
             note = f"{self.table.value}: {frame.upper()} -> {'FRD' if frame == 'flu' else 'NED'}"

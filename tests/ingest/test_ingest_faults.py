@@ -137,3 +137,15 @@ def test_ned_frame_id_is_not_converted(tmp_path: Path) -> None:
     assert result.report["tables"]["imu"]["frame_conversions"] == []
     acc_z = pq.read_table(tmp_path / "out" / "imu.parquet")["acc_z_mps2"].to_numpy()
     assert acc_z.mean() == pytest.approx(-G, abs=0.01)
+
+
+def test_descriptor_frame_overrides_the_ros_convention(tmp_path: Path) -> None:
+    # A driver that publishes FRD without the _ned suffix: imu.frame: frd in dataset.yaml.
+    data = imu_data(300)
+    acc = data.acc * np.array([1.0, 1.0, -1.0])
+    stream = imu_stream(type(data)(data.t_ns, acc, data.gyro))
+    cfg = parse_dataset_config({"id": "x", "imu": {"frame": "frd"}})
+    result = ingest([write_mcap(tmp_path / "a.mcap", [stream])], tmp_path / "out", config=cfg)
+    assert result.report["tables"]["imu"]["frame_conversions"] == []
+    acc_z = pq.read_table(tmp_path / "out" / "imu.parquet")["acc_z_mps2"].to_numpy()
+    assert acc_z.mean() == pytest.approx(-G, abs=0.01)
