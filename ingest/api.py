@@ -130,7 +130,7 @@ def inspect(
     inventories = [o.inventory for o in opened]
     for o in opened:
         o.reader.close()
-    return inventories, select_streams(inventories, config)
+    return inventories, select_streams(inventories, config, check_required=False)
 
 
 def ingest(

@@ -69,9 +69,13 @@ def _override(config: DatasetConfig | None, table: TableName) -> tuple[str | Non
 
 
 def select_streams(
-    inventories: Sequence[Inventory], config: DatasetConfig | None
+    inventories: Sequence[Inventory],
+    config: DatasetConfig | None,
+    *,
+    check_required: bool = True,
 ) -> dict[TableName, TablePlan]:
-    """Choose a stream per table (see the module docstring).
+    """Choose a stream per table (see the module docstring); ``check_required=False`` lets
+    ``--list`` show a selection that still lacks a required table.
 
     Raises:
         ConfigError: a configured topic is absent, not decodable, or for another table.
@@ -87,7 +91,7 @@ def select_streams(
             plan = _with_velocity(inventories, plan, config)
         if plan is not None:
             plans[table] = plan
-    for name in config.required if config else ():
+    for name in config.required if config and check_required else ():
         if TableName(name) not in plans:
             topic, _ = _override(config, TableName(name))
             what = f"topic {topic!r}" if topic else f"no stream that can fill the {name} table"

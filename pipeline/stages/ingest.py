@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     )
     if args.list:
         inventories, plans = inspect(logs, config=config, config_dir=config_dir, options=options)
-        sys.stdout.write(format_listing(inventories, plans))
+        sys.stdout.write(format_listing(inventories, plans, config.required if config else ()))
         return 0
     if args.out is None:
         raise ParamsError("--out", "an output directory is required unless --list is given")
@@ -111,10 +111,17 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def format_listing(inventories: list, plans: dict) -> str:  # type: ignore[type-arg]
+def format_listing(
+    inventories: list,  # type: ignore[type-arg]
+    plans: dict,  # type: ignore[type-arg]
+    required: tuple[str, ...] = (),
+) -> str:
     """The --list text: every stream of every file, and which one each table gets."""
     lines: list[str] = []
     chosen = {q.key for p in plans.values() for q in (p, p.companion) if q is not None}
+    streams = [s for inv in inventories for s in inv.streams]
+    kw = max((len(s.key) for s in streams), default=0)
+    tw = max((len(s.msgtype) for s in streams), default=0)
     for inv in inventories:
         lines.append(f"{inv.path}  [{inv.format.value}]")
         for s in inv.streams:
@@ -123,7 +130,7 @@ def format_listing(inventories: list, plans: dict) -> str:  # type: ignore[type-
             table = s.table.value if s.table is not None else "-"
             mark = "*" if s.key in chosen else " "
             lines.append(
-                f" {mark} {s.key:<40} {s.msgtype:<36} {count} {rate}  -> {table:<9} {s.detail}"
+                f" {mark} {s.key:<{kw}}  {s.msgtype:<{tw}} {count} {rate}  -> {table:<9} {s.detail}"
             )
         lines.extend(f"   note: {n}" for n in inv.notes)
     lines.append("selection:")
@@ -131,6 +138,10 @@ def format_listing(inventories: list, plans: dict) -> str:  # type: ignore[type-
         lines.append(f"  {t.value:<9} <- {p.key} ({p.reason})")
         if p.companion is not None:
             lines.append(f"  {'':<9}  + {p.companion.key} ({p.companion.reason}, joined by time)")
+    chosen_tables = {t.value for t in plans}
+    for name in required:
+        if name not in chosen_tables:
+            lines.append(f"  {name:<9} <- nothing: REQUIRED by the descriptor, ingest will fail")
     return "\n".join(lines) + "\n"
 
 
