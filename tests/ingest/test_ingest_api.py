@@ -107,8 +107,8 @@ def test_exception_mid_write_leaves_nothing_and_keeps_the_previous_output(
 def test_sigkill_mid_write_leaves_no_partial_output_and_a_rerun_is_identical(
     tmp_path: Path,
 ) -> None:
-    # Case 40: the process is killed at row group 20; nothing appears at the final path.
-    log = _drive(tmp_path, n=12000)
+    # Case 40: the process is killed at row group 10; nothing appears at the final path.
+    log = _drive(tmp_path, n=6000)
     out = tmp_path / "tables"
     script = textwrap.dedent(
         f"""
@@ -120,7 +120,7 @@ def test_sigkill_mid_write_leaves_no_partial_output_and_a_rerun_is_identical(
         calls = [0]
         def write(self, table):
             calls[0] += 1
-            if calls[0] == 20:
+            if calls[0] == 10:
                 os.kill(os.getpid(), signal.SIGKILL)
             real(self, table)
         TableWriter.write = write
