@@ -19,6 +19,7 @@ REGISTRY: dict[Format, str] = {
     Format.ROS2BAG: "ingest.readers.ros2bag:Ros2BagReader",
     Format.CSV: "ingest.readers.csv:CsvReader",
     Format.COMMA2K19: "ingest.readers.comma2k19:Comma2k19Reader",
+    Format.LIBRSF: "ingest.readers.librsf:LibrsfReader",
 }
 
 
