@@ -20,6 +20,7 @@ REGISTRY: dict[Format, str] = {
     Format.CSV: "ingest.readers.csv:CsvReader",
     Format.COMMA2K19: "ingest.readers.comma2k19:Comma2k19Reader",
     Format.LIBRSF: "ingest.readers.librsf:LibrsfReader",
+    Format.NMEA: "ingest.readers.nmea:NmeaReader",
 }
 
 
