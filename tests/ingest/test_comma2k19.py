@@ -347,3 +347,31 @@ def test_real_reference_is_the_camera_pose(
     assert "road camera" in result.report["tables"]["truth"]["info"]["truth"]
     notes: list[Any] = result.report["files"][0]["inventory_notes"]
     assert any("357697.849502" in n for n in notes)
+
+
+def test_real_derived_csv_copy_carries_the_same_fixes(tmp_path: Path) -> None:
+    derived = SEGMENT.parent / "derived_csv"
+    if not derived.is_dir():
+        pytest.skip(f"shared data not present at {derived}")
+    cfg = parse_dataset_config({"id": "q", "gnss": {"topic": "GNSS/live_gnss_qcom"}})
+    seg = ingest([SEGMENT], tmp_path / "seg", config=cfg)
+    assert seg.tables["gnss"] == 30
+    mapping = {
+        "path": "gnss_fix_qcom.csv",
+        "table": "gnss",
+        "time_column": "t_boot_s",
+        "time_unit": "s",
+        "constants": {"fix_type": 3},
+        "columns": {"lat_deg": "lat_deg", "lon_deg": "lon_deg", "alt_m": "altitude_m"},
+    }
+    csv_cfg = parse_dataset_config({"id": "q", "csv": [mapping]})
+    ingest([derived / "gnss_fix_qcom.csv"], tmp_path / "csv", config=csv_cfg, config_dir=derived)
+    a = pd.read_parquet(tmp_path / "seg" / "gnss.parquet")
+    b = pd.read_parquet(tmp_path / "csv" / "gnss.parquet")
+    np.testing.assert_allclose(
+        a[["lat_deg", "lon_deg", "alt_m"]], b[["lat_deg", "lon_deg", "alt_m"]], atol=1e-9
+    )
+    # The CSV stays on the boot clock; the segment reader adds the global_pose pairing.
+    offset = (a["t_ns"] - b["t_ns"]).to_numpy()
+    expected = 2012 * NS_PER_WEEK + 357_697_849_502_000
+    assert np.abs(offset - expected).max() < 1_000  # the CSV keeps 9 decimals of a second

@@ -301,3 +301,15 @@ def test_real_odometry_turns_with_the_ground_truth(
     assert math.isclose(
         np.median(np.hypot(vn, ve)[moving] / veh["speed_mps"][moving]), 1.0, abs_tol=0.02
     )
+
+
+def test_a_forward_clock_jump_is_reported_as_a_segment(tmp_path: Path) -> None:
+    odo = [
+        f"odom3 {k * 0.2 + (3600.0 if k >= 500 else 0.0):.1f} 5.0 0 0 0 0 0.1 0.0025 0.0009 "
+        "0.0009 4e-06 4e-06 4e-06"
+        for k in range(1000)
+    ]  # case 32: the stamps jump one hour ahead after 100 s
+    result = ingest([_write(tmp_path / "Input.txt", odo)], tmp_path / "out")
+    (segment,) = result.report["tables"]["vehicle"]["stats"]["segments"]
+    assert segment["jump_s"] == pytest.approx(3600.2)
+    assert segment["offset"] == 501

@@ -415,3 +415,22 @@ def test_real_fixes_match_an_independent_nmea_parser(
     ref = np.array(expected, dtype=float)
     assert len(ref) == len(gnss)
     np.testing.assert_allclose(gnss[["lat_deg", "lon_deg", "alt_m"]], ref[:, :3], atol=1e-9)
+
+
+def test_clock_steps_in_the_time_of_day_are_split_not_taken_for_midnight(tmp_path: Path) -> None:
+    epochs = [epoch_sentences(k) for k in range(100)]
+    later = [epoch_sentences(k + 3600) for k in range(30)]  # case 32: one hour forward
+    back = [epoch_sentences(k - 5) for k in range(60, 100)]  # case 31: 5 s back, repeated
+    path = tmp_path / "steps.nmea"
+    path.write_bytes(b"".join(s for e in [*epochs[:60], *back, *later] for s in e))
+    result = ingest([path], tmp_path / "out")
+    gnss = result.report["tables"]["gnss"]
+    (step,) = gnss["hygiene"]["clock_steps_backward"]
+    assert step["step_s"] == pytest.approx(1.0 - 5.0)  # one cycle later, minus 5 s
+    assert step["offset"] == 60 * len(epochs[0]) + 3  # the first GGA after the step
+    (segment,) = gnss["stats"]["segments"]
+    # The re-based run (55..94 s shifted by +5 s to 60..99 s) stays shifted: 3605 - 99 s.
+    assert segment["jump_s"] == pytest.approx(3600.0 + 5.0 - 99.0)
+    t = _gnss(tmp_path / "out")["t_ns"].to_numpy()
+    assert (np.diff(t) > 0).all()
+    assert t[-1] - t[0] < 86_400 * NS_PER_S  # no day was added
