@@ -209,8 +209,8 @@ class Comma2k19Reader(LogReader):
         notes = [clock.note]
         if any(s.key.startswith("GNSS/raw_gnss") for s in streams):
             notes.append(
-                f"gnss_obs: {NO_EPHEMERIS}; add a broadcast navigation file for the "
-                "recording day to use them"
+                f"gnss_obs: {NO_EPHEMERIS} (a broadcast navigation file for the recording day "
+                "would be needed; combining one with these arrays is not supported)"
             )
         if any(s.key == "global_pose" for s in streams):
             notes.append(CAMERA_POSE)
@@ -375,7 +375,14 @@ class Comma2k19Reader(LogReader):
             info["steer_rad"] = f"steer_wheel_rad / steer_ratio {ratio} (dataset.yaml)"
         else:
             info["steer_rad"] = "null: set vehicle.steer_ratio in dataset.yaml to convert"
-        return Batch("CAN", TableName.VEHICLE, cols, offsets, nulls=nulls, info=info)
+        counters = {
+            "rows_with_speed": int(has_v.sum()),
+            "rows_with_steering": int(has_s.sum()),
+            "rows_with_both": int((has_v & has_s).sum()),
+        }
+        return Batch(
+            "CAN", TableName.VEHICLE, cols, offsets, nulls=nulls, counters=counters, info=info
+        )
 
     def _pose(self) -> Batch:
         t, pos, offsets = self._pair("global_pose", "frame_times", "frame_positions")

@@ -163,8 +163,13 @@ def test_can_speed_and_steering_keep_their_own_stamps(tmp_path: Path) -> None:
     steer = veh["steer_wheel_rad"].dropna()
     np.testing.assert_allclose(steer, -math.radians(15.0))
     np.testing.assert_allclose(veh["steer_rad"].dropna(), -math.radians(15.0) / 15.0)
-    info = result.report["tables"]["vehicle"]["info"]
-    assert "steer_ratio 15.0" in info["steer_rad"]
+    vehicle = result.report["tables"]["vehicle"]
+    assert "steer_ratio 15.0" in vehicle["info"]["steer_rad"]
+    assert vehicle["counters"] == {
+        "rows_with_both": 0,
+        "rows_with_speed": n,
+        "rows_with_steering": n,
+    }
     plain = ingest([seg], tmp_path / "plain")  # no ratio: road-wheel angle not provided
     assert pd.read_parquet(tmp_path / "plain" / "vehicle.parquet")["steer_rad"].isna().all()
     assert "null" in plain.report["tables"]["vehicle"]["info"]["steer_rad"]
@@ -259,6 +264,11 @@ def test_real_segment_counts_rates_and_time_base(
     assert result.tables == {"imu": 6256, "gnss": 579, "vehicle": 4974 + 4974 - 21, "truth": 1200}
     report = result.report
     assert report["files"][0]["completeness"] == ["complete"]
+    assert report["tables"]["vehicle"]["counters"] == {
+        "rows_with_both": 21,
+        "rows_with_speed": 4974,
+        "rows_with_steering": 4974,
+    }
     stats = {k: v["stats"] for k, v in report["tables"].items()}
     assert stats["imu"]["rate_hz"] == pytest.approx(104.4, abs=0.1)  # median dt 9.58 ms
     assert stats["truth"]["rate_hz"] == pytest.approx(20.0, abs=0.01)
