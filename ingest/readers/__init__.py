@@ -18,6 +18,9 @@ REGISTRY: dict[Format, str] = {
     Format.ROS1BAG: "ingest.readers.ros1bag:Ros1BagReader",
     Format.ROS2BAG: "ingest.readers.ros2bag:Ros2BagReader",
     Format.CSV: "ingest.readers.csv:CsvReader",
+    Format.COMMA2K19: "ingest.readers.comma2k19:Comma2k19Reader",
+    Format.LIBRSF: "ingest.readers.librsf:LibrsfReader",
+    Format.NMEA: "ingest.readers.nmea:NmeaReader",
 }
 
 
