@@ -1,0 +1,208 @@
+"""Experiment sections of a dataset report: ``datasets/<id>/experiments/<name>/``.
+
+An experiment stage (paper reproductions, Monte Carlo sweeps, speed-band studies ...) writes
+its results into its own directory; the report renders each directory as one section.
+
+The contract, ``<name>/section.json`` (every key but ``title`` optional)::
+
+    {"title": "Cascaded filters (paper 000)",
+     "order": 40,                                  sections sort by (order, name); default 50
+     "summary": ["paragraph", ...],                plain text, one string per paragraph
+     "claims": [{"claim": "UKF bias convergence faster than the EKF's",
+                 "paper": "about 2x faster", "ours": "1.4x (CI 1.1-1.8)",
+                 "verdict": "agrees" | "differs" | "partly" | "n/a"}],
+     "tables": [{"title": "...", "csv": "convergence.csv", "caption": "..."}],
+     "figures": [{"title": "...", "file": "bands.svg", "caption": "..."}]}   .svg or .png
+
+A directory without ``section.json`` is rendered generically: each ``*.csv`` a table and
+each ``*.svg``/``*.png`` a figure, in name order. A file named ``sat_reduction.csv``
+(columns of ``SAT_REDUCTION_COLUMNS``) is the dataset's per-satellite-count reduction table
+(issue 6) wherever it lies; the report shows it in its own section and copies it to
+``reports/<id>/tables/``.
+
+Unknown keys, a referenced file that does not exist, a CSV that does not parse or a figure
+of another type are ``ReportInputError``s naming the file.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pipeline.report.inputs import ReportInputError, read_json
+
+SECTION_NAME = "section.json"
+SAT_REDUCTION_NAME = "sat_reduction.csv"
+SAT_REDUCTION_COLUMNS = (
+    "pair",
+    "sats",
+    "err_baseline_m",
+    "err_candidate_m",
+    "reduction_pct",
+    "ci_low_pct",
+    "ci_high_pct",
+)
+_KEYS = {"title", "order", "summary", "claims", "tables", "figures"}
+_CLAIM_KEYS = {"claim", "paper", "ours", "verdict"}
+_VERDICTS = {"agrees", "differs", "partly", "n/a"}
+
+
+@dataclass(frozen=True)
+class CsvTable:
+    """A CSV file read as text cells (header + rows)."""
+
+    path: Path
+    title: str
+    caption: str
+    header: tuple[str, ...]
+    rows: tuple[tuple[str, ...], ...]
+
+
+@dataclass(frozen=True)
+class Figure:
+    """An experiment figure: inline SVG text, or a PNG as a data URI."""
+
+    path: Path
+    title: str
+    caption: str
+    svg: str | None = None
+    png_data_uri: str | None = None
+
+
+@dataclass
+class Experiment:
+    """One experiment directory, ready to render."""
+
+    name: str
+    path: Path
+    title: str
+    order: int = 50
+    summary: list[str] = field(default_factory=list)
+    claims: list[dict[str, str]] = field(default_factory=list)
+    tables: list[CsvTable] = field(default_factory=list)
+    figures: list[Figure] = field(default_factory=list)
+
+
+def read_csv(path: Path, title: str = "", caption: str = "") -> CsvTable:
+    """A CSV file with a header row; ragged or empty files are ``ReportInputError``s."""
+    try:
+        with path.open(newline="", encoding="utf-8") as fh:
+            rows = list(csv.reader(fh))
+    except OSError as err:
+        raise ReportInputError(path, f"cannot read: {err.strerror}") from err
+    except (csv.Error, UnicodeDecodeError) as err:
+        raise ReportInputError(path, f"not a CSV file: {err}") from err
+    if not rows or not rows[0]:
+        raise ReportInputError(path, "empty CSV (no header row)")
+    header = tuple(rows[0])
+    for i, r in enumerate(rows[1:], start=2):
+        if len(r) != len(header):
+            raise ReportInputError(path, f"line {i}: {len(r)} cells, the header has {len(header)}")
+    return CsvTable(path, title or path.stem, caption, header, tuple(tuple(r) for r in rows[1:]))
+
+
+def read_figure(path: Path, title: str = "", caption: str = "") -> Figure:
+    """An SVG (inlined) or PNG (base64) figure file."""
+    if not path.is_file():
+        raise ReportInputError(path, "figure file does not exist")
+    suffix = path.suffix.lower()
+    if suffix == ".svg":
+        text = path.read_text(encoding="utf-8")
+        if "<svg" not in text:
+            raise ReportInputError(path, "not an SVG file (no <svg> element)")
+        return Figure(path, title or path.stem, caption, svg=text[text.index("<svg") :])
+    if suffix == ".png":
+        data = path.read_bytes()
+        if not data.startswith(b"\x89PNG\r\n\x1a\n"):
+            raise ReportInputError(path, "not a PNG file (bad signature)")
+        uri = "data:image/png;base64," + base64.b64encode(data).decode("ascii")
+        return Figure(path, title or path.stem, caption, png_data_uri=uri)
+    raise ReportInputError(path, "figures must be .svg or .png")
+
+
+def _str_list(path: Path, value: Any, key: str) -> list[str]:
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ReportInputError(path, f"{key}: expected a list of strings")
+    return list(value)
+
+
+def _items(path: Path, spec: dict[str, Any], key: str) -> list[dict[str, Any]]:
+    items = spec.get(key, [])
+    if not isinstance(items, list) or not all(isinstance(i, dict) for i in items):
+        raise ReportInputError(path, f"{key}: expected a list of objects")
+    return items
+
+
+def _from_section(directory: Path) -> Experiment:
+    path = directory / SECTION_NAME
+    spec = read_json(path)
+    if not isinstance(spec, dict):
+        raise ReportInputError(path, "expected a JSON object")
+    unknown = sorted(set(spec) - _KEYS)
+    if unknown:
+        raise ReportInputError(path, f"unknown keys {unknown}; allowed: {sorted(_KEYS)}")
+    if not isinstance(spec.get("title"), str):
+        raise ReportInputError(path, "title: missing or not a string")
+    order = spec.get("order", 50)
+    if not isinstance(order, int) or isinstance(order, bool):
+        raise ReportInputError(path, "order: expected an integer")
+    exp = Experiment(directory.name, directory, spec["title"], order)
+    exp.summary = _str_list(path, spec.get("summary", []), "summary")
+    for i, c in enumerate(_items(path, spec, "claims")):
+        if set(c) - _CLAIM_KEYS or not all(isinstance(v, str) for v in c.values()):
+            raise ReportInputError(path, f"claims[{i}]: keys {sorted(_CLAIM_KEYS)}, strings")
+        if c.get("verdict", "n/a") not in _VERDICTS:
+            raise ReportInputError(path, f"claims[{i}].verdict: one of {sorted(_VERDICTS)}")
+        exp.claims.append({k: c.get(k, "") for k in ("claim", "paper", "ours", "verdict")})
+    for i, t in enumerate(_items(path, spec, "tables")):
+        if not isinstance(t.get("csv"), str):
+            raise ReportInputError(path, f"tables[{i}].csv: missing or not a string")
+        csv_path = directory / t["csv"]
+        if not csv_path.is_file():
+            raise ReportInputError(path, f"tables[{i}]: {csv_path} does not exist")
+        exp.tables.append(read_csv(csv_path, str(t.get("title", "")), str(t.get("caption", ""))))
+    for i, f in enumerate(_items(path, spec, "figures")):
+        if not isinstance(f.get("file"), str):
+            raise ReportInputError(path, f"figures[{i}].file: missing or not a string")
+        exp.figures.append(
+            read_figure(directory / f["file"], str(f.get("title", "")), str(f.get("caption", "")))
+        )
+    return exp
+
+
+def _generic(directory: Path) -> Experiment:
+    exp = Experiment(directory.name, directory, directory.name.replace("_", " "))
+    for p in sorted(directory.iterdir()):
+        if p.suffix == ".csv" and p.name != SAT_REDUCTION_NAME:
+            exp.tables.append(read_csv(p))
+        elif p.suffix in (".svg", ".png"):
+            exp.figures.append(read_figure(p))
+    return exp
+
+
+def load_experiments(experiments_dir: Path) -> list[Experiment]:
+    """Every experiment directory under ``experiments_dir`` (none if it is absent)."""
+    if not experiments_dir.is_dir():
+        return []
+    out = []
+    for d in sorted(p for p in experiments_dir.iterdir() if p.is_dir()):
+        exp = _from_section(d) if (d / SECTION_NAME).is_file() else _generic(d)
+        if exp.tables or exp.figures or exp.summary or exp.claims:
+            out.append(exp)
+    return sorted(out, key=lambda e: (e.order, e.name))
+
+
+def find_sat_reduction(experiments_dir: Path | None) -> CsvTable | None:
+    """The dataset's ``sat_reduction.csv`` (first in path order), checked for its columns."""
+    if experiments_dir is None or not experiments_dir.is_dir():
+        return None
+    for path in sorted(experiments_dir.rglob(SAT_REDUCTION_NAME)):
+        table = read_csv(path, "Error reduction per satellite count")
+        missing = [c for c in SAT_REDUCTION_COLUMNS if c not in table.header]
+        if missing:
+            raise ReportInputError(path, f"missing columns {missing}")
+        return table
+    return None

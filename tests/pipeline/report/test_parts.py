@@ -1,0 +1,143 @@
+"""Report parts: decimation keeps extremes, the reduction table, experiment sections, summary."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.report.experiments import load_experiments
+from pipeline.report.inputs import ReportInputError, load_dataset
+from pipeline.report.render import render_dataset
+from pipeline.report.summary import paired, ranking, render_summary
+from pipeline.report.svg import decimate_minmax
+from pipeline.report.tables import sat_reduction
+
+
+def test_decimation_keeps_every_extreme_and_the_order() -> None:
+    rng = np.random.default_rng(1)
+    x = np.arange(100_000, dtype=float)
+    y = rng.standard_normal(x.size)
+    y[31_337] = 50.0
+    y[77_777] = -60.0
+    xd, yd = decimate_minmax(x, y, 2000)
+    assert xd.size <= 2000
+    assert np.all(np.diff(xd) > 0)
+    assert yd.max() == 50.0
+    assert yd.min() == -60.0
+    short = np.arange(10.0)
+    assert decimate_minmax(short, short)[0] is short
+
+
+def _windows(filt: str, errs: list[float], k: int) -> list[dict[str, object]]:
+    return [
+        {
+            "filter": filt,
+            "scenario": f"sats_{k}",
+            "window": i,
+            "sats": float(k),
+            "err_mean_m": e,
+        }
+        for i, e in enumerate(errs)
+    ]
+
+
+def test_reduction_is_paired_over_the_same_windows_with_an_interval() -> None:
+    rows = _windows("a", [10.0, 12.0, 8.0, 10.0], 2) + _windows("b", [5.0, 6.0, 4.0, 5.0], 2)
+    rows += _windows("b", [1.0], 3)  # no baseline window with 3 satellites: no row
+    out = sat_reduction(rows, [("a", "b")])
+    assert len(out) == 1
+    r = out[0]
+    assert r["sats"] == 2
+    assert r["windows"] == 4
+    assert r["reduction_pct"] == pytest.approx(50.0)
+    assert r["ci_low_pct"] <= 50.0 <= r["ci_high_pct"]
+    assert r["paper_pct"] == 52.6
+    assert sat_reduction(rows, [("a", "b")]) == out  # seeded: the same bounds every time
+
+
+def test_ranking_and_paired_ratio() -> None:
+    cells = {
+        ("d1", "nominal"): {"x": 1.0, "y": 2.0, "z": 4.0},
+        ("d1", "outage"): {"x": 10.0, "y": 20.0},
+        ("d2", "nominal"): {"x": 2.0, "y": 4.0, "z": 1.0},
+    }
+    rank = ranking(cells)
+    assert next(r["filter"] for r in rank) == "x"
+    pairs = paired(cells, [r["filter"] for r in rank])
+    xy = next(p for p in pairs if (p["a"], p["b"]) == ("x", "y"))
+    assert xy["cells"] == 3
+    assert xy["ratio_b_over_a"] == pytest.approx(2.0)
+    assert math.isnan(xy["ratio_ci_low"]) or xy["ratio_ci_low"] == pytest.approx(2.0)
+
+
+def _experiment(root: Path, spec: dict[str, object]) -> Path:
+    d = root / "experiments" / "cascade"
+    d.mkdir(parents=True)
+    (d / "convergence.csv").write_text("filter,rb_s\ncascaded_ekf,12.5\ncascaded_ukf,6.1\n")
+    (d / "bands.svg").write_text('<?xml version="1.0"?><svg viewBox="0 0 10 10"><path id="p" '
+                                 'd="M0 0L10 10"/></svg>')  # fmt: skip
+    (d / "section.json").write_text(json.dumps(spec))
+    return d
+
+
+def test_experiment_sections_render_from_their_contract(dataset_dir: Path, tmp_path: Path) -> None:
+    root = tmp_path / "ds"
+    shutil.copytree(dataset_dir, root)
+    _experiment(
+        root,
+        {
+            "title": "Cascaded filters (paper 000)",
+            "summary": ["The UKF converges faster."],
+            "claims": [
+                {"claim": "UKF faster", "paper": "2x", "ours": "2.05x", "verdict": "agrees"}
+            ],
+            "tables": [{"title": "Convergence", "csv": "convergence.csv"}],
+            "figures": [{"title": "Bands", "file": "bands.svg"}],
+        },
+    )
+    data = load_dataset("tiny", root / "tables", root / "runs", root / "experiments")
+    render_dataset(data, tmp_path / "r", experiments_dir=root / "experiments")
+    page = (tmp_path / "r" / "index.html").read_text()
+    assert '<section id="experiments">' in page
+    assert "Cascaded filters (paper 000)" in page
+    assert "cascaded_ukf" in page
+    assert 'id="exp-cascade-0-p"' in page
+
+
+@pytest.mark.parametrize(
+    ("spec", "match"),
+    [
+        ({"titel": "x"}, "unknown keys"),
+        ({"title": "x", "tables": [{"csv": "missing.csv"}]}, "does not exist"),
+        ({"title": "x", "claims": [{"claim": "c", "verdict": "maybe"}]}, "verdict"),
+        ({"title": "x", "figures": [{"file": "convergence.csv"}]}, ".svg or .png"),
+    ],
+)
+def test_a_malformed_section_is_an_error_naming_the_file(
+    tmp_path: Path, spec: dict[str, object], match: str
+) -> None:
+    _experiment(tmp_path, spec)
+    with pytest.raises(ReportInputError, match=match) as err:
+        load_experiments(tmp_path / "experiments")
+    assert "cascade" in str(err.value)
+
+
+def test_summary_ranks_filters_across_reports(dataset_dir: Path, tmp_path: Path) -> None:
+    reports = []
+    for name in ("one", "two"):
+        data = load_dataset(name, dataset_dir / "tables", dataset_dir / "runs", None)
+        data.dataset = name
+        render_dataset(data, tmp_path / name)
+        reports.append(tmp_path / name)
+    index = render_summary(reports, tmp_path / "summary")
+    page = index.read_text()
+    assert "Filters ranked" not in page  # one filter per cell: nothing to rank
+    assert '<a href="../one/index.html">one</a>' in page
+    assert (tmp_path / "summary" / "tables" / "ranking.csv").is_file()
+    with pytest.raises(ReportInputError, match="not a dataset report"):
+        render_summary([tmp_path], tmp_path / "s2")
