@@ -8,7 +8,7 @@ Unknown or misspelled keys, wrong types, duplicated keys and missing sections ar
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -59,12 +59,38 @@ class IngestParams:
 
 
 @dataclass(frozen=True)
+class RunGroup:
+    """One ``run.groups`` entry: datasets that share a filter set (a ``dvc.yaml`` matrix).
+
+    ``dvc.yaml`` has one ``run_<group>`` stage per group, a matrix over
+    datasets x filters x scenarios, so that a filter runs only on data it can use (the INS
+    filters need an IMU; the tightly coupled ones raw observables with orbits).
+    """
+
+    datasets: tuple[str, ...]
+    filters: tuple[str, ...]
+    scenarios: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        for key in ("datasets", "filters", "scenarios"):
+            if not getattr(self, key):
+                raise FieldError(key, "must not be empty")
+
+
+@dataclass(frozen=True)
 class RunParams:
-    """``run``: which filters and scenarios the pipeline runs, and on which backend."""
+    """``run``: which filters and scenarios the pipeline runs, and on which backend.
+
+    Attributes:
+        backend: ``numba`` or ``filterpy``.
+        filters, scenarios: the defaults of ``navreplay analyze``.
+        groups: what ``dvc repro`` runs, per group of datasets (``RunGroup``).
+    """
 
     backend: Literal["numba", "filterpy"]
     filters: tuple[str, ...]
     scenarios: tuple[str, ...]
+    groups: dict[str, RunGroup] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -108,6 +134,10 @@ class Params:
                 )
         if len(set(self.datasets)) != len(self.datasets):
             raise FieldError("datasets", "lists a dataset twice")
+        for name, group in self.run.groups.items():
+            for ds in group.datasets:
+                if ds not in self.datasets:
+                    raise FieldError(f"run.groups.{name}.datasets", f"{ds!r} is not in datasets")
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):

@@ -12,7 +12,8 @@ inside cells, on the same data (paired):
   One cell gives a point value without an interval.
 
 Also the per-satellite-count reduction table of every dataset that has one (paper 001).
-Writes ``index.html``, ``tables/ranking.csv``, ``tables/paired.csv``,
+Writes ``index.html``, ``tables/ranking.csv``, ``tables/paired.csv``, ``tables/runs.csv``
+(every finished run of every dataset, the data of ``dvc plots``),
 ``tables/sat_reduction.csv`` and ``metrics.json`` (the ranking, for ``dvc metrics``).
 """
 
@@ -65,6 +66,10 @@ def load_report(report_dir: Path) -> DatasetResult:
         t = read_csv(red_path)
         red = (t.header, t.rows)
     return DatasetResult(dataset or report_dir.name, report_dir, runs, red)
+
+
+_RUN_COLS = ("run", "dataset", "filter", "scenario", "pos_err_h_rms_m", "pos_err_3d_rms_m",
+             "pos_err_3d_max_m", "nees_mean", "realtime_factor")  # fmt: skip
 
 
 def _cells(results: Sequence[DatasetResult]) -> dict[tuple[str, str], dict[str, float]]:
@@ -144,6 +149,12 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
     pairs = paired(cells, [r["filter"] for r in rank])
     best = rank[0]["filter"] if rank else None
     vs_best = [p for p in pairs if p["a"] == best]
+    all_runs = [
+        {"run": f"{d.dataset}/{r['filter']}/{r['scenario']}", "dataset": d.dataset, **r}
+        for d in results
+        for r in d.runs
+        if r.get("status") == "ok" and r.get(METRIC) is not None
+    ]
     red_rows: list[Row] = []
     for d in results:
         if d.sat_reduction is not None:
@@ -224,6 +235,7 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
         (tmp / "tables").mkdir()
         atomic_write_text(tmp / "index.html", page)
         atomic_write_text(tmp / "tables" / "ranking.csv", tb.to_csv(rank))
+        atomic_write_text(tmp / "tables" / "runs.csv", tb.to_csv(all_runs, _RUN_COLS))
         atomic_write_text(
             tmp / "tables" / "paired.csv", tb.to_csv(pairs, [k for k, _ in pair_cols])
         )
