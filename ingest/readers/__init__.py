@@ -18,6 +18,7 @@ REGISTRY: dict[Format, str] = {
     Format.ROS1BAG: "ingest.readers.ros1bag:Ros1BagReader",
     Format.ROS2BAG: "ingest.readers.ros2bag:Ros2BagReader",
     Format.CSV: "ingest.readers.csv:CsvReader",
+    Format.RINEX: "ingest.readers.rinex:RinexReader",
 }
 
 
