@@ -19,6 +19,8 @@ REGISTRY: dict[Format, str] = {
     Format.ROS2BAG: "ingest.readers.ros2bag:Ros2BagReader",
     Format.CSV: "ingest.readers.csv:CsvReader",
     Format.RINEX: "ingest.readers.rinex:RinexReader",
+    Format.GNSSLOGGER: "ingest.readers.gnsslogger:GnssLoggerReader",
+    Format.GSDC: "ingest.readers.gsdc:GsdcReader",
 }
 
 
