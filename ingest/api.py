@@ -17,7 +17,12 @@ so a stream split over several files (a split bag) continues across them.
 ``ingest_report.json`` (also ``meta.json``'s ``audit``)::
 
     package_version, options {strict, reorder_window_s, gap_factor}
-    time_base {base, leap_seconds, decisions[], checks[]}        cross-file overlap checks
+    time_base {base, leap_seconds, decisions[], checks[],      cross-file overlap checks
+               alignment[] {streams, signal, lag_s, correlation, overlap_s, speed_ratio},
+                                                  speed-signal lags (ingest.alignment)
+               gnss_check {against, files, status, lag_s, median_m_at_lag,
+                           median_m_at_zero, epochs, motion_m}}
+                                  gnss_obs positions vs the fixes (ingest.gnsscheck)
     files[]   {name, format, variant, streams[] (the inventory), inventory_notes[],
                completeness[] ("complete", "truncated", "corrupt_chunks_skipped", ...),
                defects[] {kind, reason, offset, messages_lost, messages_recovered,
@@ -45,6 +50,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ingest.alignment import check_tables
 from ingest.atomic import atomic_directory, atomic_write_json
 from ingest.config import DatasetConfig
 from ingest.detect import Detected, Format, detect
@@ -249,8 +255,15 @@ def _ingest(
                 log.warning("table %s (%s) is empty", t, plans[TableName(t)].key)
         checks = _cross_file_checks(sinks, names, warnings)
         gnss_check = _gnss_check(tmp, sinks, names, warnings, options)
+        aligned = check_tables(tmp, [t for t, n in rows.items() if n > 1])
+        checks += [a.text() for a in aligned]
+        for a in aligned:
+            if a.suspicious:
+                warnings.append(f"time bases disagree: {a.text()}")
+                log.warning("time bases disagree: %s", a.text())
         report = _report(opened, plans, sinks, recon, options, warnings, names)
         report["time_base"]["checks"] = checks
+        report["time_base"]["alignment"] = [a.to_json() for a in aligned]
         if gnss_check is not None:
             report["time_base"]["gnss_check"] = gnss_check
         meta = DatasetMeta(

@@ -21,6 +21,9 @@ REGISTRY: dict[Format, str] = {
     Format.RINEX: "ingest.readers.rinex:RinexReader",
     Format.GNSSLOGGER: "ingest.readers.gnsslogger:GnssLoggerReader",
     Format.GSDC: "ingest.readers.gsdc:GsdcReader",
+    Format.COMMA2K19: "ingest.readers.comma2k19:Comma2k19Reader",
+    Format.LIBRSF: "ingest.readers.librsf:LibrsfReader",
+    Format.NMEA: "ingest.readers.nmea:NmeaReader",
 }
 
 
