@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from ingest.readers.base import Completeness, DamageLog, Defect
 from ingest.rinextext import Header
@@ -57,7 +57,6 @@ class Counts:
 
     events_skipped: int = 0
     defects: int = 0
-    extra: dict[str, int] = field(default_factory=dict)
 
 
 def epochs(

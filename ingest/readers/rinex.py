@@ -163,16 +163,14 @@ class RinexReader(LogReader):
             self.damage.count(f"gps_week_rollover_{which}_weeks", weeks)
         head, sig, scan, chunks = read_obs(self.path, self.variant, self.damage)
         for rows in chunks:
-            batch = self._batch(rows, head, sig, nav)
-            if batch is not None:
-                yield batch
+            yield self._batch(rows, head, sig, nav)
         for name, n in scan.rows_by_system.items():
             if name != "GPS":
                 self.damage.count(f"rows_{name}_excluded", n)
         if scan.skipped.events_skipped:
             self.damage.count("events_skipped", scan.skipped.events_skipped)
 
-    def _batch(self, rows: ObsRows, head: Header, sig: Signals, nav: NavData) -> Batch | None:
+    def _batch(self, rows: ObsRows, head: Header, sig: Signals, nav: NavData) -> Batch:
         has_pr = np.isfinite(rows.pseudorange_m)
         counters = {"no_pseudorange": int(np.count_nonzero(~has_pr))}
         t = rows.t_ns[has_pr] + max(self._shift_ns, 0)
