@@ -18,6 +18,9 @@ REGISTRY: dict[Format, str] = {
     Format.ROS1BAG: "ingest.readers.ros1bag:Ros1BagReader",
     Format.ROS2BAG: "ingest.readers.ros2bag:Ros2BagReader",
     Format.CSV: "ingest.readers.csv:CsvReader",
+    Format.TLOG: "ingest.readers.tlog:TlogReader",
+    Format.DATAFLASH: "ingest.readers.dataflash:DataFlashReader",
+    Format.ULOG: "ingest.readers.ulog:UlogReader",
 }
 
 
