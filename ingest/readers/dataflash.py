@@ -153,16 +153,20 @@ class DataFlashReader(LogReader):
                 )
 
     def _matching(
-        self, rec: Records, formats: Formats, name: str
+        self, rec: Records, formats: Formats, name: str, fixed: int, inst: int
     ) -> Iterator[tuple[npt.NDArray[np.intp], np.ndarray, DfFormat]]:
-        """(record indices, decoded records, format) of message ``name`` in a block."""
+        """(record indices, decoded records, format) of message ``name``, instance ``inst``
+        in a block (``fixed``: the instance of a type without an instance column)."""
         for type_ in formats.types_seen(name):
-            idx_all = np.flatnonzero(rec.type == type_)
+            idx_all = rec.of_type(type_)
             if not len(idx_all):
                 continue
             for fmt, sub in formats.split(type_, rec.offset[idx_all]):
-                if fmt is not None and fmt.name == name and len(sub):
-                    idx = idx_all[sub]
+                if fmt is None or fmt.name != name or not len(sub):
+                    continue
+                idx = idx_all[sub]
+                idx = idx[instances(fixed, fmt, rec, idx) == inst]
+                if len(idx):
                     yield idx, rec.decode(idx, fmt), fmt
 
     def _batches(
@@ -176,11 +180,7 @@ class DataFlashReader(LogReader):
     ) -> list[Batch]:
         s = self._survey()
         out: list[Batch] = []
-        for found, decoded, fmt in self._matching(rec, formats, spec.message):
-            keep = instances(spec.instance, fmt, decoded) == inst
-            if not keep.any():
-                continue
-            idx, data = found[keep], decoded[keep]
+        for idx, data, fmt in self._matching(rec, formats, spec.message, spec.instance, inst):
             conv = spec.convert(data, fmt, extras)
             t = s.to_base(np.asarray(data["TimeUS"], np.int64), rec.offset[idx])
             if spec.table == TableName.GNSS:
@@ -213,11 +213,9 @@ class DataFlashReader(LogReader):
         assert spec.join is not None
         convert = spec.join[1]
         s = self._survey()
-        for idx, data, fmt in self._matching(rec, formats, name):
-            mine = instances(spec.instance, fmt, data) == inst
-            if mine.any():
-                t = s.to_base(np.asarray(data["TimeUS"], np.int64)[mine], rec.offset[idx[mine]])
-                join.push_right(t, convert(data[mine], fmt, extras).columns)
+        for idx, data, fmt in self._matching(rec, formats, name, spec.instance, inst):
+            t = s.to_base(np.asarray(data["TimeUS"], np.int64), rec.offset[idx])
+            join.push_right(t, convert(data, fmt, extras).columns)
 
     # -------------------------------------------------------------------------------- damage
     def _record_damage(self, stats: ScanStats, formats: Formats, s: DfSurvey) -> None:

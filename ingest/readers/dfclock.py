@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from ingest.readers._mavscan import gather
 from ingest.readers.dfformat import FMT_TYPE, DfFormat
 from ingest.readers.dfmsgs import BY_NAME, DfExtras, Origin
 from ingest.readers.dfscan import Formats, Records, ScanStats, Unusable, scan_blocks
@@ -33,15 +34,15 @@ from ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
 
 I64Array = npt.NDArray[np.int64]
 WEEK_NS = SECONDS_PER_WEEK * NS_PER_S
-_AR8 = np.arange(8, dtype=np.int64)
 
 
-def instances(fixed: int, fmt: DfFormat, data: np.ndarray) -> I64Array:
-    """Instance of each record: its ``I``/``C`` column, else ``fixed`` (legacy ``IMU2``)."""
+def instances(fixed: int, fmt: DfFormat, rec: Records, idx: npt.NDArray[np.intp]) -> I64Array:
+    """Instance of records ``idx``: their ``I``/``C`` column, else ``fixed`` (legacy
+    ``IMU2``); read without decoding the records."""
     col = fmt.instance_column
     if col is None:
-        return np.full(len(data), fixed, dtype=np.int64)
-    return np.asarray(data[col], dtype=np.int64)
+        return np.full(len(idx), fixed, dtype=np.int64)
+    return np.asarray(rec.column(idx, fmt, col), dtype=np.int64)
 
 
 @dataclass
@@ -132,10 +133,13 @@ def _time_us(formats: Formats, rec: Records) -> tuple[I64Array, npt.NDArray[np.b
         for t, f in formats.current.items()
         if f.columns[:1] == ("TimeUS",) and f.format[:1] == "Q"
     ]
-    has = np.isin(rec.type, np.array(timed, np.int64))
-    pos = rec.pos[has] + 3
+    is_timed = np.zeros(256, bool)
+    is_timed[timed] = True
+    has = is_timed[rec.type]
+    raw = np.empty((int(has.sum()), 8), np.uint8)
+    gather(rec.buf, rec.pos[has] + 3, np.full(len(raw), 8, np.int64), raw)
     out = np.zeros(len(rec), np.int64)
-    out[has] = rec.buf[pos[:, None] + _AR8].copy().view("<u8")[:, 0].astype(np.int64)
+    out[has] = raw.view("<u8")[:, 0].astype(np.int64)
     return out, has
 
 
@@ -143,8 +147,8 @@ def _block(s: DfSurvey, rec: Records) -> None:
     s.data_records += int((rec.type != FMT_TYPE).sum())
     time_us, has_time = _time_us(s.formats, rec)
     s.tracker.push(rec.offset[has_time], time_us[has_time] * 1000)
-    for type_ in np.unique(rec.type).tolist():
-        idx_all = np.flatnonzero(rec.type == type_)
+    for type_ in rec.types():
+        idx_all = rec.of_type(type_)
         for fmt, sub in s.formats.split(type_, rec.offset[idx_all]):
             idx = idx_all[sub]
             if fmt is not None:
@@ -165,18 +169,18 @@ def _records(
 ) -> None:
     name = fmt.name
     spec = BY_NAME.get(name)
-    if spec is None and name not in ("GPA", "GPA2", "ORGN"):
-        return
-    data = rec.decode(idx, fmt)
     if spec is not None:
-        inst = instances(spec.instance, fmt, data)
+        inst = instances(spec.instance, fmt, rec, idx)
         s.instanced[name] = fmt.instance_column is not None
-        for i in np.unique(inst).tolist():
+        for i in np.flatnonzero(np.bincount(inst)).tolist():
             sel = inst == i
             key = (name, int(i))
             s.counts[key] += int(sel.sum())
             s.first_us.setdefault(key, int(t_us[sel][0]))
             s.last_us[key] = int(t_us[sel][-1])
+    if name not in ("GPS", "GPS2", "GPA", "GPA2", "ORGN"):
+        return
+    data = rec.decode(idx, fmt)
     if name in ("GPS", "GPS2") and "GWk" in fmt.columns:
         _gps(s, rec, idx, data, t_us)
     elif name in ("GPA", "GPA2") and "Und" in fmt.columns:

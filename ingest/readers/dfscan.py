@@ -12,9 +12,11 @@ trailing partial record.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -36,6 +38,7 @@ MAX_LISTED = 20
 
 U8Array = npt.NDArray[np.uint8]
 I64Array = npt.NDArray[np.int64]
+_EMPTY = np.empty(0, np.int64)
 
 
 @dataclass
@@ -46,9 +49,35 @@ class Records:
     pos: I64Array  # record start in buf
     offset: I64Array  # record start in the file
     type: U8Array
+    _groups: dict[int, I64Array] | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.pos)
+
+    def of_type(self, type_: int) -> I64Array:
+        """Indices of the records of ``type_``, in file order (one sort per block)."""
+        if self._groups is None:
+            order = np.argsort(self.type, kind="stable")
+            counts = np.bincount(self.type, minlength=256)
+            ends = np.cumsum(counts)
+            self._groups = {
+                int(t): order[ends[t] - counts[t] : ends[t]] for t in np.flatnonzero(counts)
+            }
+        return self._groups.get(type_, _EMPTY)
+
+    def types(self) -> list[int]:
+        self.of_type(0)
+        assert self._groups is not None
+        return sorted(self._groups)
+
+    def column(self, idx: npt.NDArray[np.intp], fmt: DfFormat, name: str) -> np.ndarray:
+        """One column of records ``idx`` (all of ``fmt``), without decoding the others."""
+        fields: Mapping[str, Any] = fmt.dtype.fields or {}
+        dtype, at = fields[name][:2]
+        out = np.empty((len(idx), dtype.itemsize), np.uint8)
+        gather(self.buf, self.pos[idx] + HEADER + at, np.full(len(idx), dtype.itemsize), out)
+        values: np.ndarray = out.view(dtype)[:, 0]
+        return values
 
     def decode(self, idx: npt.NDArray[np.intp], fmt: DfFormat) -> np.ndarray:
         """Payloads of records ``idx`` (all of type ``fmt``) as a structured array."""
@@ -80,19 +109,17 @@ class Formats:
 
     def observe(self, rec: Records) -> None:
         """Take the FMT records of a block (in order)."""
-        idx = np.flatnonzero(rec.type == FMT_TYPE)
+        idx = rec.of_type(FMT_TYPE)
         if not len(idx):
             return
         for i in idx.tolist():
             offset = int(rec.offset[i])
-            raw = bytes(rec.buf[rec.pos[i] + HEADER : rec.pos[i] + FMT_LENGTH])
-            type_, length, name, fmt, columns = parse_fmt(raw)
-            try:
-                made: DfFormat | None = make_format(type_, length, name, fmt, columns)
+            raw = rec.buf[rec.pos[i] + HEADER : rec.pos[i] + FMT_LENGTH].tobytes()
+            type_, name, columns, made, error = _format(raw)
+            if made is not None:
                 self.unusable.pop(type_, None)
-            except FormatError as err:
-                made = None
-                self.unusable[type_] = Unusable(name, offset, str(err), columns)
+            else:
+                self.unusable[type_] = Unusable(name, offset, error, columns)
             old = self.current.get(type_)
             if made is not None and old is not None and old.dtype != made.dtype:
                 self.redefined.append((offset, name))
@@ -110,6 +137,8 @@ class Formats:
             return [(FMT_FORMAT, np.arange(len(offsets)))]
         if not hist:
             return [(None, np.arange(len(offsets)))]
+        if len(hist) == 1 and (not len(offsets) or offsets[0] >= hist[0][0]):
+            return [(hist[0][1], np.arange(len(offsets)))]  # the common case: one FMT
         starts = np.array([o for o, _ in hist], np.int64)
         which = np.searchsorted(starts, offsets, side="right") - 1
         out: list[tuple[DfFormat | None, I64Array]] = []
@@ -121,6 +150,17 @@ class Formats:
     def types_seen(self, name: str) -> list[int]:
         """Every type byte an FMT so far has given the name ``name``."""
         return sorted(self._names.get(name, ()))
+
+
+@lru_cache(maxsize=4096)
+def _format(raw: bytes) -> tuple[int, str, tuple[str, ...], DfFormat | None, str]:
+    """(type, name, columns, format or None, why not) of an FMT payload (cached: logs repeat
+    their FMTs, and every pass over a log sees them again)."""
+    type_, length, name, fmt, columns = parse_fmt(raw)
+    try:
+        return type_, name, columns, make_format(type_, length, name, fmt, columns), ""
+    except FormatError as err:
+        return type_, name, columns, None, str(err)
 
 
 @dataclass
