@@ -96,6 +96,11 @@ class DataFlashReader(LogReader):
                     detail=unusable or spec.detail,
                 )
             )
+        for name, count in s.other_messages().items():
+            detail = "accuracies joined into GPS" if name.startswith("GPA") else "not converted"
+            if name == "ORGN":
+                detail = "EKF origin of XKF1/NKF1"
+            streams.append(StreamInfo(name, name, count, None, None, None, s.base, detail=detail))
         notes = [s.time_note()]
         notes += [f"FMT of {u.name} at offset {u.offset}: {u.reason}" for u in s.unusable]
         return Inventory(self.path, self.format, tuple(streams), tuple(notes))

@@ -63,6 +63,7 @@ class DfSurvey:
     gps_first: tuple[int, int] | None = None
     gps_rows: int = 0
     data_records: int = 0
+    per_type: Counter[int] = field(default_factory=Counter)
     week_shift: int = 0
     offsets_ns: list[int | None] = field(default_factory=list)
     base: TimeBase = TimeBase.RECORDER
@@ -97,6 +98,16 @@ class DfSurvey:
         week = np.asarray(data["GWk"], np.int64)
         epoch = (week + self.week_shift) * WEEK_NS + np.asarray(data["GMS"], np.int64) * 10**6
         return np.where(week > 0, epoch, t)
+
+    def other_messages(self) -> dict[str, int]:
+        """Record counts of the message types that feed no table, by name."""
+        out: dict[str, int] = {}
+        for type_, n in sorted(self.per_type.items()):
+            fmt = self.formats.current.get(type_)
+            name = fmt.name if fmt is not None else f"type {type_}"
+            if name not in BY_NAME:
+                out[name] = out.get(name, 0) + n
+        return out
 
     def time_note(self) -> str:
         if self.base == TimeBase.RECORDER:
@@ -145,6 +156,9 @@ def _time_us(formats: Formats, rec: Records) -> tuple[I64Array, npt.NDArray[np.b
 
 def _block(s: DfSurvey, rec: Records) -> None:
     s.data_records += int((rec.type != FMT_TYPE).sum())
+    for type_, n in enumerate(np.bincount(rec.type, minlength=256).tolist()):
+        if n:
+            s.per_type[type_] += n
     time_us, has_time = _time_us(s.formats, rec)
     s.tracker.push(rec.offset[has_time], time_us[has_time] * 1000)
     for type_ in rec.types():

@@ -176,9 +176,11 @@ class ScanStats:
 
 
 def scan_blocks(
-    path: Path, formats: Formats, stats: ScanStats, *, block_bytes: int = BLOCK_BYTES
+    path: Path, formats: Formats, stats: ScanStats, *, block_bytes: int | None = None
 ) -> Iterator[Records]:
-    """Yield the records of ``path`` block by block, feeding ``formats`` and ``stats``."""
+    """Yield the records of ``path`` block by block (``BLOCK_BYTES`` unless given), feeding
+    ``formats`` and ``stats``."""
+    block_bytes = block_bytes or BLOCK_BYTES
     size = path.stat().st_size
     fmt_len = np.zeros(256, np.int32)
     fmt_len[FMT_TYPE] = FMT_LENGTH

@@ -123,11 +123,13 @@ class TlogReader(LogReader):
                 )
             )
         listed = {st.msgtype for st in streams}
+        joined = {spec.join[0]: spec.message for spec in BY_NAME.values() if spec.join}
         for msgid, count in sorted(s.stats.valid.items()):
             name = self.dialect.msg_name(msgid)
             if name not in listed:
+                detail = f"joined into {joined[name]}" if name in joined else "not converted"
                 streams.append(
-                    StreamInfo(name, name, count, None, None, None, s.base, detail="not converted")
+                    StreamInfo(name, name, count, None, None, None, s.base, detail=detail)
                 )
         notes = [f"MAVLink dialect {self.dialect.name}; CRC checked on every packet"]
         notes += s.decisions()

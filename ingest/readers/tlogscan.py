@@ -149,9 +149,11 @@ def packet_fields(buf: U8Array, pos: I64Array, flag: npt.NDArray[np.int8], base:
 
 
 def scan_blocks(
-    path: Path, dialect: Dialect, stats: ScanStats, *, block_bytes: int = BLOCK_BYTES
+    path: Path, dialect: Dialect, stats: ScanStats, *, block_bytes: int | None = None
 ) -> Iterator[Packets]:
-    """Yield the packets of ``path`` block by block; ``stats`` collects the damage."""
+    """Yield the packets of ``path`` block by block (``BLOCK_BYTES`` unless given); ``stats``
+    collects the damage."""
+    block_bytes = block_bytes or BLOCK_BYTES
     size = path.stat().st_size
     base = 0
     garbage = -1

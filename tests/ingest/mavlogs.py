@@ -1,6 +1,8 @@
-"""Small MAVLink tlogs and ArduPilot DataFlash logs for tests, written with the formats' own
-encoders: pymavlink's ``MAVLink(...).<msg>_encode().pack()`` for tlog packets, and raw
-``struct`` packing (pymavlink's format-character table) for DataFlash FMT and data records.
+"""Small MAVLink tlogs, ArduPilot DataFlash and PX4 ULog logs for tests, written with the
+formats' own encoders: pymavlink's ``MAVLink(...).<msg>_encode().pack()`` for tlog packets, and
+raw ``struct`` packing (pymavlink's format-character table) for DataFlash FMT and data records
+and for ULog messages. ``write_tlog_drive`` and ``write_dataflash_drive`` write large drives
+for the memory test and the benchmark.
 
 ``TlogDrive`` is a vehicle standing still for a few seconds: RAW_IMU and SCALED_IMU2 (mG,
 mrad/s), HIGHRES_IMU, GPS_RAW_INT at 5 Hz (MAVLink 2, with the extensions), ATTITUDE +
@@ -19,6 +21,8 @@ import numpy as np
 from pymavlink.DFReader import FORMAT_TO_STRUCT
 from pymavlink.dialects.v20 import ardupilotmega as apm
 from pymavlink.generator.mavcrc import x25crc
+
+from ingest.readers.dfformat import make_format
 
 G = 9.80665
 UTC0_US = 1_700_000_000 * 10**6  # 2023-11-14T22:13:20Z: the vehicle's UTC at boot + BOOT_US
@@ -339,3 +343,113 @@ def ulog_drive(seconds: float = 2.0, imu_hz: int = 200, *, gps: bool = True) -> 
                 15,
             )
     return ulog
+
+
+# --------------------------------------------------------------------- large generated drives
+def write_tlog_drive(path: Path, seconds: float) -> Path:
+    link = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+    rng = np.random.default_rng(0)
+    utc0, boot0 = 1_700_000_000 * 10**6, 50_000_000
+    chunks: list[bytes] = []
+
+    def add(t_us: int, msg: object) -> None:
+        packet = msg.pack(link)  # type: ignore[attr-defined]
+        link.seq = (link.seq + 1) % 256
+        chunks.append(struct.pack(">Q", t_us) + packet)
+
+    n = round(seconds * 200)
+    acc = np.array([0.0, 0.0, -9.80665]) + rng.normal(0, 0.02, (n, 3))
+    gyro = rng.normal(0, 1e-3, (n, 3))
+    for i in range(n):
+        boot = boot0 + i * 5_000
+        stamp = utc0 + i * 5_000 + 2_000
+        a, g = acc[i].tolist(), gyro[i].tolist()
+        add(stamp, link.highres_imu_encode(boot, *a, *g, 0, 0, 0, 0, 0, 0, 20.0, 0x3F, 0))
+        mg = [round(v * 1000 / 9.80665) for v in a]
+        add(stamp, link.raw_imu_encode(boot, *mg, *(round(v * 1000) for v in g), 0, 0, 0))
+        if i % 20 == 0:
+            ms = boot // 1000
+            add(stamp, link.attitude_encode(ms, 0.01, 0.02, 1.0, 0.0, 0.0, 0.0))
+            add(
+                stamp,
+                link.global_position_int_encode(
+                    ms, 523_456_789, -41_234_567, 120_000, 5_000, 10, 20, 0, 9000
+                ),
+            )
+        if i % 40 == 0:
+            add(
+                stamp,
+                link.gps_raw_int_encode(
+                    boot,
+                    3,
+                    523_456_789,
+                    -41_234_567,
+                    120_000,
+                    90,
+                    150,
+                    10,
+                    9000,
+                    14,
+                    alt_ellipsoid=170_000,
+                    h_acc=900,
+                    v_acc=1500,
+                    vel_acc=200,
+                ),
+            )
+        if i % 200 == 0:
+            add(stamp, link.system_time_encode(utc0 + boot - boot0, boot // 1000))
+    path.write_bytes(b"".join(chunks))
+    return path
+
+
+def _df_length(fmt: str) -> int:
+    return 3 + struct.calcsize(_codes(fmt))
+
+
+def _df_block(name: str, n: int, values: dict[str, Any]) -> np.ndarray:
+    """``n`` DataFlash records of ``name`` (header + payload) as one structured array."""
+    type_, fmt, cols = DF_FORMATS[name]
+    payload = make_format(type_, _df_length(fmt), name, fmt, tuple(cols.split(",")))
+    dtype = np.dtype([("h1", "u1"), ("h2", "u1"), ("type", "u1"), ("p", payload.dtype)])
+    out = np.zeros(n, dtype)
+    out["h1"], out["h2"], out["type"] = 0xA3, 0x95, type_
+    for key, v in values.items():
+        out["p"][key] = v
+    return out
+
+
+def write_dataflash_drive(path: Path, seconds: float) -> Path:
+    """Three IMUs at 400 Hz, GPS+GPA at 5 Hz, three EKF cores at 10 Hz, in time order."""
+    rng = np.random.default_rng(1)
+    head = b""
+    fmt_fmt = {"FMT": (128, "BBnNZ", "Type,Length,Name,Format,Columns")}
+    for name, (type_, fmt, cols) in (fmt_fmt | DF_FORMATS).items():
+        length = _df_length(fmt)
+        head += b"\xa3\x95\x80" + struct.pack(
+            "<BB4s16s64s", type_, length, name.encode(), fmt.encode(), cols.encode()
+        )
+    t0, n, m, k = 30_000_000, round(seconds * 400), round(seconds * 5), round(seconds * 10)
+    t_imu = t0 + np.arange(n, dtype=np.int64) * 2_500
+    t_gps = t0 + np.arange(m, dtype=np.int64) * 200_000
+    t_ekf = t0 + np.arange(k, dtype=np.int64) * 100_000
+    parts: list[tuple[np.ndarray, np.ndarray]] = []
+    for inst in range(3):
+        imu = {"TimeUS": t_imu + inst, "I": inst, "GyrX": rng.normal(0, 1e-3, n)}
+        imu |= {"AccZ": -9.80665 + rng.normal(0, 0.02, n), "GHz": 8000, "AHz": 4000}
+        parts.append((t_imu + inst, _df_block("IMU", n, imu)))
+    gps: dict[str, Any] = {"TimeUS": t_gps, "Status": 3, "GWk": 2269, "NSats": 20, "HDop": 60}
+    gps |= {"GMS": 378_756_400 + np.arange(m) * 200, "Lat": 528_069_428, "Lng": -41_224_417}
+    gps |= {"Alt": 1772, "Spd": 0.1, "U": 1}
+    parts.append((t_gps, _df_block("GPS", m, gps)))
+    gpa = {"TimeUS": t_gps + 10, "HAcc": 30, "VAcc": 40, "SAcc": 8, "VV": 1, "Und": -50.5}
+    parts.append((t_gps + 10, _df_block("GPA", m, gpa)))
+    for core in range(3):
+        ekf = {"TimeUS": t_ekf + 20 + core, "C": core, "Yaw": 9000, "PN": 1.0, "PE": 2.0}
+        parts.append((t_ekf + 20 + core, _df_block("XKF1", k, ekf)))
+    orgn = {"TimeUS": t0, "Type": 0, "Lat": 528_069_428, "Lng": -41_224_417, "Alt": 1772}
+    parts.append((np.array([t0]), _df_block("ORGN", 1, orgn)))
+    times = np.concatenate([t for t, _ in parts])
+    records = [r[i : i + 1].tobytes() for _, rec in parts for r in (rec,) for i in range(len(r))]
+    order = np.argsort(times, kind="stable").tolist()
+    path.write_bytes(head + b"".join(records[i] for i in order))
+    return path
