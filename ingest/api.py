@@ -17,7 +17,9 @@ so a stream split over several files (a split bag) continues across them.
 ``ingest_report.json`` (also ``meta.json``'s ``audit``)::
 
     package_version, options {strict, reorder_window_s, gap_factor}
-    time_base {base, leap_seconds, decisions[], checks[]}        cross-file overlap checks
+    time_base {base, leap_seconds, decisions[], checks[],      cross-file overlap checks
+               alignment[] {streams, signal, lag_s, correlation, overlap_s, speed_ratio}}
+                                                  speed-signal lags (ingest.alignment)
     files[]   {name, format, variant, streams[] (the inventory), inventory_notes[],
                completeness[] ("complete", "truncated", "corrupt_chunks_skipped", ...),
                defects[] {kind, reason, offset, messages_lost, messages_recovered,
@@ -45,6 +47,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ingest.alignment import check_tables
 from ingest.atomic import atomic_directory, atomic_write_json
 from ingest.config import DatasetConfig
 from ingest.detect import Detected, Format, detect
@@ -237,8 +240,15 @@ def _ingest(
                 warnings.append(f"table {t} ({plans[TableName(t)].key}) is empty")
                 log.warning("table %s (%s) is empty", t, plans[TableName(t)].key)
         checks = _cross_file_checks(sinks, names, warnings)
+        aligned = check_tables(tmp, [t for t, n in rows.items() if n > 1])
+        checks += [a.text() for a in aligned]
+        for a in aligned:
+            if a.suspicious:
+                warnings.append(f"time bases disagree: {a.text()}")
+                log.warning("time bases disagree: %s", a.text())
         report = _report(opened, plans, sinks, recon, options, warnings, names)
         report["time_base"]["checks"] = checks
+        report["time_base"]["alignment"] = [a.to_json() for a in aligned]
         meta = DatasetMeta(
             dataset=config.id,
             time_base=recon.base.value,

@@ -21,7 +21,7 @@ GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ns")
 GPS_EPOCH_UNIX_NS = 315_964_800 * NS_PER_S
 
 # UTC dates on which GPS - UTC grew by one second (IERS Bulletin C), after the GPS epoch.
-_LEAP_DATES_UTC = (
+LEAP_DATES_UTC = (
     "1981-07-01",
     "1982-07-01",
     "1983-07-01",
@@ -41,11 +41,15 @@ _LEAP_DATES_UTC = (
     "2015-07-01",
     "2017-01-01",
 )
-# GPS time (ns) at which each leap second takes effect: UTC midnight plus the new offset.
+# POSIX (UTC) ns of each of those midnights, and the GPS time (ns) at which each takes effect:
+# UTC midnight plus the new offset.
+LEAP_STEPS_UNIX_NS = np.array(
+    [np.datetime64(d, "ns").astype(np.int64) for d in LEAP_DATES_UTC], dtype=np.int64
+)
 _LEAP_GPS_NS = np.array(
     [
         (np.datetime64(d, "ns") - GPS_EPOCH).astype(np.int64) + (i + 1) * NS_PER_S
-        for i, d in enumerate(_LEAP_DATES_UTC)
+        for i, d in enumerate(LEAP_DATES_UTC)
     ],
     dtype=np.int64,
 )

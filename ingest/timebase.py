@@ -27,35 +27,18 @@ import numpy as np
 import numpy.typing as npt
 
 from ingest.errors import IngestError
-from ingest.gpstime import GPS_EPOCH_UNIX_NS, NS_PER_S, SECONDS_PER_WEEK, utc_unix_ns_from_gps
+from ingest.gpstime import (
+    GPS_EPOCH_UNIX_NS,
+    LEAP_STEPS_UNIX_NS,
+    NS_PER_S,
+    SECONDS_PER_WEEK,
+    utc_unix_ns_from_gps,
+)
 
 __all__ = ["GPS_EPOCH_UNIX_NS", "NS_PER_S", "SECONDS_PER_WEEK"]
 
-# POSIX second at which GPS - UTC became the given count (IERS Bulletin C; 18 since 2017-01-01).
-_LEAP_STEPS_UNIX_S = np.array(
-    [
-        362_793_600,  # 1981-07-01: 1
-        394_329_600,  # 1982-07-01
-        425_865_600,  # 1983-07-01
-        489_024_000,  # 1985-07-01
-        567_993_600,  # 1988-01-01
-        631_152_000,  # 1990-01-01
-        662_688_000,  # 1991-01-01
-        709_948_800,  # 1992-07-01
-        741_484_800,  # 1993-07-01
-        773_020_800,  # 1994-07-01
-        820_454_400,  # 1996-01-01
-        867_715_200,  # 1997-07-01
-        915_148_800,  # 1999-01-01
-        1_136_073_600,  # 2006-01-01
-        1_230_768_000,  # 2009-01-01
-        1_341_100_800,  # 2012-07-01
-        1_435_708_800,  # 2015-07-01
-        1_483_228_800,  # 2017-01-01: 18
-    ],
-    dtype=np.int64,
-)
-_LEAP_STEPS_UNIX_NS = _LEAP_STEPS_UNIX_S * NS_PER_S
+# The leap-second table lives in ingest.gpstime (one source of truth).
+_LEAP_STEPS_UNIX_NS = LEAP_STEPS_UNIX_NS
 
 # Stamps before this (2000-01-01) cannot be wall-clock UTC from a modern recorder: a ROS bag
 # with such header stamps ran on simulated or boot time.

@@ -21,6 +21,9 @@ REGISTRY: dict[Format, str] = {
     Format.TLOG: "ingest.readers.tlog:TlogReader",
     Format.DATAFLASH: "ingest.readers.dataflash:DataFlashReader",
     Format.ULOG: "ingest.readers.ulog:UlogReader",
+    Format.COMMA2K19: "ingest.readers.comma2k19:Comma2k19Reader",
+    Format.LIBRSF: "ingest.readers.librsf:LibrsfReader",
+    Format.NMEA: "ingest.readers.nmea:NmeaReader",
 }
 
 
