@@ -62,7 +62,8 @@ class DataFlashReader(LogReader):
 
     def _survey(self) -> DfSurvey:
         if self._s is None:
-            found = survey(self.file)
+            cfg = self.ctx.config
+            found = survey(self.file, cfg.utc_date if cfg is not None else None)
             if not found.data_records:
                 raise CorruptLogError(
                     "no DataFlash data record found (only format definitions, if any): not a "
@@ -237,7 +238,7 @@ class DataFlashReader(LogReader):
             dmg.count("gps_week_rollover_corrected", s.gps_rows)
             dmg.note(
                 f"GPS week rollover: {s.gps_rows} GPS records corrected by +{s.week_shift} "
-                "weeks, snapped to the epoch nearest the file's modification time"
+                f"weeks, snapped to the epoch nearest {s.reference}"
             )
         for u in s.unusable:
             dmg.note(f"message type {u.name} skipped: its FMT at offset {u.offset}: {u.reason}")

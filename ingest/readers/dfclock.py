@@ -8,9 +8,9 @@
 - per segment, ``GPS - boot``: the median over GPS records with a 2-D fix or better of
   ``GWk * 604800 s + GMS - TimeUS`` (ArduPilot stamps a GPS record with the boot time of the
   fix, so the spread is sub-millisecond on real logs);
-- GPS week rollover (case 35): the first GPS time is compared with the file's modification
-  time (the only reference a DataFlash log has) and moved by multiples of 1024 weeks to the
-  epoch nearest it;
+- GPS week rollover (case 35): the first GPS time is compared with a reference date
+  (``utc_date`` in dataset.yaml, else the file's modification time: a DataFlash log has no
+  other clock) and moved by multiples of 1024 weeks to the epoch nearest it;
 - the EKF origins (``ORGN`` type 0) and the geoid undulation (median ``GPA.Und``).
 
 The file's base is GPS when every boot segment is paired, else the recorder clock (TimeUS).
@@ -65,6 +65,7 @@ class DfSurvey:
     data_records: int = 0
     per_type: Counter[int] = field(default_factory=Counter)
     week_shift: int = 0
+    reference: str = ""
     offsets_ns: list[int | None] = field(default_factory=list)
     base: TimeBase = TimeBase.RECORDER
 
@@ -119,15 +120,22 @@ class DfSurvey:
         )
 
 
-def survey(path: Path) -> DfSurvey:
-    """One scan of ``path`` (see the module docstring)."""
+def survey(path: Path, utc_date: str | None = None) -> DfSurvey:
+    """One scan of ``path`` (see the module docstring); ``utc_date`` (``YYYY-MM-DD``, from
+    dataset.yaml) is the rollover reference when given, else the file's modification time."""
     s = DfSurvey()
     for rec in scan_blocks(path, s.formats, s.stats):
         _block(s, rec)
-    mtime_gps = int(utc_to_gps_ns(np.array([path.stat().st_mtime_ns], np.int64))[0])
+    if utc_date is not None:
+        ref_utc = int(np.datetime64(utc_date, "ns").astype(np.int64))
+        s.reference = f"utc_date {utc_date} from dataset.yaml"
+    else:
+        ref_utc = path.stat().st_mtime_ns
+        s.reference = "the file's modification time"
+    ref_gps = int(utc_to_gps_ns(np.array([ref_utc], np.int64))[0])
     if s.gps_first is not None:
         _, s.week_shift = unroll_gps_week(
-            np.array([s.gps_first[0]], np.int64), np.array([s.gps_first[1]], np.int64), mtime_gps
+            np.array([s.gps_first[0]], np.int64), np.array([s.gps_first[1]], np.int64), ref_gps
         )
     for seg in range(len(s.tracker.starts)):
         med = s.pairs.median(seg)

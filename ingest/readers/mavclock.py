@@ -8,10 +8,14 @@ so single late or jittery messages do not move it.
 
 - ``BootTracker`` splits a log into boot segments where the vehicle clock drops (a reboot
   mid-log resets ``time_boot_ms`` to 0: catalogue case 37). Segments start at byte offsets.
+  A drop must exceed ``RESET_DROP_NS`` (late telemetry packets are not reboots), so a reboot
+  after a session shorter than that goes unnoticed (both sessions share one pairing; the
+  stream hygiene still reports the clock step).
 - ``OffsetAccumulator`` keeps, per segment, the median of each block's offsets and the count,
   and returns their weighted median: bounded memory for logs of any length.
-- ``unroll_gps_week`` and ``unroll_utc_ns`` undo a GPS week-number rollover (1024 weeks,
-  catalogue case 35) by snapping to the epoch nearest a reference time.
+- ``unroll_gps_week`` undoes a GPS week-number rollover (1024 weeks, catalogue case 35) by
+  snapping to the epoch nearest a reference time (the tlog reader does the same for UTC
+  values against its stamps, ``ROLLOVER_NS``).
 """
 
 from __future__ import annotations
@@ -98,21 +102,6 @@ class OffsetAccumulator:
         return sum(c for _, c in self._parts.get(segment, ()))
 
 
-@dataclass(frozen=True)
-class Rollover:
-    """A GPS week-rollover correction applied to a stream."""
-
-    weeks: int
-    rows: int
-    reference: str
-
-    def text(self, what: str) -> str:
-        return (
-            f"{what}: GPS week rollover corrected on {self.rows} rows (+{self.weeks} weeks, "
-            f"snapped to the epoch nearest {self.reference})"
-        )
-
-
 def unroll_gps_week(
     week: I64Array, tow_ns: I64Array, reference_gps_ns: int
 ) -> tuple[I64Array, int]:
@@ -127,22 +116,3 @@ def unroll_gps_week(
     if k <= 0:
         return week, 0
     return week + k * ROLLOVER_WEEKS, k * ROLLOVER_WEEKS
-
-
-def unroll_utc_ns(utc_ns: I64Array, reference_ns: int) -> tuple[I64Array, int]:
-    """UTC stamps derived from a GPS receiver, shifted by multiples of 1024 weeks to the epoch
-    nearest ``reference_ns``; returns the stamps and the weeks added."""
-    if not len(utc_ns):
-        return utc_ns, 0
-    k = round((reference_ns - int(utc_ns[0])) / ROLLOVER_NS)
-    if k <= 0:
-        return utc_ns, 0
-    return utc_ns + k * ROLLOVER_NS, k * ROLLOVER_WEEKS
-
-
-def robust_spread_ns(values: I64Array) -> int:
-    """Half the 5-95 percentile range of ``values``: how well one offset fits them."""
-    if len(values) < 2:
-        return 0
-    lo, hi = np.percentile(values, [5.0, 95.0])
-    return int((hi - lo) / 2)

@@ -218,6 +218,10 @@ def test_gps_week_rollover_is_snapped_to_the_file_time(tmp_path: Path) -> None:
     assert (gnss["t_ns"] // WEEK_NS == GWK).all()
     imu = frame(tmp_path / "out", "imu")
     assert imu["t_ns"].iloc[0] // WEEK_NS == GWK
+    # A reference date in dataset.yaml wins over the file time: 2004 is nearest to 2005.
+    result = run(path, tmp_path / "dated", utc_date="2005-01-01")
+    assert "gps_week_rollover_corrected" not in result.report["files"][0]["counters"]
+    assert (frame(tmp_path / "dated", "gnss")["t_ns"] // WEEK_NS == GWK - 1024).all()
 
 
 def test_reboot_mid_file_pairs_each_boot(tmp_path: Path) -> None:
