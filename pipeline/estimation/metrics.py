@@ -128,6 +128,12 @@ def nis_summary(result: RunResult) -> dict[str, dict[str, Any]]:
     return out
 
 
+def _full_truth(truth: pa.Table) -> bool:
+    """Whether the truth has position, velocity and attitude (a simulator's may lack some)."""
+    cols = (*_NAV_TRUTH, *_ANGLES)
+    return all(c in truth.column_names and truth.column(c).null_count < len(truth) for c in cols)
+
+
 def compute_metrics(result: RunResult, truth: pa.Table | None) -> dict[str, Any]:
     """The metrics of one run (see the module docstring); error metrics need ``truth``."""
     kinds: dict[str, int] = {}
@@ -151,7 +157,7 @@ def compute_metrics(result: RunResult, truth: pa.Table | None) -> dict[str, Any]
         "events": kinds,
         "alignment": [a.summary() for a in result.alignments],
     }
-    if truth is None or truth.num_rows == 0 or result.t_ns.size == 0:
+    if truth is None or truth.num_rows == 0 or result.t_ns.size == 0 or not _full_truth(truth):
         m["truth"] = False
         return m
     inside, err, names = error_states(result, truth)

@@ -184,7 +184,20 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
         keys = list(red_rows[0].keys())
         red_html = h.text_table(keys, [[str(r.get(k, "")) for k in keys] for r in red_rows])
     sections = [
-        ("datasets", "Datasets", f"<ul>{links}</ul>"),
+        (
+            "datasets",
+            "Datasets",
+            h.table(
+                ds_rows,
+                (
+                    ("dataset", "dataset"),
+                    ("runs", "runs"),
+                    ("ok", "finished"),
+                    ("filters", "filters"),
+                ),
+            )
+            + f"<ul>{links}</ul>",
+        ),
         (
             "ranking",
             "Filters ranked",

@@ -42,6 +42,11 @@ def _num(v: Any) -> float | int | None:
     return v
 
 
+def _nanrms(x: np.ndarray) -> float | None:
+    finite = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(finite**2))) if finite.size else None
+
+
 def metrics_rows(data: DatasetInputs, series: dict[tuple[str, str], ErrorSeries]) -> list[Row]:
     """One row per run (see the module docstring), in the runs' order."""
     rows = []
@@ -71,9 +76,10 @@ def metrics_rows(data: DatasetInputs, series: dict[tuple[str, str], ErrorSeries]
         s = series.get((r.filter, r.scenario))
         if s is not None and row["pos_err_h_rms_m"] is None:
             row["reference"] = s.reference
-            row["pos_err_h_rms_m"] = float(np.sqrt(np.mean(s.err_h_m**2)))
-            row["pos_err_3d_rms_m"] = float(np.sqrt(np.mean(s.err_3d_m**2)))
-            row["pos_err_3d_max_m"] = float(s.err_3d_m.max())
+            row["pos_err_h_rms_m"] = _nanrms(s.err_h_m)
+            row["pos_err_3d_rms_m"] = _nanrms(s.err_3d_m)
+            finite = s.err_3d_m[np.isfinite(s.err_3d_m)]
+            row["pos_err_3d_max_m"] = float(finite.max()) if finite.size else None
         rows.append(row)
     return rows
 
