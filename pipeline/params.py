@@ -117,7 +117,8 @@ class ReportParams:
 @dataclass(frozen=True)
 class Params:
     """The whole of ``params.yaml``; ``filters`` holds one section per filter
-    (``pipeline.estimation.config``)."""
+    (``pipeline.estimation.config``). ``datasets`` are the built-in, synthesized datasets;
+    ``recorded`` the datasets whose logs the user put under ``datasets/<id>/raw/``."""
 
     datasets: tuple[str, ...]
     synth: SynthParams
@@ -125,6 +126,7 @@ class Params:
     run: RunParams
     report: ReportParams
     filters: FiltersParams
+    recorded: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         for i, ds in enumerate(self.datasets):
@@ -134,10 +136,15 @@ class Params:
                 )
         if len(set(self.datasets)) != len(self.datasets):
             raise FieldError("datasets", "lists a dataset twice")
+        for i, ds in enumerate(self.recorded):
+            if not _ID_RE.match(ds) or ds in self.datasets:
+                raise FieldError(f"recorded[{i}]", f"{ds!r}: a new dataset id (lowercase)")
         for name, group in self.run.groups.items():
             for ds in group.datasets:
-                if ds not in self.datasets:
-                    raise FieldError(f"run.groups.{name}.datasets", f"{ds!r} is not in datasets")
+                if ds not in self.datasets and ds not in self.recorded:
+                    raise FieldError(
+                        f"run.groups.{name}.datasets", f"{ds!r} is in neither datasets nor recorded"
+                    )
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):

@@ -14,11 +14,13 @@ The contract, ``<name>/section.json`` (every key but ``title`` optional)::
      "tables": [{"title": "...", "csv": "convergence.csv", "caption": "..."}],
      "figures": [{"title": "...", "file": "bands.svg", "caption": "..."}]}   .svg or .png
 
-A directory without ``section.json`` is rendered generically: each ``*.csv`` a table and
-each ``*.svg``/``*.png`` a figure, in name order. A file named ``sat_reduction.csv``
-(columns of ``SAT_REDUCTION_COLUMNS``) is the dataset's per-satellite-count reduction table
-(issue 6) wherever it lies; the report shows it in its own section and copies it to
-``reports/<id>/tables/``.
+A directory without ``section.json`` is rendered generically: each ``*.csv`` a table (the
+first ``sections.MAX_TABLE_ROWS`` rows on the page; every CSV is copied whole to
+``reports/<id>/tables/experiments/<name>/``) and each ``*.svg``/``*.png`` (also in a
+``figures/`` sub-directory; an SVG wins over a PNG of the same name) a figure, in name order.
+A file named ``sat_reduction.csv`` (columns of ``SAT_REDUCTION_COLUMNS``) is the dataset's
+per-satellite-count reduction table (issue 6) wherever it lies; the report shows it in its own
+section and copies it to ``reports/<id>/tables/``.
 
 Unknown keys, a referenced file that does not exist, a CSV that does not parse or a figure
 of another type are ``ReportInputError``s naming the file.
@@ -173,25 +175,47 @@ def _from_section(directory: Path) -> Experiment:
     return exp
 
 
-def _generic(directory: Path) -> Experiment:
-    exp = Experiment(directory.name, directory, directory.name.replace("_", " "))
-    for p in sorted(directory.iterdir()):
-        if p.suffix == ".csv" and p.name != SAT_REDUCTION_NAME:
+def _figure_files(directory: Path) -> list[Path]:
+    """SVG and PNG files of ``directory`` and its ``figures/``; an SVG wins over a PNG twin."""
+    files = [p for d in (directory, directory / "figures") if d.is_dir()
+             for p in sorted(d.iterdir()) if p.suffix in (".svg", ".png")]  # fmt: skip
+    stems_svg = {(p.parent, p.stem) for p in files if p.suffix == ".svg"}
+    return [p for p in files if p.suffix == ".svg" or (p.parent, p.stem) not in stems_svg]
+
+
+def _generic(directory: Path, name: str) -> Experiment:
+    exp = Experiment(name, directory, name.replace("_", " "))
+    for p in sorted(directory.glob("*.csv")):
+        if p.name != SAT_REDUCTION_NAME:
             exp.tables.append(read_csv(p))
-        elif p.suffix in (".svg", ".png"):
-            exp.figures.append(read_figure(p))
+    exp.figures = [read_figure(p) for p in _figure_files(directory)]
     return exp
 
 
+def _load(directory: Path, name: str) -> Experiment:
+    return (
+        _from_section(directory)
+        if (directory / SECTION_NAME).is_file()
+        else _generic(directory, name)
+    )
+
+
 def load_experiments(experiments_dir: Path) -> list[Experiment]:
-    """Every experiment directory under ``experiments_dir`` (none if it is absent)."""
+    """Every experiment directory under ``experiments_dir`` (none if it is absent).
+
+    Files directly in ``experiments_dir`` (an experiment stage that writes there) form one
+    more experiment named ``results``; a ``figures/`` directory belongs to its parent.
+    """
     if not experiments_dir.is_dir():
         return []
     out = []
-    for d in sorted(p for p in experiments_dir.iterdir() if p.is_dir()):
-        exp = _from_section(d) if (d / SECTION_NAME).is_file() else _generic(d)
-        if exp.tables or exp.figures or exp.summary or exp.claims:
-            out.append(exp)
+    if (experiments_dir / SECTION_NAME).is_file() or any(
+        p.suffix in (".csv", ".svg", ".png") for p in experiments_dir.iterdir()
+    ):
+        out.append(_load(experiments_dir, "results"))
+    for d in sorted(p for p in experiments_dir.iterdir() if p.is_dir() and p.name != "figures"):
+        out.append(_load(d, d.name))
+    out = [e for e in out if e.tables or e.figures or e.summary or e.claims]
     return sorted(out, key=lambda e: (e.order, e.name))
 
 

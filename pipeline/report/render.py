@@ -175,6 +175,11 @@ def render_dataset(
         atomic_write_text(tmp / "tables" / "drift_by_length.csv", tb.to_csv(drift_rows, _DRIFT))
         atomic_write_text(tmp / "tables" / "audit.csv", tb.to_csv(audit_rows, _AUDIT))
         atomic_write_json(tmp / "tables" / "provenance.json", provenance)
+        for e in data.experiments:
+            for t in e.tables:
+                dest = tmp / "tables" / "experiments" / e.name / t.path.name
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(t.path, dest)
         if external is not None:
             shutil.copyfile(external.path, tmp / "tables" / "sat_reduction.csv")
         elif red_rows:

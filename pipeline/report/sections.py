@@ -11,6 +11,7 @@ from pipeline.report.inputs import DatasetInputs
 from pipeline.report.tables import PAPER_REDUCTION_PCT
 
 Row = dict[str, Any]
+MAX_TABLE_ROWS = 40  # rows of an experiment's CSV shown on the page
 
 
 def overview(data: DatasetInputs, rows: Sequence[Row]) -> str:
@@ -148,11 +149,14 @@ def cost(rows: Sequence[Row]) -> str:
     rows = [r for r in rows if r.get("runtime_s") is not None]
     if not rows:
         return ""
-    cols = (("filter", "filter"), ("scenario", "scenario"), ("epochs", "output epochs"),
-            ("duration_s", "data s"), ("runtime_s", "wall s"),
+    cols: tuple[tuple[str, str], ...] = (("filter", "filter"), ("scenario", "scenario"),
+            ("epochs", "output epochs"), ("duration_s", "data s"), ("runtime_s", "wall s"),
             ("realtime_factor", "x real time"))  # fmt: skip
+    if any(r.get("compile_s") is not None for r in rows):
+        cols = (*cols, ("compile_s", "of which JIT s"))
     return h.table(rows, cols) + h.para(
-        "Wall time of the replay (inputs, alignment, filter) on one core, after compilation.",
+        "Wall time of the replay (inputs, alignment, filter) on one core; a run that found no "
+        "compiled kernel in the numba cache includes the compilation.",
         "note",
     )
 
@@ -199,7 +203,12 @@ def experiments(exps: Sequence[Experiment], figs: list[str]) -> str:
                 )
             )
         for t in e.tables:
-            parts.append(f"<h4>{h.esc(t.title)}</h4>" + h.text_table(t.header, t.rows))
+            parts.append(f"<h4>{h.esc(t.title)}</h4>")
+            parts.append(h.text_table(t.header, t.rows[:MAX_TABLE_ROWS]))
+            if len(t.rows) > MAX_TABLE_ROWS:
+                where = f"tables/experiments/{e.name}/{t.path.name}"
+                note = f"First {MAX_TABLE_ROWS} of {len(t.rows)} rows; all in {where}."
+                parts.append(h.para(note, "note"))
             if t.caption:
                 parts.append(h.para(t.caption, "note"))
         for i, f in enumerate(e.figures):

@@ -68,6 +68,7 @@ def metrics_rows(data: DatasetInputs, series: dict[tuple[str, str], ErrorSeries]
             "epochs": _num(m.get("epochs")),
             "duration_s": _num(m.get("duration_s")),
             "runtime_s": _num(m.get("runtime_s")),
+            "compile_s": _num(m.get("compile_s")),
             "realtime_factor": _num(m.get("realtime_factor")),
             "reason": m.get("reason") or m.get("failure"),
         }

@@ -101,3 +101,19 @@ def test_changing_one_filter_reruns_only_its_runs_and_then_the_reports(tmp_path:
                     todo.append(st)
     seoul = {d for g in groups.values() if "tc_ukf" in g.filters for d in g.datasets}
     assert after == {f"report@{d}" for d in seoul} | {"summarize"}
+
+
+def test_a_recorded_dataset_gets_ingest_run_and_report_stages(tmp_path: Path) -> None:
+    subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
+    shutil.copy(REPO / "dvc.yaml", tmp_path)
+    text = (REPO / "params.yaml").read_text()
+    text = text.replace("recorded: []", "recorded: [my_rig]", 1)
+    text = text.replace("datasets: [seoul_campus_cw, seoul_campus_ccw]",
+                        "datasets: [seoul_campus_cw, seoul_campus_ccw, my_rig]", 1)  # fmt: skip
+    (tmp_path / "params.yaml").write_text(text)
+    load_params(tmp_path / "params.yaml")  # still valid
+    _dvc(tmp_path, "init", "-q")
+    names = {line.split()[0] for line in _dvc(tmp_path, "stage", "list").splitlines()}
+    assert {"ingest_recorded@my_rig", "report_recorded@my_rig"} <= names
+    assert "run_ins_raw_gnss@my_rig-tc_ukf-nominal" in names
+    assert not any(n.startswith("synth@my_rig") for n in names)

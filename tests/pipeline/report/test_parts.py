@@ -141,3 +141,27 @@ def test_summary_ranks_filters_across_reports(dataset_dir: Path, tmp_path: Path)
     assert (tmp_path / "summary" / "tables" / "ranking.csv").is_file()
     with pytest.raises(ReportInputError, match="not a dataset report"):
         render_summary([tmp_path], tmp_path / "s2")
+
+
+def test_experiment_files_without_a_section_render_generically(
+    dataset_dir: Path, tmp_path: Path
+) -> None:
+    root = tmp_path / "ds"
+    shutil.copytree(dataset_dir, root)
+    exp = root / "experiments"
+    (exp / "figures").mkdir(parents=True)
+    rows = "\n".join(f"cascaded_ekf,{i},{0.1 * i}" for i in range(100))
+    (exp / "timeseries_nominal.csv").write_text("label,k,east_m\n" + rows + "\n")
+    (exp / "summary.json").write_text("{}")
+    (exp / "figures" / "tracking.svg").write_text('<svg viewBox="0 0 4 4"><path d="M0 0"/></svg>')
+    (exp / "figures" / "tracking.png").write_bytes(b"not read: the SVG twin wins")
+    data = load_dataset("tiny", root / "tables", root / "runs", exp)
+    assert [e.name for e in data.experiments] == ["results"]
+    render_dataset(data, tmp_path / "r", experiments_dir=exp)
+    page = (tmp_path / "r" / "index.html").read_text()
+    assert "First 40 of 100 rows" in page
+    assert "<td>99</td>" not in page
+    copied = tmp_path / "r" / "tables" / "experiments" / "results" / "timeseries_nominal.csv"
+    assert copied.read_text().count("\n") == 101
+    assert '<svg viewBox="0 0 4 4">' in page
+    assert "not read" not in page
