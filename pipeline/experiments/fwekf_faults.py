@@ -122,6 +122,5 @@ def fault_rows(
                 "gate_resets": sum(1 for e in res.events if e.kind == "gate_reset"),
                 "alpha_median": float(np.median(alpha)),
                 "alpha_p95": float(np.percentile(alpha, 95)),
-                "runtime_s": res.runtime_s,
             })  # fmt: skip
     return rows

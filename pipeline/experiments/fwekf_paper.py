@@ -197,7 +197,6 @@ def convergence_rows(
         alpha = res.extra.get("alpha")
         row["alpha_median"] = float(np.median(alpha)) if alpha is not None else 1.0
         row["alpha_max"] = float(np.max(alpha)) if alpha is not None else 1.0
-        row["runtime_s"] = res.runtime_s
         row["paper"] = PAPER[case]
         rows.append(row)
     return rows
@@ -216,11 +215,13 @@ def convergence_figure(
 
     fig, axes = plt.subplots(3, len(cases), figsize=(6 * len(cases), 8), sharex=True, squeeze=False)
     for c, (case, runs) in enumerate(cases.items()):
-        for name, (res, s) in runs.items():
-            axes[0][c].semilogy(s["t_s"], np.maximum(s["pos_err_m"], 1e-4), label=name)
-            axes[1][c].semilogy(s["t_s"], np.maximum(s["vel_err_mps"], 1e-5), label=name)
+        for k, (name, (res, s)) in enumerate(runs.items()):
+            color = f"C{k}"
+            axes[0][c].semilogy(s["t_s"], np.maximum(s["pos_err_m"], 1e-4), color, label=name)
+            axes[1][c].semilogy(s["t_s"], np.maximum(s["vel_err_mps"], 1e-5), color, label=name)
             if "alpha" in res.extra:
-                axes[2][c].plot((res.t_ns - res.t_ns[0]) * 1e-9, res.extra["alpha"], label=name)
+                t_s = (res.t_ns - res.t_ns[0]) * 1e-9
+                axes[2][c].plot(t_s, res.extra["alpha"], color, label=name)
         axes[0][c].axhline(0.5, color="k", ls=":", lw=0.8)
         axes[0][c].axvline(20.0, color="k", ls=":", lw=0.8)
         axes[1][c].axhline(0.02, color="k", ls=":", lw=0.8)

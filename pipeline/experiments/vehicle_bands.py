@@ -34,7 +34,7 @@ def band_table(
     outage: tuple[float, float, float] = (20.0, 30.0, 10.0),
     backend: Backend = "numba",
 ) -> list[dict[str, Any]]:
-    """Rows (scenario, filter, band, RMS errors, runtime) for the nominal and outage runs.
+    """Rows (scenario, filter, band, RMS errors) for the nominal and outage runs.
 
     Args:
         tables: ``vehicle``, ``gnss`` and ``truth`` tables.
@@ -57,7 +57,7 @@ def band_table(
                 for row in per_band(err, edges, mask):
                     rows.append(
                         {"scenario": scen, "filter": name, "subset": subset, **row,
-                         "runtime_s": res.runtime_s, "dynamic_share": float(np.mean(res.aux))}
+                         "dynamic_share": float(np.mean(res.aux))}
                     )  # fmt: skip
     return rows
 

@@ -173,7 +173,6 @@ def smartloc_rows(
             for subset, mask in subsets.items():
                 rows.append({"scenario": scen, "filter": name, "subset": subset,
                              "band_lo_mps": 0.0, "band_hi_mps": math.inf, **summarize(err, mask),
-                             "runtime_s": res.runtime_s,
                              "dynamic_share": float(np.mean(res.aux))})  # fmt: skip
                 for row in per_band(err, SMARTLOC_EDGES_MPS, mask):
                     rows.append({"scenario": scen, "filter": name, "subset": subset, **row})
