@@ -18,6 +18,8 @@ reports under ``datasets/<id>/experiments/<NAME>/``:
 - ``fwekf_faults`` (paper 004, seoul_campus_cw): ``faults.{json,csv}`` one row per scenario
   (``nominal``, ``F7_multipath_burst``, ``F8_optimistic_accuracy``, ``outages``) and filter.
 
-``vehicle_smartloc`` (the real smartLoc drive) has the same row layout as ``vehicle_bands``
-plus a ``spp_fixes`` row; it runs from the tests until the libRSF reader lands in ``ingest``.
+- ``vehicle_smartloc`` (the real smartLoc drive, tables from ``navreplay ingest`` of its two
+  text files; not a dvc stage, the data lives outside the repository): ``smartloc.{json,csv}``
+  with the layout of ``bands`` plus whole-drive rows (``band_hi_mps`` null) and a
+  ``spp_fixes`` row (the least-squares fixes themselves).
 """

@@ -8,6 +8,9 @@ Experiments (pure functions in pipeline/experiments/):
                      (--tables: fwekf_reference, --tables-noise-free: fwekf_reference_noise_free)
   fwekf_faults       paper 004 on seoul_campus: nominal, F7 multipath burst, F8 optimistic
                      accuracy, outages (--tables: seoul_campus_cw)
+  vehicle_smartloc   paper 003 on the real smartLoc drive: least-squares fixes from the
+                     pseudoranges, the four vehicle filters with and without outages
+                     (--tables: `navreplay ingest` of the smartLoc Input and GT files)
 
 examples:
   navreplay experiment vehicle_bands --tables datasets/car_speed_ramp/tables \\
@@ -30,7 +33,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-EXPERIMENTS = ("vehicle_bands", "fwekf_convergence", "fwekf_faults")
+EXPERIMENTS = ("vehicle_bands", "fwekf_convergence", "fwekf_faults", "vehicle_smartloc")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -60,7 +63,7 @@ def _read(tables_dir: Path) -> tuple[dict[str, pa.Table], SensorMeta]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.experiments import fwekf_faults, fwekf_paper, vehicle_bands
+    from pipeline.experiments import fwekf_faults, fwekf_paper, vehicle_bands, vehicle_smartloc
     from pipeline.experiments.outputs import write_rows
     from pipeline.params import load_params
 
@@ -91,6 +94,10 @@ def run(args: argparse.Namespace) -> int:
         write_rows(out, "convergence", rows)
         fwekf_paper.convergence_figure(cases, out / "convergence.png", dpi)
         print(f"fwekf_convergence: {len(rows)} rows -> {out}")
+    elif args.name == "vehicle_smartloc":
+        rows = vehicle_smartloc.smartloc_rows(tables, params.filters)
+        write_rows(out, "smartloc", rows)
+        print(f"vehicle_smartloc: {len(rows)} rows -> {out}")
     else:
         rows = fwekf_faults.fault_rows(tables, sensors, params.filters, params.synth.seed)
         write_rows(out, "faults", rows)

@@ -1,4 +1,4 @@
-"""The vehicle-model filters on the real smartLoc drive (Berlin), read in place."""
+"""The vehicle-model filters on the real smartLoc drive (Berlin), ingested in place."""
 
 from __future__ import annotations
 
@@ -8,19 +8,26 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
+from ingest.api import ingest
+from ingest.schema import TableName
+from ingest.tables import read_table
 from pipeline.experiments.vehicle_smartloc import smartloc_rows, spp_fixes
 from pipeline.params import load_params
-from tests.pipeline.estimation.smartloc_loader import load
 
 REPO = Path(__file__).resolve().parents[3]
 DATA = REPO.parent / "shared" / "data" / "smartloc_berlin_potsdamer_platz"
 
 
 @pytest.fixture(scope="module")
-def smartloc() -> dict[str, pa.Table]:
-    if not (DATA / "Berlin_Potsdamer_Platz_Input.txt").is_file():
+def smartloc(tmp_path_factory: pytest.TempPathFactory) -> dict[str, pa.Table]:
+    """The Berlin run through the libRSF reader: gnss_obs, vehicle (no steering), truth."""
+    logs = [DATA / "Berlin_Potsdamer_Platz_Input.txt", DATA / "Berlin_Potsdamer_Platz_GT.txt"]
+    if not all(p.is_file() for p in logs):
         pytest.skip(f"smartLoc data not found at {DATA} (shared/data is read in place)")
-    return dict(load(DATA))
+    out = tmp_path_factory.mktemp("smartloc") / "tables"
+    ingest(logs, out)
+    names = (TableName.GNSS_OBS, TableName.VEHICLE, TableName.TRUTH)
+    return {n.value: read_table(out / f"{n.value}.parquet", n).table for n in names}
 
 
 def test_least_squares_fixes_cover_every_epoch_with_two_clocks(
