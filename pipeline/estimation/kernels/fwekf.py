@@ -61,7 +61,7 @@ def push_residuals(ring: F64, count: int, rows: I64, nu: F64, S: F64, m: int) ->
 
 
 @nb.njit(cache=True)
-def run_fwekf(  # noqa: PLR0915 - kernels.ekf.run_ekf plus the fading
+def run_fwekf(
     x0: F64, P0: F64, n: int, t0: int, i0: int, u0: F64, imu_t: I64, imu: F64, stops: I64,
     fix: F64, obs: F64, obs_start: I64, cfg: F64, noise: F64, lever_b: F64, nhc_sigma: F64,
     gate: F64, fz: F64, rules: I64, out_alpha: F64, m_max: int, out_t: I64, out_x: F64,

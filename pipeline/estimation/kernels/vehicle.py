@@ -334,7 +334,7 @@ def switch_model(current: int, v_whl: float, cfg: F64) -> int:
 
 
 @nb.njit(cache=True)
-def run_vehicle(  # noqa: PLR0912, PLR0915 - one loop, four modes, no calls in the hot path
+def run_vehicle(
     x0: F64,
     P0: F64,
     u0: F64,
