@@ -16,6 +16,7 @@ import yaml
 
 from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
+from pipeline.estimation.config import FiltersParams
 from pipeline.synth.car import CarSpeedRampParams
 from pipeline.synth.fwekf import FwekfReferenceParams
 from pipeline.synth.seoul_params import SeoulCampusParams
@@ -79,13 +80,15 @@ class ReportParams:
 
 @dataclass(frozen=True)
 class Params:
-    """The whole of ``params.yaml``."""
+    """The whole of ``params.yaml``; ``filters`` holds one section per filter
+    (``pipeline.estimation.config``)."""
 
     datasets: tuple[str, ...]
     synth: SynthParams
     ingest: IngestParams
     run: RunParams
     report: ReportParams
+    filters: FiltersParams
 
     def __post_init__(self) -> None:
         for i, ds in enumerate(self.datasets):

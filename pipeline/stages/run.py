@@ -1,9 +1,10 @@
 """Replay one filter over a dataset's canonical tables under one scenario.
 
-Events from all tables are merged by time; IMU or vehicle samples predict, other streams
-update. Writes DIR/estimate.parquet (the navigation solution under the truth table's column
-names, with a sigma column for each), DIR/innovations.parquet, DIR/metrics.json and the
-scenario's windows.
+Reads TABLES_DIR/{imu,gnss,gnss_obs,truth}.parquet and meta.json (IMU noise, lever arm).
+Writes DIR atomically: estimate.parquet (the navigation solution under the truth table's
+column names, with a sigma column for each), innovations.parquet (NIS per update),
+events.parquet (gate rejections, resets, skipped inputs) and metrics.json. A diverging
+filter exits with status 2 and writes nothing, unless its params say on_divergence: flag.
 
 examples:
   navreplay run datasets/seoul_campus_cw/tables --filter tc_ukf_nhc --out runs/tc_ukf_nhc
@@ -13,9 +14,12 @@ examples:
 from __future__ import annotations
 
 import argparse
+import logging
 from pathlib import Path
 
-from pipeline.errors import NotBuiltError
+from pipeline.errors import NotBuiltError, ParamsError
+
+log = logging.getLogger(__name__)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -55,6 +59,26 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    raise NotBuiltError(
-        "the estimation core arrives with the issue 'Estimation core'; nothing was written"
-    )
+    from pipeline.estimation.families import runner
+    from pipeline.params import load_params
+
+    params = load_params(args.params)
+    try:
+        run_filter = runner(args.filter)
+    except KeyError as err:
+        raise ParamsError(
+            f"filters.{args.filter}", str(err.args[0]), source=str(args.params)
+        ) from err
+    if args.scenario != "nominal":
+        raise NotBuiltError(
+            f"scenario {args.scenario!r}: only 'nominal' exists until the scenario engine "
+            "arrives (issue 'Outage and satellite-count experiments'); nothing was written"
+        )
+    backend = args.backend or params.run.backend
+    m = run_filter(args.tables, args.filter, params.filters, backend, args.out, args.scenario)
+    summary = f"{args.filter} ({backend}): {m['status']}, {m['epochs']} epochs"
+    if m.get("truth"):
+        summary += f", horizontal RMS {m['pos_err_h_rms_m']:.2f} m"
+    summary += f", {m['realtime_factor']:.0f}x real time -> {args.out}"
+    print(summary)
+    return 0

@@ -1,0 +1,1 @@
+"""Estimation core: strapdown INS with loosely and tightly coupled GNSS, EKF and UKF, NHC."""

@@ -1,0 +1,450 @@
+"""The total-state UKF replay loop (paper 001), compiled whole with numba (``cache=True``).
+
+State: the UKF coordinates ``s`` of ``models.ins`` (lat, lon, h, v_NED, attitude rotation
+vector relative to ``q_ref``, biases, clock) with covariance ``P``; sigma points are never
+quaternions, so their weighted means and differences are plain vector arithmetic.
+
+Per stop (every ``step_s`` and every update epoch):
+
+1. draw the 2n+1 scaled sigma points (Van der Merwe; ``alpha``, ``beta``, ``kappa``) from
+   ``(s, P)`` and materialize each as a full state (``q = Exp(a) q_ref``);
+2. integrate every sigma point through the IMU samples of the span with RK4 (its own biases
+   correct the input);
+3. re-reference the attitude to the propagated central sigma point (``q_ref``), convert back
+   to coordinates, and take the unscented mean and covariance, adding the process noise
+   accumulated over the span, ``Qd`` of ``ins.transition`` along the central trajectory
+   mapped into UKF coordinates;
+4. if the stop has measurements: redraw the sigma points from the predicted ``(s, P)``,
+   predict every row through ``models.measurement.epoch_h`` (relative to the prediction of
+   the mean, which keeps ~2e7 m pseudoranges well conditioned), gate each block on its NIS
+   against the unscented ``S``, reset timed-out streams, and update the accepted rows jointly
+   (``K = Pxz S^-1``, ``P <- P - K S K^T``, symmetrized).
+
+Between stops the sigma points are not redrawn: the process noise enters once per span
+(``step_s``, default 0.1 s) instead of at every IMU sample. This is what filterpy's
+``UnscentedKalmanFilter`` does when its ``fx`` integrates a whole span, which the reference
+backend uses; the accuracy cost is measured in ``benchmarks/estimation.py``.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from pipeline.estimation.kernels.common import (
+    CFG_GAP_S,
+    CFG_MAX_STEP,
+    CFG_NHC_ON,
+    CFG_SUBSTEPS,
+    CFG_TIMEOUT_S,
+    CFG_UKF_GAMMA,
+    CNT_STOP,
+    EV_RESET,
+    N_STREAMS,
+    STATUS_INDEFINITE,
+    STATUS_OK,
+    accepted_rows,
+    check_state,
+    cho_solve,
+    cholesky,
+    fail,
+    gate_blocks,
+    inflate_for_stream,
+    keep_pd,
+    record_event,
+    record_innovations,
+    record_output,
+    streams_to_reset,
+    update_reject_since,
+)
+from pipeline.estimation.kernels.unscented import (
+    cross_cov,
+    draw_sigmas,
+    sigma_h,
+    unscented_mean_cov,
+)
+from pipeline.estimation.models.ins import (
+    ACC_DIM,
+    E_CB,
+    FULL_DIM,
+    X_CB,
+    X_CD,
+    X_Q,
+    coords_scale,
+    from_full,
+    propagate_span,
+    to_full,
+)
+from pipeline.estimation.models.ins_errors import transition
+from pipeline.estimation.models.measurement import ST_OUT, ST_T, epoch_h, epoch_layout, epoch_z
+from pipeline.nav.earth import F64, I64
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _clock_only(L: F64, c: int) -> bool:
+    """Column ``c`` of the Cholesky factor moves no navigation or bias state."""
+    for r in range(E_CB):  # noqa: SIM110 (numba: no all() over a generator)
+        if L[r, c] != 0.0:
+            return False
+    return True
+
+
+@nb.njit(cache=True, error_model="numpy")
+def ukf_predict(
+    s: F64,
+    P: F64,
+    q_ref: F64,
+    n: int,
+    wm: F64,
+    wc: F64,
+    gamma: float,
+    imu_t: I64,
+    imu: F64,
+    i: int,
+    t_start: int,
+    u: F64,
+    t_end: int,
+    cfg: F64,
+    noise: F64,
+    sig: F64,
+    sigX: F64,
+    L: F64,
+    u_end: F64,
+    work: F64,
+    acc: F64,
+    Phi: F64,
+    Qd: F64,
+    sc: F64,
+) -> int:
+    """Steps 1-3 of the module docstring over one span; ``s``, ``P``, ``q_ref`` updated in
+    place (the other arrays are workspace). Returns the next IMU index, or -1 if ``P`` is not
+    positive definite."""
+    if not draw_sigmas(s, P, n, gamma, L, sig):
+        return -1
+    ns = 2 * n + 1
+    substeps = int(cfg[CFG_SUBSTEPS])
+    T = (t_end - t_start) * 1e-9
+    i_next = i
+    for j in range(ns):
+        to_full(sig[j], q_ref, n, sigX[j])
+        c = (j - 1) % n  # the Cholesky column that made sigma point j
+        if j > 0 and c >= E_CB and _clock_only(L, c):
+            # lower-triangular factor: this point equals the mean except for the clock, so
+            # its navigation solution is the central point's (bitwise); integrate its clock
+            for r in range(X_CB):
+                sigX[j, r] = sigX[0, r]
+            sigX[j, X_CB] += sigX[j, X_CD] * T
+            continue
+        i_next = propagate_span(
+            sigX[j],
+            imu_t,
+            imu,
+            i,
+            t_start,
+            u,
+            t_end,
+            substeps,
+            cfg[CFG_MAX_STEP],
+            cfg[CFG_GAP_S],
+            u_end,
+            work,
+            acc,
+            j == 0,
+        )
+    transition(sigX[0], acc, noise, n, Phi, Qd)
+    coords_scale(sigX[0], n, sc)
+    for j in range(4):
+        q_ref[j] = sigX[0, X_Q + j]
+    for j in range(ns):
+        from_full(sigX[j], q_ref, n, sig[j])
+    unscented_mean_cov(sig, wm, wc, n, s, P)
+    for r in range(n):
+        for c in range(n):
+            P[r, c] += sc[r] * sc[c] * Qd[r, c]
+    return i_next
+
+
+@nb.njit(cache=True, error_model="numpy")
+def ukf_update(
+    t_ns: int,
+    s: F64,
+    P: F64,
+    q_ref: F64,
+    n: int,
+    wm: F64,
+    wc: F64,
+    gamma: float,
+    rows: I64,
+    m: int,
+    blocks: I64,
+    nb_: int,
+    fix: F64,
+    obs: F64,
+    w_ib_b: F64,
+    lever_b: F64,
+    nhc_sigma: F64,
+    gate: F64,
+    cfg: F64,
+    reject_since: I64,
+    sig: F64,
+    L: F64,
+    inn_i: I64,
+    inn_f: F64,
+    ev_i: I64,
+    ev_f: F64,
+    counts: I64,
+) -> bool:
+    """Step 4 of the module docstring; False if ``P`` was not positive definite."""
+    ns = 2 * n + 1
+    Xm = np.empty(FULL_DIM)
+    to_full(s, q_ref, n, Xm)
+    ref = Xm[:3].copy()
+    sc = np.empty(n)
+    coords_scale(Xm, n, sc)
+    z = np.empty(m)
+    r = np.empty(m)
+    epoch_z(rows, m, fix, obs, ref, nhc_sigma, z, r)
+    # predictions relative to the mean's: pseudoranges are ~2e7 m and their unscented average
+    # would otherwise lose ~1e-9 m to cancellation
+    h_ref = np.empty(m)
+    epoch_h(Xm, rows, m, obs, ref, w_ib_b, lever_b, h_ref)
+    for k in range(m):
+        z[k] -= h_ref[k]
+    Z = np.empty((ns, m))
+    zp = np.empty(m)
+    S = np.empty((m, m))
+    Pxz = np.empty((n, m))
+    nu = np.empty(m)
+    nis = np.empty(nb_)
+    accepted = np.empty(nb_, np.int64)
+    gwork = np.empty((3, 6))
+    for attempt in range(2):
+        if not draw_sigmas(s, P, n, gamma, L, sig):
+            return False
+        sigma_h(sig, q_ref, n, rows, m, obs, ref, w_ib_b, lever_b, h_ref, Xm, Z)
+        unscented_mean_cov(Z, wm, wc, m, zp, S)
+        for k in range(m):
+            S[k, k] += r[k]
+            nu[k] = z[k] - zp[k]
+        gate_blocks(nu, S, blocks, nb_, gate, nis, accepted, gwork)
+        if attempt == 1 or not _reset_streams(
+            t_ns, P, n, nu, blocks, nb_, accepted, reject_since, sc, cfg, ev_i, ev_f, counts
+        ):
+            break
+    cross_cov(sig, s, Z, zp, wc, n, m, Pxz)
+    record_innovations(
+        t_ns, nu, S, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts, ev_i, ev_f
+    )
+    update_reject_since(t_ns, blocks, nb_, accepted, reject_since)
+    a = np.empty(m, np.int64)
+    ma = accepted_rows(blocks, nb_, accepted, a)
+    if ma > 0:
+        _apply_gain(s, P, n, Pxz, S, nu, a, ma)
+    return True
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _reset_streams(
+    t_ns: int,
+    P: F64,
+    n: int,
+    nu: F64,
+    blocks: I64,
+    nb_: int,
+    accepted: I64,
+    reject_since: I64,
+    sc: F64,
+    cfg: F64,
+    ev_i: I64,
+    ev_f: F64,
+    counts: I64,
+) -> bool:
+    """Reset the streams that timed out (``common.streams_to_reset``); True if any was."""
+    reset = streams_to_reset(t_ns, blocks, nb_, accepted, reject_since, cfg[CFG_TIMEOUT_S])
+    for st in range(N_STREAMS):
+        if reset[st]:
+            big = inflate_for_stream(P, n, st, nu, blocks, nb_, sc, cfg)
+            record_event(ev_i, ev_f, counts, t_ns, EV_RESET, st, -1, big)
+    return bool(reset.sum() > 0)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _apply_gain(s: F64, P: F64, n: int, Pxz: F64, S: F64, nu: F64, a: I64, ma: int) -> None:
+    """``s += K nu``, ``P -= K S K^T`` with ``K = Pxz S^-1`` over the accepted rows ``a``."""
+    Sa = np.empty((ma, ma))
+    Kt = np.empty((ma, n))  # Pxz^T of the accepted rows, then Sa^-1 Pxz^T = K^T
+    for i in range(ma):
+        for j in range(n):
+            Kt[i, j] = Pxz[j, a[i]]
+        for j in range(ma):
+            Sa[i, j] = S[a[i], a[j]]
+    La = np.empty((ma, ma))
+    if not cholesky(Sa, ma, La):
+        return
+    cho_solve(La, ma, Kt, n)
+    for j in range(n):
+        d = 0.0
+        for i in range(ma):
+            d += Kt[i, j] * nu[a[i]]
+        s[j] += d
+    for r in range(n):  # P -= K S K^T = Pxz Sa^-1 Pxz^T
+        for c in range(r, n):
+            d = 0.0
+            for i in range(ma):
+                d += Pxz[r, a[i]] * Kt[i, c]
+            P[r, c] -= d
+            if c != r:
+                P[c, r] = P[r, c]
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _error_cov(P: F64, sc: F64, n: int, out: F64) -> None:
+    for r in range(n):
+        for c in range(n):
+            out[r, c] = P[r, c] / (sc[r] * sc[c])
+
+
+@nb.njit(cache=True, error_model="numpy")
+def run_ukf(
+    x0: F64,
+    P0: F64,
+    n: int,
+    t0: int,
+    i0: int,
+    u0: F64,
+    imu_t: I64,
+    imu: F64,
+    stops: I64,
+    fix: F64,
+    obs: F64,
+    obs_start: I64,
+    cfg: F64,
+    noise: F64,
+    lever_b: F64,
+    nhc_sigma: F64,
+    gate: F64,
+    wm: F64,
+    wc: F64,
+    m_max: int,
+    out_t: I64,
+    out_x: F64,
+    out_P: F64,
+    inn_i: I64,
+    inn_f: F64,
+    ev_i: I64,
+    ev_f: F64,
+    counts: I64,
+) -> int:
+    """Replay the total-state UKF from ``x0`` (full state) and ``P0`` (error coordinates).
+
+    Arguments as ``kernels.ekf.run_ekf``, plus the unscented weights ``wm``, ``wc`` (2n+1,);
+    the sigma spread is ``cfg[CFG_UKF_GAMMA]``. Outputs carry the full state and the
+    covariance converted to error coordinates (NED metres for position), like the EKF's.
+    """
+    gamma = cfg[CFG_UKF_GAMMA]
+    ns = 2 * n + 1
+    q_ref = x0[X_Q : X_Q + 4].copy()
+    s = np.empty(n)
+    from_full(x0, q_ref, n, s)
+    sc = np.empty(n)
+    coords_scale(x0, n, sc)
+    P = np.empty((n, n))
+    for r in range(n):
+        for c in range(n):
+            P[r, c] = P0[r, c] * sc[r] * sc[c]
+    sig = np.empty((ns, n))
+    sigX = np.empty((ns, FULL_DIM))
+    L = np.empty((n, n))
+    Pe = np.empty((n, n))
+    X = np.empty(FULL_DIM)
+    u = u0.copy()
+    u_end = np.empty(6)
+    work = np.zeros((9, 10))
+    acc = np.zeros(ACC_DIM)
+    Phi = np.empty((n, n))
+    Qd = np.empty((n, n))
+    sc_q = np.empty(n)
+    rows = np.empty((m_max, 2), np.int64)
+    blocks = np.empty((m_max, 4), np.int64)
+    reject_since = -np.ones(N_STREAMS, np.int64)
+    nhc_on = cfg[CFG_NHC_ON] > 0.0
+    record_output(t0, x0, P0, n, out_t, out_x, out_P, counts)
+    t_cur = t0
+    i = i0
+    for k in range(stops.shape[0]):
+        stop = stops[k]
+        t = stop[ST_T]
+        i_next = ukf_predict(
+            s,
+            P,
+            q_ref,
+            n,
+            wm,
+            wc,
+            gamma,
+            imu_t,
+            imu,
+            i,
+            t_cur,
+            u,
+            t,
+            cfg,
+            noise,
+            sig,
+            sigX,
+            L,
+            u_end,
+            work,
+            acc,
+            Phi,
+            Qd,
+            sc_q,
+        )
+        ok = i_next >= 0
+        if ok:
+            i = i_next
+            for j in range(6):
+                u[j] = u_end[j]
+            t_cur = t
+            ok = keep_pd(P, n, L, t, ev_i, ev_f, counts)
+        m, nb_ = epoch_layout(stop, fix, obs, obs_start, nhc_on, rows, blocks)
+        if ok and m > 0:
+            ok = ukf_update(
+                t,
+                s,
+                P,
+                q_ref,
+                n,
+                wm,
+                wc,
+                gamma,
+                rows,
+                m,
+                blocks,
+                nb_,
+                fix,
+                obs,
+                u[3:6],
+                lever_b,
+                nhc_sigma,
+                gate,
+                cfg,
+                reject_since,
+                sig,
+                L,
+                inn_i,
+                inn_f,
+                ev_i,
+                ev_f,
+                counts,
+            ) and keep_pd(P, n, L, t, ev_i, ev_f, counts)
+        to_full(s, q_ref, n, X)
+        coords_scale(X, n, sc)
+        status = check_state(X, P, n, sc, cfg) if ok else STATUS_INDEFINITE
+        if status != STATUS_OK:
+            return fail(t, status, ev_i, ev_f, counts)
+        if stop[ST_OUT] > 0:
+            _error_cov(P, sc, n, Pe)
+            record_output(t, X, Pe, n, out_t, out_x, out_P, counts)
+        counts[CNT_STOP] = k + 1
+    return STATUS_OK

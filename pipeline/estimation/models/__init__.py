@@ -1,0 +1,1 @@
+"""Model functions (numba): the physics every INS/GNSS estimator and backend shares."""

@@ -1,0 +1,188 @@
+"""One update epoch as stacked measurement rows: layout, values, predictions and Jacobians.
+
+An epoch (one stop of the replay loop) may carry a GNSS fix (loose coupling), the satellites
+of one ``gnss_obs`` epoch (tight coupling) and the NHC pair; all its rows are fused in one
+joint update (paper 001: "if both NHC and GPS observables are used at the same time ...").
+Rows are grouped into *blocks*, the units of gating: a fix's position (3 rows, 2 for a 2-D
+fix), its velocity (3, or 2 when the receiver gives speed and course only), one satellite's
+pseudorange and rate (1-2), the NHC pair (2).
+
+Array layouts shared with ``pipeline.estimation.inputs`` (which fills them) and the kernels:
+
+- ``fix`` (M, ``FIX_COLS``): latitude, longitude (rad), altitude (m), NED velocity (m/s),
+  horizontal, vertical and speed 1-sigma, position dimension (0 = unusable, 2 = horizontal,
+  3) and velocity dimension (0 = unusable, 2 = north and east only, 3).
+- ``obs`` (K, ``OBS_COLS``): satellite ECEF position and velocity, corrected pseudorange (m)
+  and pseudorange rate (m/s), their 1-sigma, the satellite code (``sv_code``) and flags.
+- ``obs_start`` (E + 1,): rows of obs epoch ``e`` are ``obs_start[e]:obs_start[e + 1]``.
+- ``stop`` rows (``STOP_COLS``, int64): time (ns), fix index, obs epoch index (-1 = none),
+  NHC flag, output flag.
+- ``rows`` (m, 2): kind (``K_*``) and the fix or obs row it reads.
+- ``blocks`` (b, 4): first row, dimension, stream (``S_*``) and satellite code (-1 = none).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from pipeline.estimation.models.gnss import (
+    AN_DIM,
+    AN_LLH,
+    AN_VN,
+    antenna,
+    ned_offset,
+    position_jac,
+    pseudorange_h,
+    pseudorange_jac,
+    pseudorange_rate_h,
+    pseudorange_rate_jac,
+    velocity_jac,
+)
+from pipeline.estimation.models.nhc import body_velocity, nhc_jac
+from pipeline.nav.earth import F64, I64
+
+FX_LAT, FX_LON, FX_ALT, FX_VN, FX_VE, FX_VD = 0, 1, 2, 3, 4, 5
+FX_SIG_H, FX_SIG_V, FX_SIG_VEL, FX_POS_DIM, FX_VEL_DIM = 6, 7, 8, 9, 10
+FIX_COLS = 11
+
+OB_SAT = 0  # 0..5: ECEF x, y, z (m), vx, vy, vz (m/s)
+OB_PR, OB_PRR, OB_SIG_PR, OB_SIG_PRR, OB_SV, OB_PR_OK, OB_PRR_OK = 6, 7, 8, 9, 10, 11, 12
+OBS_COLS = 13
+
+ST_T, ST_FIX, ST_OBS, ST_NHC, ST_OUT = 0, 1, 2, 3, 4
+STOP_COLS = 5
+
+K_POS, K_VEL, K_PR, K_PRR, K_NHC = 0, 3, 6, 7, 8  # K_POS + axis, K_VEL + axis, K_NHC + 0/1
+
+S_POS, S_VEL, S_OBS, S_NHC = 0, 1, 2, 3
+STREAM_NAMES = ("gnss_pos", "gnss_vel", "gnss_obs", "nhc")
+STREAM_UNITS = ("m", "mps", "m|mps", "mps")
+
+
+def sv_code(sv: str) -> int:
+    """Integer code of a satellite id ("G05" -> 7*1000+5 style: ord(system) * 1000 + number)."""
+    return ord(sv[0]) * 1000 + int(sv[1:])
+
+
+def sv_name(code: int) -> str:
+    """Inverse of ``sv_code`` ("" for -1)."""
+    if code < 0:
+        return ""
+    return f"{chr(code // 1000)}{code % 1000:02d}"
+
+
+@nb.njit(cache=True, error_model="numpy")
+def epoch_layout(
+    stop: I64, fix: F64, obs: F64, obs_start: I64, nhc_on: bool, rows: I64, blocks: I64
+) -> tuple[int, int]:
+    """Lay out the rows and blocks of the epoch at ``stop``; returns (rows, blocks) used."""
+    m = 0
+    nb_ = 0
+    fi = stop[ST_FIX]
+    if fi >= 0:
+        pdim = int(fix[fi, FX_POS_DIM])
+        if pdim > 0:
+            blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, pdim, S_POS, -1
+            nb_ += 1
+            for a in range(pdim):
+                rows[m, 0], rows[m, 1] = K_POS + a, fi
+                m += 1
+        vdim = int(fix[fi, FX_VEL_DIM])
+        if vdim > 0:
+            blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, vdim, S_VEL, -1
+            nb_ += 1
+            for a in range(vdim):
+                rows[m, 0], rows[m, 1] = K_VEL + a, fi
+                m += 1
+    oi = stop[ST_OBS]
+    if oi >= 0:
+        for k in range(obs_start[oi], obs_start[oi + 1]):
+            start = m
+            if obs[k, OB_PR_OK] > 0.0:
+                rows[m, 0], rows[m, 1] = K_PR, k
+                m += 1
+            if obs[k, OB_PRR_OK] > 0.0:
+                rows[m, 0], rows[m, 1] = K_PRR, k
+                m += 1
+            if m > start:
+                blocks[nb_, 0], blocks[nb_, 1] = start, m - start
+                blocks[nb_, 2], blocks[nb_, 3] = S_OBS, int(obs[k, OB_SV])
+                nb_ += 1
+    if nhc_on and stop[ST_NHC] > 0:
+        blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, 2, S_NHC, -1
+        nb_ += 1
+        for a in range(2):
+            rows[m, 0], rows[m, 1] = K_NHC + a, -1
+            m += 1
+    return m, nb_
+
+
+@nb.njit(cache=True, error_model="numpy")
+def epoch_z(
+    rows: I64, m: int, fix: F64, obs: F64, ref: F64, nhc_sigma: F64, z: F64, r: F64
+) -> None:
+    """Measured values ``z`` and noise variances ``r`` of the rows (positions as NED offsets
+    from ``ref`` = (lat, lon, h) in metres; NHC pseudo-measurements are zero)."""
+    for k in range(m):
+        kind, src = rows[k, 0], rows[k, 1]
+        if kind < K_VEL:
+            off = ned_offset(fix[src, FX_LAT], fix[src, FX_LON], fix[src, FX_ALT], ref)
+            z[k] = off[0] if kind == K_POS else off[1] if kind == K_POS + 1 else off[2]
+            sig = fix[src, FX_SIG_V] if kind == K_POS + 2 else fix[src, FX_SIG_H]
+            r[k] = sig * sig
+        elif kind < K_PR:
+            z[k] = fix[src, FX_VN + kind - K_VEL]
+            r[k] = fix[src, FX_SIG_VEL] ** 2
+        elif kind == K_PR:
+            z[k] = obs[src, OB_PR]
+            r[k] = obs[src, OB_SIG_PR] ** 2
+        elif kind == K_PRR:
+            z[k] = obs[src, OB_PRR]
+            r[k] = obs[src, OB_SIG_PRR] ** 2
+        else:
+            z[k] = 0.0
+            r[k] = nhc_sigma[kind - K_NHC] ** 2
+
+
+@nb.njit(cache=True, error_model="numpy")
+def epoch_h(
+    X: F64, rows: I64, m: int, obs: F64, ref: F64, w_ib_b: F64, lever_b: F64, out: F64
+) -> None:
+    """Predicted values of the rows for the full state ``X`` (``out[:m]``)."""
+    ant = np.empty(AN_DIM)
+    antenna(X, lever_b, w_ib_b, np.empty((3, 3)), ant)
+    pos = ned_offset(ant[AN_LLH], ant[AN_LLH + 1], ant[AN_LLH + 2], ref)
+    for k in range(m):
+        kind, src = rows[k, 0], rows[k, 1]
+        if kind < K_VEL:
+            out[k] = pos[0] if kind == K_POS else pos[1] if kind == K_POS + 1 else pos[2]
+        elif kind < K_PR:
+            out[k] = ant[AN_VN + kind - K_VEL]
+        elif kind == K_PR:
+            out[k] = pseudorange_h(ant, X, obs[src, OB_SAT : OB_SAT + 6])
+        elif kind == K_PRR:
+            out[k] = pseudorange_rate_h(ant, X, obs[src, OB_SAT : OB_SAT + 6])
+        else:
+            out[k] = body_velocity(X, ant, 1 + kind - K_NHC)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def epoch_jac(
+    X: F64, rows: I64, m: int, obs: F64, w_ib_b: F64, lever_b: F64, n: int, H: F64
+) -> None:
+    """Jacobian rows w.r.t. the error state (``H[:m, :n]``)."""
+    ant = np.empty(AN_DIM)
+    antenna(X, lever_b, w_ib_b, np.empty((3, 3)), ant)
+    for k in range(m):
+        kind, src = rows[k, 0], rows[k, 1]
+        if kind < K_VEL:
+            position_jac(ant, kind - K_POS, n, H[k])
+        elif kind < K_PR:
+            velocity_jac(ant, lever_b, kind - K_VEL, n, H[k])
+        elif kind == K_PR:
+            pseudorange_jac(ant, obs[src, OB_SAT : OB_SAT + 6], n, H[k])
+        elif kind == K_PRR:
+            pseudorange_rate_jac(ant, lever_b, obs[src, OB_SAT : OB_SAT + 6], n, H[k])
+        else:
+            nhc_jac(X, ant, 1 + kind - K_NHC, n, H[k])

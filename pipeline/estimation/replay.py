@@ -1,0 +1,375 @@
+"""One replay loop for every INS/GNSS filter: tables in, a ``RunResult`` out.
+
+``run_filter`` prepares the inputs behind the data barrier (``inputs``), splits the IMU into
+segments at long gaps, aligns each segment (``alignment``), builds the stop schedule (output
+grid + update epochs + NHC slots) and hands arrays to a backend:
+
+- ``numba`` (default): ``kernels.ekf.run_ekf`` / ``kernels.ukf.run_ukf``, the whole loop
+  compiled (``cache=True``);
+- ``filterpy``: ``reference.run_ekf_filterpy`` / ``reference.run_ukf_filterpy``, the same
+  model functions, gating and bookkeeping driven by filterpy's ExtendedKalmanFilter and
+  UnscentedKalmanFilter, with the same signature and outputs.
+
+A divergence (NaN barrier, indefinite covariance, limits) raises ``DivergenceError`` or, with
+``divergence.on_divergence: flag``, ends the run there and marks it diverged.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numba as nb
+import numpy as np
+import pyarrow as pa
+from scipy.stats import chi2
+
+from ingest.config import ImuNoise
+from ingest.meta import SensorMeta
+from pipeline.errors import DivergenceError, PipelineError
+from pipeline.estimation import inputs as inp
+from pipeline.estimation.alignment import Alignment, align
+from pipeline.estimation.config import FILTER_KINDS, InsFilterParams
+from pipeline.estimation.kernels import common as cm
+from pipeline.estimation.kernels.unscented import ukf_weights
+from pipeline.estimation.models import ins, ins_errors
+from pipeline.estimation.models import measurement as me
+from pipeline.nav.earth import F64, I64
+
+log = logging.getLogger(__name__)
+
+Backend = Literal["numba", "filterpy"]
+
+
+class ReplayInputError(PipelineError):
+    """The tables cannot drive this filter (a required table or column is missing)."""
+
+
+@dataclass(frozen=True)
+class FilterSetup:
+    """Everything a backend needs besides the data: the packed settings of one filter."""
+
+    name: str
+    n: int
+    estimator: str
+    cfg: F64
+    noise: F64
+    lever_b: F64
+    nhc_sigma: F64
+    gate: F64
+    wm: F64
+    wc: F64
+    fuzzy: F64 | None = None
+
+
+@dataclass
+class RunResult:
+    """The outcome of one filter run.
+
+    Attributes:
+        filter: filter name; backend: ``numba`` or ``filterpy``; n: error-state dimension.
+        t_ns: output times (K,); x: full states (K, 18); P: error covariances (K, n, n).
+        inn_i: innovation rows (J, 5): t_ns, stream, sv code, dim, accepted.
+        inn_f: innovation rows (J, 8): nis, gate, innovation[3], innovation sigma[3].
+        events: data and filter events, by time.
+        alignments: one per aligned segment.
+        status: ``ok`` or ``diverged``; failure: what diverged, and when.
+        runtime_s: wall time of the replay (inputs, alignment, filter), without compile_s.
+        compile_s: time spent compiling the kernel or loading it from numba's cache.
+        duration_s: span of IMU time replayed.
+    """
+
+    filter: str
+    backend: str
+    n: int
+    t_ns: I64
+    x: F64
+    P: F64
+    inn_i: I64
+    inn_f: F64
+    events: list[inp.Event]
+    alignments: list[Alignment]
+    status: str = "ok"
+    failure: str | None = None
+    runtime_s: float = 0.0
+    compile_s: float = 0.0
+    duration_s: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def make_setup(name: str, params: InsFilterParams, sensors: SensorMeta | None) -> FilterSetup:
+    """Pack the settings of filter ``name`` for the kernels (sensor metadata first)."""
+    kind = FILTER_KINDS[name]
+    n = ins.N_TIGHT if kind.coupling == "tight" else ins.N_LOOSE
+    noise_model: ImuNoise = (
+        sensors.imu_noise if sensors is not None and sensors.imu_noise else params.imu_noise
+    )
+    lever = np.array(sensors.lever_arm_m if sensors is not None else (0.0, 0.0, 0.0), float)
+    st, g = params.step, params.gating
+    cfg = np.zeros(cm.CFG_DIM)
+    cfg[cm.CFG_SUBSTEPS] = st.substeps
+    cfg[cm.CFG_MAX_STEP] = st.max_rk4_step_s
+    cfg[cm.CFG_GAP_S] = st.imu_gap_s
+    cfg[cm.CFG_NHC_ON] = 1.0 if kind.nhc else 0.0
+    cfg[cm.CFG_TIMEOUT_S] = g.timeout_s
+    cfg[cm.CFG_RESET_POS] = g.reset_pos_sigma_m
+    cfg[cm.CFG_RESET_VEL] = g.reset_vel_sigma_mps
+    cfg[cm.CFG_RESET_CLK] = g.reset_clock_sigma_m
+    cfg[cm.CFG_MAX_POS_SIGMA] = params.divergence.max_pos_sigma_m
+    cfg[cm.CFG_MAX_SPEED] = params.divergence.max_speed_mps
+    wm = wc = np.ones(1)
+    if params.ukf is not None:
+        wm, wc, gamma = ukf_weights(n, params.ukf.alpha, params.ukf.beta, params.ukf.kappa)
+        cfg[cm.CFG_UKF_GAMMA] = gamma
+        cfg[cm.CFG_UKF_ALPHA] = params.ukf.alpha
+        cfg[cm.CFG_UKF_BETA] = params.ukf.beta
+        cfg[cm.CFG_UKF_KAPPA] = params.ukf.kappa
+    noise = ins_errors.noise_vector(
+        noise_model.accel_noise_mps2_rthz,
+        noise_model.gyro_noise_radps_rthz,
+        noise_model.accel_bias_rw_mps3_rthz,
+        noise_model.gyro_bias_rw_radps2_rthz,
+        params.clock.bias_psd_m2ps,
+        params.clock.drift_psd_m2ps3,
+        st.gap_accel_psd_m2ps3,
+        st.gap_gyro_psd_rad2ps,
+    )
+    nhc = params.nhc
+    nhc_sigma = np.array(
+        [nhc.sigma_lateral_mps, nhc.sigma_vertical_mps] if nhc is not None else [1.0, 1.0]
+    )
+    gate = np.array([math.inf] + [float(chi2.ppf(g.probability, d)) for d in (1, 2, 3)])
+    fz = params.fuzzy.vector() if kind.fading and params.fuzzy is not None else None
+    return FilterSetup(name, n, kind.estimator, cfg, noise, lever, nhc_sigma, gate, wm, wc, fz)
+
+
+def _table(tables: Mapping[str, pa.Table], name: str, filt: str) -> pa.Table:
+    if name not in tables or tables[name].num_rows == 0:
+        raise ReplayInputError(f"filter {filt} needs the {name!r} table, which is absent or empty")
+    return tables[name]
+
+
+KernelFn = Callable[..., int]
+
+
+def _backend(setup: FilterSetup, backend: Backend) -> KernelFn:
+    if setup.fuzzy is not None:
+        if backend == "numba":
+            from pipeline.estimation.kernels.fwekf import run_fwekf
+
+            return run_fwekf
+        from pipeline.estimation.reference_fwekf import run_fwekf_filterpy
+
+        return run_fwekf_filterpy
+    if backend == "numba":
+        from pipeline.estimation.kernels.ekf import run_ekf
+        from pipeline.estimation.kernels.ukf import run_ukf
+
+        return run_ekf if setup.estimator == "ekf" else run_ukf
+    from pipeline.estimation.reference import run_ekf_filterpy, run_ukf_filterpy
+
+    return run_ekf_filterpy if setup.estimator == "ekf" else run_ukf_filterpy
+
+
+def run_filter(
+    tables: Mapping[str, pa.Table],
+    sensors: SensorMeta | None,
+    name: str,
+    params: InsFilterParams,
+    *,
+    backend: Backend = "numba",
+    imu: inp.ImuData | None = None,
+    initial: Alignment | None = None,
+) -> RunResult:
+    """Replay filter ``name`` over canonical tables (``imu`` + ``gnss`` or ``gnss_obs``).
+
+    Args:
+        tables: canonical tables by name (``truth`` is not read here).
+        sensors: the dataset's sensor metadata (IMU noise, lever arm), or None.
+        name: a key of ``config.FILTER_KINDS``.
+        params: the filter's parameter section.
+        backend: ``numba`` or ``filterpy``.
+        imu: already cleaned IMU data (tests feeding raw arrays through ``inputs.clean_imu``);
+            default: the ``imu`` table.
+        initial: start the first segment from this state and covariance instead of aligning
+            (a known initial condition; Monte Carlo consistency tests draw it from ``P0``).
+
+    Raises:
+        ReplayInputError: a table the filter needs is missing.
+        DivergenceError: the filter diverged and ``on_divergence`` is ``raise``.
+    """
+    t_wall = time.perf_counter()
+    kind = FILTER_KINDS[name]
+    setup = make_setup(name, params, sensors)
+    imu_data = imu if imu is not None else inp.prepare_imu(_table(tables, "imu", name), params.step)
+    fixes = inp.prepare_fixes(tables["gnss"], params.gnss) if "gnss" in tables else None
+    obs = inp.prepare_obs(tables["gnss_obs"], params.gnss) if "gnss_obs" in tables else None
+    if kind.coupling == "loose" and fixes is None:
+        _table(tables, "gnss", name)
+    if kind.coupling == "tight" and obs is None:
+        _table(tables, "gnss_obs", name)
+    events = list(imu_data.events)
+    events += list(fixes.events) if fixes is not None and kind.coupling == "loose" else []
+    events += list(obs.events) if obs is not None and kind.coupling == "tight" else []
+    kernel = _backend(setup, backend)
+    parts: list[tuple[I64, F64, F64, I64, F64]] = []
+    alphas: list[F64] = []
+    alignments: list[Alignment] = []
+    status, failure = "ok", None
+    duration = 0.0
+    compile_s = 0.0
+    for k_seg, seg in enumerate(imu_data.segments):
+        al: Alignment | None = initial
+        if initial is None or k_seg > 0:
+            noise_model = _noise(setup, params, sensors)
+            al = align(imu_data, seg, fixes, obs, params.init, noise_model, setup.lever_b, setup.n)
+        if al is None:
+            events.append(inp.Event(int(imu_data.t_ns[seg[0]]), "no_alignment", "imu"))
+            continue
+        alignments.append(al)
+        out, code, t_fail, seg_events, seg_compile_s, alpha = _run_segment(
+            kernel, setup, params, kind.coupling, kind.nhc, imu_data, seg, fixes, obs, al
+        )
+        compile_s += seg_compile_s
+        parts.append(out)
+        alphas.append(alpha)
+        events += seg_events
+        duration += (out[0][-1] - al.t_ns) * 1e-9 if out[0].size else 0.0
+        if code != cm.STATUS_OK:
+            failure = f"{cm.STATUS_TEXT[code]} at t_ns={t_fail}"
+            status = "diverged"
+            if params.divergence.on_divergence == "raise":
+                raise DivergenceError(
+                    f"filter {name} ({backend}) diverged: {failure}; set "
+                    f"filters.{name}.divergence.on_divergence: flag to keep the output up to it"
+                )
+            log.warning("filter %s diverged: %s", name, failure)
+            break
+    events.sort(key=lambda e: e.t_ns)
+    return RunResult(
+        filter=name,
+        backend=backend,
+        n=setup.n,
+        t_ns=np.concatenate([p[0] for p in parts]) if parts else np.empty(0, np.int64),
+        x=np.concatenate([p[1] for p in parts]) if parts else np.empty((0, ins.FULL_DIM)),
+        P=np.concatenate([p[2] for p in parts]) if parts else np.empty((0, setup.n, setup.n)),
+        inn_i=np.concatenate([p[3] for p in parts]) if parts else np.empty((0, 5), np.int64),
+        inn_f=np.concatenate([p[4] for p in parts]) if parts else np.empty((0, 8)),
+        events=events,
+        alignments=alignments,
+        status=status,
+        failure=failure,
+        runtime_s=time.perf_counter() - t_wall - compile_s,
+        compile_s=compile_s,
+        duration_s=duration,
+        extra={"alpha": np.concatenate(alphas)} if setup.fuzzy is not None and alphas else {},
+    )
+
+
+def _typeof(value: object) -> Any:
+    return nb.typeof(value)  # type: ignore[no-untyped-call]
+
+
+def _noise(setup: FilterSetup, params: InsFilterParams, sensors: SensorMeta | None) -> ImuNoise:
+    if sensors is not None and sensors.imu_noise is not None:
+        return sensors.imu_noise
+    return params.imu_noise
+
+
+def _run_segment(
+    kernel: KernelFn,
+    setup: FilterSetup,
+    params: InsFilterParams,
+    coupling: str,
+    nhc: bool,
+    imu: inp.ImuData,
+    seg: tuple[int, int],
+    fixes: inp.FixData | None,
+    obs: inp.ObsData | None,
+    al: Alignment,
+) -> tuple[tuple[I64, F64, F64, I64, F64], int, int, list[inp.Event], float, F64]:
+    lo, hi = seg
+    imu_t = imu.t_ns[lo:hi]
+    imu_d = imu.data[lo:hi]
+    t_end = int(imu_t[-1])
+    empty_fix = np.zeros((0, me.FIX_COLS))
+    fix_arr, fix_t = empty_fix, None
+    obs_arr, obs_start, obs_t = np.zeros((0, me.OBS_COLS)), np.zeros(1, np.int64), None
+    if coupling == "loose" and fixes is not None:
+        fix_arr = np.ascontiguousarray(fixes.fix[fixes.usable])
+        fix_t = fixes.t_ns[fixes.usable]
+    if coupling == "tight" and obs is not None:
+        obs_arr, obs_start, obs_t = obs.obs, obs.start, obs.epoch_t_ns
+    nhc_rate = params.nhc.rate_hz if nhc and params.nhc is not None else None
+    stops = inp.build_schedule(al.t_ns, t_end, params.step.step_s, fix_t, obs_t, nhc_rate)
+    m_max = inp.max_rows(stops, obs_start, coupling == "tight")
+    i0, u0 = inp.interpolate_input(imu_t, imu_d, al.t_ns)
+    n = setup.n
+    n_out = int(stops[:, me.ST_OUT].sum()) + 1
+    n_inn = len(stops) * (m_max // 1)
+    n_ev = n_inn + 2 * len(stops) + 16
+    out_t = np.zeros(n_out, np.int64)
+    out_x = np.zeros((n_out, ins.FULL_DIM))
+    out_P = np.zeros((n_out, n, n))
+    inn_i = np.zeros((n_inn, cm.INN_I_COLS), np.int64)
+    inn_f = np.zeros((n_inn, cm.INN_F_COLS))
+    ev_i = np.zeros((n_ev, 4), np.int64)
+    ev_f = np.zeros(n_ev)
+    counts = np.zeros(cm.CNT_DIM, np.int64)
+    common = (
+        al.x0,
+        al.P0,
+        n,
+        al.t_ns,
+        i0,
+        u0,
+        imu_t,
+        imu_d,
+        stops,
+        fix_arr,
+        obs_arr,
+        obs_start,
+        setup.cfg,
+        setup.noise,
+        setup.lever_b,
+        setup.nhc_sigma,
+        setup.gate,
+    )
+    tail = (m_max, out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts)
+    out_alpha = np.ones(n_out)  # fwekf: the fading factor at each output row
+    if setup.fuzzy is not None:
+        from pipeline.estimation.fuzzy import RULES
+
+        args: tuple[object, ...] = (*common, setup.fuzzy, RULES, out_alpha, *tail)
+    elif setup.estimator == "ukf":
+        args = (*common, setup.wm, setup.wc, *tail)
+    else:
+        args = (*common, *tail)
+    compile_s = 0.0
+    if hasattr(kernel, "compile"):  # a numba dispatcher: compile or load it outside the timing
+        t0 = time.perf_counter()
+        kernel.compile(tuple(_typeof(a) for a in args))
+        compile_s = time.perf_counter() - t0
+    code = kernel(*args)
+    k_out, k_inn, k_ev = (int(counts[c]) for c in (cm.CNT_OUT, cm.CNT_INN, cm.CNT_EV))
+    if k_inn > n_inn or k_ev > n_ev or k_out > n_out:
+        log.warning(
+            "log capacity exceeded: %d/%d innovations, %d/%d events", k_inn, n_inn, k_ev, n_ev
+        )
+    seg_events = [
+        inp.Event(
+            int(ev_i[j, 0]),
+            cm.EVENT_NAMES.get(int(ev_i[j, 1]), str(ev_i[j, 1])),
+            me.STREAM_NAMES[ev_i[j, 2]] if ev_i[j, 2] >= 0 else "",
+            me.sv_name(int(ev_i[j, 3])),
+            float(ev_f[j]),
+        )
+        for j in range(min(k_ev, n_ev))
+    ]
+    k_out, k_inn = min(k_out, n_out), min(k_inn, n_inn)
+    out = (out_t[:k_out], out_x[:k_out], out_P[:k_out], inn_i[:k_inn], inn_f[:k_inn])
+    return out, int(code), int(counts[cm.CNT_T_FAIL]), seg_events, compile_s, out_alpha[:k_out]

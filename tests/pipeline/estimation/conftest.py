@@ -1,0 +1,74 @@
+"""Fixtures of the estimation tests: the repository's filter params and seoul_campus-type runs."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from ingest.meta import SensorMeta
+from pipeline.estimation.alignment import Alignment
+from pipeline.estimation.config import FILTER_KINDS, FiltersParams, InsFilterParams
+from pipeline.estimation.models import ins
+from pipeline.nav.rotations import euler_to_quat
+from pipeline.params import load_params
+from tests.pipeline.estimation.drive import DriveSpec, simulate
+
+REPO = Path(__file__).resolve().parents[3]
+ALL_FILTERS = tuple(FILTER_KINDS)
+
+
+@pytest.fixture(scope="session")
+def filters() -> FiltersParams:
+    """The ``filters`` section of the repository's params.yaml."""
+    return load_params(REPO / "params.yaml").filters
+
+
+def section(filters: FiltersParams, name: str, **step: Any) -> InsFilterParams:
+    """Filter ``name``'s params, optionally with changed ``step`` settings."""
+    p = filters.get(name)
+    return replace(p, step=replace(p.step, **step)) if step else p
+
+
+@pytest.fixture(scope="session")
+def drive60() -> tuple[dict[str, pa.Table], SensorMeta]:
+    """One 60 s seoul_campus-type drive (static start, turns both ways)."""
+    return simulate(DriveSpec(duration_s=60.0), seed=7)
+
+
+def truth_state(truth: pa.Table, k: int) -> np.ndarray:
+    """The full state (``models.ins`` layout) of truth row ``k``."""
+    row = {c: truth.column(c)[k].as_py() for c in truth.column_names}
+    X = np.zeros(ins.FULL_DIM)
+    X[ins.X_LAT], X[ins.X_LON] = math.radians(row["lat_deg"]), math.radians(row["lon_deg"])
+    X[ins.X_H] = row["alt_m"]
+    X[ins.X_VEL : ins.X_VEL + 3] = (row["vel_n_mps"], row["vel_e_mps"], row["vel_d_mps"])
+    X[ins.X_Q : ins.X_Q + 4] = euler_to_quat(row["roll_rad"], row["pitch_rad"], row["yaw_rad"])
+    for j, axis in enumerate("xyz"):
+        X[ins.X_BA + j] = row[f"acc_bias_{axis}_mps2"]
+        X[ins.X_BG + j] = row[f"gyro_bias_{axis}_radps"]
+    X[ins.X_CB], X[ins.X_CD] = row.get("clock_bias_m", 0.0), row.get("clock_drift_mps", 0.0)
+    return X
+
+
+def drawn_start(
+    truth: pa.Table, k: int, n: int, sigmas: np.ndarray, rng: np.random.Generator
+) -> Alignment:
+    """A start at truth row ``k`` with an error drawn from ``P0 = diag(sigmas^2)``.
+
+    Biases start at zero (their truth is itself a draw from the bias prior), everything else
+    at the truth plus the drawn error: the textbook Monte Carlo NEES set-up.
+    """
+    X = truth_state(truth, k)
+    dx = rng.normal(0.0, sigmas[:n])
+    dx[ins.E_BA : ins.E_BG + 3] = 0.0
+    x0 = X.copy()
+    ins.inject(x0, -dx, n)  # estimate = truth - error
+    x0[ins.X_BA : ins.X_BG + 3] = 0.0
+    t0 = int(truth.column("t_ns")[k].as_py())
+    return Alignment(t0, x0, np.diag(sigmas[:n] ** 2), "drawn", 0.0, 0.0)

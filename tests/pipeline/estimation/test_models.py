@@ -1,0 +1,199 @@
+"""The shared model: error injection, coordinates, Jacobians against finite differences."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+from pipeline.estimation.models import ins, ins_errors
+from pipeline.estimation.models import measurement as me
+from pipeline.estimation.outputs import euler_covariance, quat_to_euler_batch
+from pipeline.nav.earth import dcm_ecef_to_ned, geodetic_to_ecef
+from pipeline.nav.mechanization import imu_from_motion
+from pipeline.nav.rotations import euler_to_quat, quat_to_dcm, quat_to_euler
+
+N = ins.N_TIGHT
+# finite-difference steps per error state: m, m/s, rad, m/s^2, rad/s, m, m/s
+EPS = np.array([1e-2] * 3 + [1e-3] * 3 + [1e-5] * 3 + [1e-4] * 3 + [1e-6] * 3 + [1e-2, 1e-3])
+# larger steps for the dynamics: the response over milliseconds is small
+FD_EPS = np.array([1.0] * 3 + [1e-2] * 3 + [1e-4] * 3 + [1e-3] * 3 + [1e-5] * 3 + [1.0, 0.1])
+
+
+def moving_state() -> np.ndarray:
+    X = np.zeros(ins.FULL_DIM)
+    X[ins.X_LAT], X[ins.X_LON], X[ins.X_H] = math.radians(37.45), math.radians(126.95), 80.0
+    X[ins.X_VEL : ins.X_VEL + 3] = (8.0, -5.0, 0.3)
+    X[ins.X_Q : ins.X_Q + 4] = euler_to_quat(0.05, -0.03, 2.3)
+    X[ins.X_BA : ins.X_BA + 3] = (0.02, -0.01, 0.03)
+    X[ins.X_BG : ins.X_BG + 3] = (1e-3, -2e-3, 5e-4)
+    X[ins.X_CB], X[ins.X_CD] = 100.0, 2.0
+    return X
+
+
+def imu_span(X: np.ndarray, n_samples: int, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Constant IMU (turning and accelerating) that includes the state's own biases."""
+    f, w = imu_from_motion(X[:10], np.array([0.5, 0.3, -0.1]), np.array([0.01, -0.02, 0.2]))
+    t = np.arange(n_samples, dtype=np.int64) * round(dt_s * 1e9)
+    return t, np.tile(np.r_[f + X[ins.X_BA : ins.X_BA + 3], w + X[ins.X_BG : ins.X_BG + 3]],
+                      (n_samples, 1))  # fmt: skip
+
+
+def propagate(X: np.ndarray, t: np.ndarray, imu: np.ndarray, t_end: int) -> np.ndarray:
+    Y = X.copy()
+    acc = np.zeros(ins.ACC_DIM)
+    ins.propagate_span(Y, t, imu, 1, 0, imu[0], t_end, 1, 0.02, 0.05, np.empty(6),
+                       np.zeros((9, 10)), acc, False)  # fmt: skip
+    return Y
+
+
+def test_inject_and_difference_are_inverse() -> None:
+    X = moving_state()
+    dx = np.random.default_rng(1).normal(size=N) * EPS * 300
+    Xp = X.copy()
+    ins.inject(Xp, dx, N)
+    np.testing.assert_allclose(ins.difference(Xp, X, N), dx, rtol=1e-9, atol=1e-12)
+
+
+def test_ukf_coordinates_round_trip() -> None:
+    X = moving_state()
+    q_ref = euler_to_quat(0.04, -0.02, 2.25)
+    s = np.empty(N)
+    ins.from_full(X, q_ref, N, s)
+    back = np.empty(ins.FULL_DIM)
+    ins.to_full(s, q_ref, N, back)
+    np.testing.assert_allclose(back, X, atol=1e-13)
+    # the attitude coordinate is the nav-frame rotation from q_ref to q
+    assert np.linalg.norm(s[ins.E_ATT : ins.E_ATT + 3]) == pytest.approx(0.05 + 0.0, abs=0.05)
+
+
+def test_error_dynamics_match_finite_differences_of_the_mechanization() -> None:
+    """expm(F T) against central differences of the RK4 propagation over a short span."""
+    X = moving_state()
+    T = 0.002
+    t, imu = imu_span(X, 3, 0.001)
+    Y0 = propagate(X, t, imu, round(T * 1e9))
+    Phi_fd = np.empty((N, N))
+    for j in range(N):
+        d = np.zeros(N)
+        d[j] = FD_EPS[j]
+        Xp, Xm = X.copy(), X.copy()
+        ins.inject(Xp, d, N)
+        ins.inject(Xm, -d, N)
+        Yp, Ym = propagate(Xp, t, imu, round(T * 1e9)), propagate(Xm, t, imu, round(T * 1e9))
+        Phi_fd[:, j] = (ins.difference(Yp, Y0, N) - ins.difference(Ym, Y0, N)) / (2 * FD_EPS[j])
+    F = np.empty((N, N))
+    C = quat_to_dcm(X[ins.X_Q : ins.X_Q + 4])
+    ins_errors.error_jacobian(X, C @ (imu[0, :3] - X[ins.X_BA : ins.X_BA + 3]), C, N, F)
+    # positions are differences of latitudes: ~1e-9 m of rounding per column, / (2 eps)
+    tol = 1e-3 * np.abs(expm(F * T)) + 2e-9 / FD_EPS[None, :] + 1e-10
+    bad = np.abs(expm(F * T) - Phi_fd) > tol
+    assert not bad.any(), list(zip(*np.nonzero(bad), strict=True))
+
+
+def test_span_transition_matches_finite_differences_to_second_order() -> None:
+    """``transition`` over a 0.1 s span of 10 samples: Phi within the O(T^3) truncation."""
+    X = moving_state()
+    t, imu = imu_span(X, 12, 0.01)
+    acc = np.zeros(ins.ACC_DIM)
+    Y0 = X.copy()
+    ins.propagate_span(Y0, t, imu, 1, 0, imu[0], 100_000_000, 1, 0.02, 0.05, np.empty(6),
+                       np.zeros((9, 10)), acc, True)  # fmt: skip
+    Phi, Qd = np.empty((N, N)), np.empty((N, N))
+    noise = ins_errors.noise_vector(2e-3, 2e-4, 1e-4, 1e-5, 0.1, 0.01, 2.0, 0.2)
+    ins_errors.transition(Y0, acc, noise, N, Phi, Qd)
+    Phi_fd = np.empty((N, N))
+    for j in range(N):
+        d = np.zeros(N)
+        d[j] = EPS[j]
+        Xp, Xm = X.copy(), X.copy()
+        ins.inject(Xp, d, N)
+        ins.inject(Xm, -d, N)
+        Yp, Ym = propagate(Xp, t, imu, 100_000_000), propagate(Xm, t, imu, 100_000_000)
+        Phi_fd[:, j] = (ins.difference(Yp, Y0, N) - ins.difference(Ym, Y0, N)) / (2 * EPS[j])
+    # third-order terms over 0.1 s at 0.2 rad/s turn rate: ~1 % of the largest couplings
+    np.testing.assert_allclose(Phi, Phi_fd, rtol=0.02, atol=2e-3)
+    assert np.allclose(Qd, Qd.T)
+    assert np.all(np.linalg.eigvalsh(Qd) > -1e-18)
+
+
+def test_span_integrates_the_receiver_clock() -> None:
+    X = moving_state()
+    t, imu = imu_span(X, 12, 0.01)
+    Y = propagate(X, t, imu, 100_000_000)
+    assert Y[ins.X_CB] == pytest.approx(X[ins.X_CB] + 0.1 * X[ins.X_CD])
+
+
+def epoch(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray]:
+    """A fix (position + velocity), four satellites and the NHC pair at ``X``."""
+    rng = np.random.default_rng(0)
+    r0 = geodetic_to_ecef(X[0], X[1], X[2])
+    obs = np.zeros((4, me.OBS_COLS))
+    for k in range(4):
+        los_n = np.array([math.cos(0.3 + k), math.sin(0.3 + k), -0.5 - 0.1 * k])
+        los_e = dcm_ecef_to_ned(X[0], X[1]).T @ (los_n / np.linalg.norm(los_n))
+        obs[k, 0:3] = r0 + 2.2e7 * los_e
+        obs[k, 3:6] = rng.normal(size=3) * 2000
+        obs[k, me.OB_PR_OK] = obs[k, me.OB_PRR_OK] = 1.0
+        obs[k, me.OB_SV] = me.sv_code(f"G{k + 1:02d}")
+    fix = np.zeros((1, me.FIX_COLS))
+    fix[0, me.FX_POS_DIM], fix[0, me.FX_VEL_DIM] = 3, 3
+    rows = np.zeros((40, 2), np.int64)
+    blocks = np.zeros((40, 4), np.int64)
+    stop = np.array([0, 0, 0, 1, 1])
+    m, nb_ = me.epoch_layout(stop, fix, obs, np.array([0, 4]), True, rows, blocks)
+    assert (m, nb_) == (16, 7)
+    return rows, obs, m, blocks, fix
+
+
+@pytest.mark.parametrize(
+    ("kind", "tol"),
+    [("pos", 1e-6), ("vel", 2e-4), ("pr", 1e-4), ("prr", 2e-4), ("nhc", 1e-6)],
+)
+def test_measurement_jacobians_match_finite_differences(kind: str, tol: float) -> None:
+    """Rows of ``epoch_jac`` against central differences of ``epoch_h`` (the EKF's H).
+
+    The velocity and rate rows neglect the earth rate in the lever-arm term's attitude
+    dependence (|w_ie x l| ~ 1e-4 m/s), hence their looser tolerance.
+    """
+    X = moving_state()
+    rows, obs, m, _, _ = epoch(X)
+    lever, w = np.array([0.5, -0.3, -1.2]), np.array([0.05, -0.1, 0.4])
+    ref = X[:3].copy()
+    H = np.zeros((m, N))
+    me.epoch_jac(X, rows, m, obs, w, lever, N, H)
+    eps = EPS.copy()
+    eps[ins.E_ATT : ins.E_ATT + 3] = 1e-4  # 2e7 m pseudoranges: keep rounding below 1e-5
+    H_fd = np.zeros((m, N))
+    for j in range(N):
+        d = np.zeros(N)
+        d[j] = eps[j]
+        Xp, Xm = X.copy(), X.copy()
+        ins.inject(Xp, d, N)
+        ins.inject(Xm, -d, N)
+        hp, hm = np.zeros(m), np.zeros(m)
+        me.epoch_h(Xp, rows, m, obs, ref, w, lever, hp)
+        me.epoch_h(Xm, rows, m, obs, ref, w, lever, hm)
+        H_fd[:, j] = (hp - hm) / (2 * eps[j])
+    kinds = {"pos": (0, 1, 2), "vel": (3, 4, 5), "pr": (6,), "prr": (7,), "nhc": (8, 9)}
+    sel = np.isin(rows[:m, 0], kinds[kind])
+    np.testing.assert_allclose(H[sel], H_fd[sel], rtol=1e-4, atol=tol)
+
+
+def test_euler_covariance_uses_the_exact_euler_jacobian() -> None:
+    """A nav-frame rotation phi changes the Euler angles by M^-1 phi (finite differences)."""
+    rpy = np.array([[0.1, -0.2, 2.5]])
+    q = euler_to_quat(*rpy[0])
+    J = np.empty((3, 3))
+    for j in range(3):
+        phi = np.zeros(3)
+        phi[j] = 1e-7
+        X = np.zeros(ins.FULL_DIM)
+        X[ins.X_Q : ins.X_Q + 4] = q
+        ins.inject(X, np.r_[np.zeros(6), phi, np.zeros(6)], ins.N_LOOSE)
+        J[:, j] = (np.array(quat_to_euler(X[ins.X_Q : ins.X_Q + 4])) - rpy[0]) / 1e-7
+    P = np.diag([1e-4, 4e-4, 9e-4])[None]
+    np.testing.assert_allclose(euler_covariance(rpy, P)[0], J @ P[0] @ J.T, rtol=1e-5)
+    np.testing.assert_allclose(quat_to_euler_batch(q[None])[0], rpy[0], atol=1e-12)
