@@ -18,6 +18,8 @@ from typing import Literal
 
 from ingest.config import ImuNoise
 from ingest.typed import FieldError
+from pipeline.estimation.fuzzy import FuzzyParams
+from pipeline.estimation.vehicle_config import VehicleFilterParams
 
 Estimator = Literal["ekf", "ukf"]
 Coupling = Literal["loose", "tight"]
@@ -168,8 +170,10 @@ class StepParams:
     rate) and at every update epoch. Between stops the navigation state (and every UKF sigma
     point) is integrated through the IMU samples by RK4 with ``substeps`` steps per sample
     interval, more where an interval exceeds ``max_rk4_step_s``. IMU intervals longer than
-    ``imu_gap_s`` are gaps (bridged, process noise inflated by ``gap_*_sigma``); longer than
-    ``imu_gap_max_s`` they end a segment and the filter re-aligns after them.
+    ``imu_gap_s`` are gaps: bridged by interpolating the samples on both sides, with white
+    process noise of densities ``gap_*_psd`` added for the unknown manoeuvres (a 2 s gap adds
+    sqrt(2 q) to the velocity sigma); longer than ``imu_gap_max_s`` they end a segment and
+    the filter re-aligns after them.
 
     Attributes:
         step_s: covariance propagation, sigma-point redraw and output interval, s.
@@ -177,8 +181,8 @@ class StepParams:
         max_rk4_step_s: longest single RK4 step, s.
         imu_gap_s: an IMU interval longer than this is a gap, s.
         imu_gap_max_s: a gap longer than this splits the run into segments, s.
-        gap_accel_sigma_mps2: unknown acceleration during a gap, 1-sigma, m/s^2.
-        gap_gyro_sigma_radps: unknown angular rate during a gap, 1-sigma, rad/s.
+        gap_accel_psd_m2ps3: white acceleration noise density during a gap, m^2/s^3.
+        gap_gyro_psd_rad2ps: white angular-rate noise density during a gap, rad^2/s.
     """
 
     step_s: float = 0.1
@@ -186,12 +190,12 @@ class StepParams:
     max_rk4_step_s: float = 0.02
     imu_gap_s: float = 0.05
     imu_gap_max_s: float = 5.0
-    gap_accel_sigma_mps2: float = 2.0
-    gap_gyro_sigma_radps: float = 0.2
+    gap_accel_psd_m2ps3: float = 4.0
+    gap_gyro_psd_rad2ps: float = 0.05
 
     def __post_init__(self) -> None:
         _positive(self, "step_s", "max_rk4_step_s", "imu_gap_s", "imu_gap_max_s")
-        _positive(self, "gap_accel_sigma_mps2", "gap_gyro_sigma_radps", allow_zero=True)
+        _positive(self, "gap_accel_psd_m2ps3", "gap_gyro_psd_rad2ps", allow_zero=True)
         if not 1 <= self.substeps <= 100:
             raise FieldError("substeps", "must be within 1..100")
         if self.imu_gap_max_s < self.imu_gap_s:
@@ -276,6 +280,7 @@ class InsFilterParams:
         divergence: the NaN barrier.
         nhc: the non-holonomic constraint (required by and only by ``*_nhc`` filters).
         ukf: the unscented transform (required by and only by UKF filters).
+        fuzzy: the fuzzy fading factor (required by and only by ``fwekf``, paper 004).
     """
 
     imu_noise: ImuNoise
@@ -287,15 +292,17 @@ class InsFilterParams:
     divergence: DivergenceParams
     nhc: NhcParams | None = None
     ukf: UkfParams | None = None
+    fuzzy: FuzzyParams | None = None
 
 
 @dataclass(frozen=True)
 class FilterKind:
-    """What a filter name means: estimator, coupling and NHC."""
+    """What a filter name means: estimator, coupling, NHC and fuzzy fading (paper 004)."""
 
     estimator: Estimator
     coupling: Coupling
     nhc: bool
+    fading: bool = False
 
 
 FILTER_KINDS: dict[str, FilterKind] = {
@@ -305,12 +312,13 @@ FILTER_KINDS: dict[str, FilterKind] = {
     "lc_ekf_nhc": FilterKind("ekf", "loose", nhc=True),
     "tc_ekf_nhc": FilterKind("ekf", "tight", nhc=True),
     "tc_ukf_nhc": FilterKind("ukf", "tight", nhc=True),
+    "fwekf": FilterKind("ekf", "loose", nhc=False, fading=True),
 }
 
 
 @dataclass(frozen=True)
 class FiltersParams:
-    """The ``filters`` section: one sub-section per INS/GNSS filter of architecture section 3."""
+    """The ``filters`` section: one sub-section per filter of architecture section 3."""
 
     lc_ekf: InsFilterParams
     tc_ekf: InsFilterParams
@@ -318,6 +326,11 @@ class FiltersParams:
     lc_ekf_nhc: InsFilterParams
     tc_ekf_nhc: InsFilterParams
     tc_ukf_nhc: InsFilterParams
+    fwekf: InsFilterParams
+    vehicle_kinematic: VehicleFilterParams
+    vehicle_dynamic: VehicleFilterParams
+    vehicle_switched: VehicleFilterParams
+    vehicle_imm: VehicleFilterParams
 
     def __post_init__(self) -> None:
         for name, kind in FILTER_KINDS.items():
@@ -330,6 +343,8 @@ class FiltersParams:
                 raise FieldError(f"{name}.ukf", "missing: a UKF needs a ukf section")
             if kind.estimator != "ukf" and section.ukf is not None:
                 raise FieldError(f"{name}.ukf", "only UKF filters take a ukf section")
+            if kind.fading != (section.fuzzy is not None):
+                raise FieldError(f"{name}.fuzzy", "fwekf needs a fuzzy section; no other filter")
 
     def get(self, name: str) -> InsFilterParams:
         """The section of filter ``name`` (a key of ``FILTER_KINDS``)."""
@@ -337,4 +352,13 @@ class FiltersParams:
             known = ", ".join(FILTER_KINDS)
             raise KeyError(f"unknown filter {name!r} (known: {known})")
         section: InsFilterParams = getattr(self, name)
+        return section
+
+    def vehicle(self, name: str) -> VehicleFilterParams:
+        """The section of vehicle filter ``name`` (``vehicle_config.VEHICLE_FILTERS``)."""
+        from pipeline.estimation.vehicle_config import VEHICLE_FILTERS
+
+        if name not in VEHICLE_FILTERS:
+            raise KeyError(f"unknown vehicle filter {name!r} (known: {', '.join(VEHICLE_FILTERS)})")
+        section: VehicleFilterParams = getattr(self, name)
         return section
