@@ -62,7 +62,7 @@ def audit_rows(report: dict[str, Any] | None) -> list[Row]:
     return rows
 
 
-_COLUMNS = (
+COLUMNS = (
     ("table", "table"),
     ("stream", "stream"),
     ("rows", "rows"),
@@ -102,7 +102,7 @@ def audit_section(data: DatasetInputs) -> str:
     if rows:
         flags = {k: _flag(k) for k in ("gaps", "segments", "dropped_late", "duplicates", "nan")}
         flags["clock_steps"] = _flag("clock_steps")
-        parts.append(h.table(rows, _COLUMNS, cls=flags, table_id="audit-tables"))
+        parts.append(h.table(rows, COLUMNS, cls=flags, table_id="audit-tables"))
     files = (report or {}).get("files") or []
     if files:
         frows = []

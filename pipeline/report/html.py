@@ -129,10 +129,20 @@ def table(
     )
 
 
+def _cell(text: str) -> str:
+    """A CSV cell for display: decimals shown to 4 significant digits (the CSV keeps all)."""
+    if "." in text or "e" in text.lower():
+        try:
+            return fmt(float(text))
+        except ValueError:
+            return text
+    return text
+
+
 def text_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    """A table of text cells as read from a CSV file."""
+    """A table of text cells as read from a CSV file (numbers rounded for display)."""
     head = "".join(f"<th>{esc(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{esc(c)}</td>" for c in r) + "</tr>" for r in rows)
+    body = "".join("<tr>" + "".join(f"<td>{esc(_cell(c))}</td>" for c in r) + "</tr>" for r in rows)
     return (
         f'<div class="scroll"><table class="data"><thead><tr>{head}</tr></thead>'
         f"<tbody>{body}</tbody></table></div>"

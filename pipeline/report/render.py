@@ -198,4 +198,4 @@ _WIN_COLS = ("filter", "scenario", "window", "start_s", "duration_s", "sats", "e
              "err_max_m", "err_mean_m", "err_rms_m", "drift_pct_distance", "reconverge_s",
              "reference")  # fmt: skip
 _DRIFT = ("filter", "outage_s", "windows", "err_end_mean_m", "ci_low_m", "ci_high_m")
-_AUDIT = tuple(k for k, _ in audit._COLUMNS)
+_AUDIT = tuple(k for k, _ in audit.COLUMNS)
