@@ -6,6 +6,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.navreplay-installed
 export DVC_NO_ANALYTICS := 1
+# dvc.yaml stages call the `navreplay` console script: run them with the venv first on PATH.
+export PATH := $(CURDIR)/$(VENV)/bin:$(PATH)
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
 .PHONY: demo test venv lint typecheck pytest bench clean-venv

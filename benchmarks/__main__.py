@@ -1,13 +1,51 @@
-"""`python -m benchmarks [NAME ...]`: run the benchmarks and print their ratio tables."""
+"""`python -m benchmarks [NAME ...] [options]`: run the benchmarks and print their ratio tables.
+
+Every module ``benchmarks/bench_<name>.py`` is a benchmark. It defines ``run(options)`` that
+prints its own side-by-side table (ours vs the reference, in the same run), and optionally
+``add_arguments(parser)`` for its options (prefix them with the benchmark name). Adding a
+benchmark is adding a module; nothing here changes.
+"""
 
 from __future__ import annotations
 
+import argparse
+import importlib
+import pkgutil
 import sys
+import time
+from types import ModuleType
+
+import benchmarks
+
+
+def discover() -> dict[str, ModuleType]:
+    """Benchmark name -> module, for every ``bench_*.py`` in this package."""
+    found: dict[str, ModuleType] = {}
+    for info in pkgutil.iter_modules(benchmarks.__path__):
+        if info.name.startswith("bench_"):
+            found[info.name.removeprefix("bench_")] = importlib.import_module(
+                f"benchmarks.{info.name}"
+            )
+    return dict(sorted(found.items()))
 
 
 def main(argv: list[str]) -> int:
-    print("no benchmarks are registered yet", file=sys.stderr)
-    return 1 if argv else 0
+    registry = discover()
+    parser = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__)
+    parser.add_argument("names", nargs="*", metavar="NAME", help=f"of: {', '.join(registry)}")
+    for module in registry.values():
+        if hasattr(module, "add_arguments"):
+            module.add_arguments(parser)
+    options = parser.parse_args(argv)
+    unknown = [n for n in options.names if n not in registry]
+    if unknown:
+        parser.error(f"unknown benchmark(s) {', '.join(unknown)}; known: {', '.join(registry)}")
+    for name in options.names or list(registry):
+        start = time.perf_counter()
+        print(f"== {name}: {(registry[name].__doc__ or '').strip().splitlines()[0]}", flush=True)
+        registry[name].run(options)
+        print(f"   ({time.perf_counter() - start:.1f} s)\n", flush=True)
+    return 0
 
 
 if __name__ == "__main__":

@@ -36,6 +36,7 @@ from ingest.schema import TableName
 from ingest.typed import FieldError, KeyPathError, load_dataclass
 
 _ID_RE = re.compile(r"^[a-z][a-z0-9_]*$")
+_DATE_RE = re.compile(r"^(19[89]\d|2\d{3})-(0[1-9]|1[0-2])-(0[1-9]|[12]\d|3[01])$")
 _TABLES = tuple(t.value for t in TableName)
 
 Vec3 = tuple[float, float, float]
@@ -104,11 +105,17 @@ class GnssConfig:
         topic: topic or message to read (default: automatic).
         instance: receiver instance (default: the first).
         lever_arm_m: antenna position relative to the IMU in body FRD, m.
+        latlon_units: ``rad`` scales lat/lon to degrees (recorded in provenance); ``deg``
+            accepts degrees as they are; ``auto`` refuses values that look like radians.
+        velocity_topic: stream with the receiver's velocity, joined to the fixes by time
+            (default: automatic, e.g. a TwistWithCovarianceStamped on ``/gps/vel``).
     """
 
     topic: str | None = None
     instance: int | None = None
     lever_arm_m: Vec3 = (0.0, 0.0, 0.0)
+    velocity_topic: str | None = None
+    latlon_units: Literal["auto", "deg", "rad"] = "auto"
 
 
 @dataclass(frozen=True)
@@ -147,6 +154,13 @@ class CsvSource:
         scale: canonical column name -> factor applied after reading (e.g. 0.0174533 deg->rad).
         delimiter: field separator; ``whitespace`` for runs of blanks.
         comment: lines starting with this are skipped.
+        time_base: the clock of ``time_column`` (``ingest.timebase``): ``gps`` (since
+            1980-01-06), ``utc`` (POSIX) or ``recorder`` (boot time, unknown epoch); default:
+            the dataset's ``time_base`` (``recorder`` when that is ``auto``).
+        frame: axis convention of vector columns: ``frd``/``ned`` (canonical) or
+            ``flu``/``enu`` (converted at ingest).
+        constants: canonical column name -> value for every row, for columns the file lacks
+            (e.g. ``fix_type: 3`` for a receiver log that only holds 3-D fixes).
     """
 
     path: str
@@ -157,6 +171,9 @@ class CsvSource:
     scale: dict[str, float] = field(default_factory=dict)
     delimiter: str = ","
     comment: str = "#"
+    time_base: Literal["gps", "utc", "recorder"] | None = None
+    frame: Literal["frd", "flu"] = "frd"
+    constants: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.table not in _TABLES:
@@ -165,13 +182,19 @@ class CsvSource:
 
 @dataclass(frozen=True)
 class DatasetConfig:
-    """A whole ``dataset.yaml``."""
+    """A whole ``dataset.yaml``.
+
+    Attributes:
+        utc_date: UTC date (``YYYY-MM-DD``) of the first record, for logs whose records carry
+            only a time of day (NMEA without a valid RMC or ZDA sentence).
+    """
 
     id: str
     description: str = ""
     logs: tuple[str, ...] = ()
     required: tuple[str, ...] = ()
     time_base: Literal["auto", "gps", "utc", "recorder"] = "auto"
+    utc_date: str | None = None
     imu: ImuConfig = field(default_factory=ImuConfig)
     gnss: GnssConfig = field(default_factory=GnssConfig)
     gnss_obs: StreamConfig = field(default_factory=StreamConfig)
@@ -186,6 +209,8 @@ class DatasetConfig:
         for i, name in enumerate(self.required):
             if name not in _TABLES:
                 raise FieldError(f"required[{i}]", f"{name!r} is not one of {', '.join(_TABLES)}")
+        if self.utc_date is not None and not _DATE_RE.match(self.utc_date):
+            raise FieldError("utc_date", f"{self.utc_date!r} is not a date YYYY-MM-DD")
 
 
 def parse_dataset_config(data: object, *, source: str | Path | None = None) -> DatasetConfig:
@@ -216,3 +241,14 @@ def log_paths(config: DatasetConfig, descriptor: str | Path) -> list[Path]:
     """The descriptor's ``logs`` as paths, resolved against the descriptor's folder."""
     base = Path(descriptor).parent
     return [p if (p := Path(s)).is_absolute() else base / p for s in config.logs]
+
+
+def input_paths(config: DatasetConfig, descriptor: str | Path) -> list[Path]:
+    """Every file the descriptor names: its ``logs``, then the ``csv:`` files not among them."""
+    base = Path(descriptor).parent
+    paths = log_paths(config, descriptor)
+    for src in config.csv:
+        p = Path(src.path) if Path(src.path).is_absolute() else base / src.path
+        if p not in paths:
+            paths.append(p)
+    return paths

@@ -228,12 +228,21 @@ class TableWriter:
     def _open(self, schema: pa.Schema) -> None:
         assert self._tmp is not None
         self._schema = schema.with_metadata({PROVENANCE_KEY: self.provenance.to_json().encode()})
+        # Dictionary encoding only where values repeat (satellite ids, fix types): on float
+        # sensor columns it never pays and its hash tables cost ~10x the block in memory.
+        dictionary = [
+            f.name
+            for f in schema
+            if pa.types.is_string(f.type)
+            or (pa.types.is_integer(f.type) and f.type.bit_width <= 16)
+        ]
         self._writer = pq.ParquetWriter(
             self._tmp,
             self._schema,
             compression="zstd",
             write_page_checksum=True,
             write_statistics=True,
+            use_dictionary=dictionary,
         )
 
     def __exit__(

@@ -17,6 +17,10 @@ import yaml
 from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
 from pipeline.estimation.config import FiltersParams
+from pipeline.synth.car import CarSpeedRampParams
+from pipeline.synth.fwekf import FwekfReferenceParams
+from pipeline.synth.seoul_params import SeoulCampusParams
+from pipeline.synth.tractor import TractorStraightParams
 
 DEFAULT_PARAMS = Path("params.yaml")
 _ID_RE = re.compile(r"^[a-z][a-z0-9_]*$")
@@ -27,6 +31,10 @@ class SynthParams:
     """``synth``: the synthesized datasets. ``seed`` seeds every random draw."""
 
     seed: int
+    seoul_campus: SeoulCampusParams
+    tractor_straight: TractorStraightParams
+    fwekf_reference: FwekfReferenceParams
+    car_speed_ramp: CarSpeedRampParams
 
 
 @dataclass(frozen=True)

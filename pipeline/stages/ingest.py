@@ -15,31 +15,22 @@ examples:
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
-from pipeline.errors import NotBuiltError
+from ingest.detect import Format
+from pipeline.errors import ParamsError
 
-FORMATS = (
-    "auto",
-    "mcap",
-    "ros1bag",
-    "ros2bag",
-    "tlog",
-    "dataflash",
-    "ulog",
-    "rinex",
-    "gnsslogger",
-    "csv",
-)
+FORMATS = ("auto", *(f.value for f in Format))
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "logs",
-        nargs="+",
+        nargs="*",
         type=Path,
         metavar="LOG",
-        help="log file(s) or rosbag2 directory of one drive",
+        help="log file(s) or rosbag2 directory of one drive (default: the descriptor's logs)",
     )
     parser.add_argument(
         "--out",
@@ -74,13 +65,95 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--params",
         type=Path,
-        default=Path("params.yaml"),
-        help="parameter file (default: params.yaml)",
+        default=None,
+        help="parameter file (default: params.yaml if present, else built-in defaults)",
     )
 
 
 def run(args: argparse.Namespace) -> int:
-    raise NotBuiltError(
-        "log readers arrive with the issue 'Ingest real logs into canonical "
-        "tables'; nothing was written"
+    from ingest.api import IngestOptions, ingest, inspect
+    from ingest.config import input_paths, load_dataset_config
+    from pipeline.params import load_params
+
+    config = None
+    config_dir = None
+    logs = list(args.logs)
+    if args.dataset_config is not None:
+        config = load_dataset_config(args.dataset_config)
+        config_dir = args.dataset_config.parent
+        if not logs:
+            logs = input_paths(config, args.dataset_config)
+    if not logs:
+        raise ParamsError("logs", "no LOG given and no dataset descriptor listing `logs`")
+    params_path = args.params if args.params is not None else Path("params.yaml")
+    strict, window_s, gap_factor, params = args.strict, 1.0, 5.0, None
+    if params_path.is_file() or args.params is not None:
+        loaded = load_params(params_path)
+        strict = strict or loaded.ingest.strict
+        window_s, gap_factor = loaded.ingest.reorder_window_s, loaded.ingest.gap_factor
+        params = {"reorder_window_s": window_s, "gap_factor": gap_factor}
+    options = IngestOptions(
+        strict=strict,
+        reorder_window_s=window_s,
+        gap_factor=gap_factor,
+        format=None if args.format == "auto" else Format(args.format),
     )
+    if args.list:
+        inventories, plans = inspect(logs, config=config, config_dir=config_dir, options=options)
+        sys.stdout.write(format_listing(inventories, plans, config.required if config else ()))
+        return 0
+    if args.out is None:
+        raise ParamsError("--out", "an output directory is required unless --list is given")
+    result = ingest(
+        logs, args.out, config=config, config_dir=config_dir, options=options, params=params
+    )
+    sys.stdout.write(format_summary(result.report, result.out_dir))
+    return 0
+
+
+def format_listing(
+    inventories: list,  # type: ignore[type-arg]
+    plans: dict,  # type: ignore[type-arg]
+    required: tuple[str, ...] = (),
+) -> str:
+    """The --list text: every stream of every file, and which one each table gets."""
+    lines: list[str] = []
+    chosen = {q.key for p in plans.values() for q in (p, p.companion) if q is not None}
+    streams = [s for inv in inventories for s in inv.streams]
+    kw = max((len(s.key) for s in streams), default=0)
+    tw = max((len(s.msgtype) for s in streams), default=0)
+    for inv in inventories:
+        lines.append(f"{inv.path}  [{inv.format.value}]")
+        for s in inv.streams:
+            rate = f"{s.rate_hz:8.2f} Hz" if s.rate_hz is not None else "       ? Hz"
+            count = f"{s.count:>9}" if s.count is not None else "        ?"
+            table = s.table.value if s.table is not None else "-"
+            mark = "*" if s.key in chosen else " "
+            lines.append(
+                f" {mark} {s.key:<{kw}}  {s.msgtype:<{tw}} {count} {rate}  -> {table:<9} {s.detail}"
+            )
+        lines.extend(f"   note: {n}" for n in inv.notes)
+    lines.append("selection:")
+    for t, p in plans.items():
+        lines.append(f"  {t.value:<9} <- {p.key} ({p.reason})")
+        if p.companion is not None:
+            lines.append(f"  {'':<9}  + {p.companion.key} ({p.companion.reason}, joined by time)")
+    chosen_tables = {t.value for t in plans}
+    for name in required:
+        if name not in chosen_tables:
+            lines.append(f"  {name:<9} <- nothing: REQUIRED by the descriptor, ingest will fail")
+    return "\n".join(lines) + "\n"
+
+
+def format_summary(report: dict, out_dir: Path) -> str:  # type: ignore[type-arg]
+    """A few lines after a successful ingest: tables, rows, completeness, warnings."""
+    lines = [f"wrote {out_dir}"]
+    for name, t in report["tables"].items():
+        st = t["stats"]
+        rate = f"{st['rate_hz']:.2f} Hz" if st.get("rate_hz") else "-"
+        lines.append(f"  {name:<9} {st['rows']:>9} rows  {rate:>11}  from {t['stream']}")
+    for f in report["files"]:
+        lines.append(f"  {f['name']}: {', '.join(f['completeness'])}")
+        lines.extend(f"    {d['reason']}" for d in f["defects"])
+    lines.extend(f"  warning: {w}" for w in report["warnings"])
+    return "\n".join(lines) + "\n"

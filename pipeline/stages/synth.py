@@ -11,9 +11,14 @@ examples:
 from __future__ import annotations
 
 import argparse
+import importlib
+import logging
+import time
 from pathlib import Path
 
-from pipeline.errors import NotBuiltError
+from pipeline.errors import NotBuiltError, PipelineError
+
+log = logging.getLogger(__name__)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -34,6 +39,24 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    raise NotBuiltError(
-        "synthesizers arrive with the issue 'Synthesized datasets'; nothing was written"
+    from pipeline.params import load_params
+    from pipeline.synth import DATASETS
+
+    params = load_params(args.params)
+    name = str(args.name)
+    if name not in DATASETS:
+        known = ", ".join(sorted(DATASETS))
+        if name in params.datasets:
+            raise NotBuiltError(f"no synthesizer for {name!r} yet (built: {known})")
+        raise PipelineError(f"unknown synthesized dataset {name!r} (known: {known})")
+    start = time.perf_counter()
+    module = importlib.import_module(DATASETS[name])
+    paths = module.write_dataset(name, params.synth, Path(args.out))
+    log.info(
+        "%s written to %s in %.1f s: %s",
+        name,
+        args.out,
+        time.perf_counter() - start,
+        ", ".join(p.name for p in paths),
     )
+    return 0

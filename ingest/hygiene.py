@@ -1,0 +1,338 @@
+"""Stream hygiene: every stream leaves ingest strictly increasing in ``t_ns``, in bounded memory.
+
+``StreamCleaner`` takes a stream's batches in arrival (file) order and emits rows that are
+sorted and unique, applying the catalogue's rules (bad-inputs.md, cases 29-32):
+
+- out of order within the reorder window W (``ingest.reorder_window_s``): re-sorted and
+  counted (case 29);
+- older than W behind the newest sample seen: dropped and counted, with offsets (case 29);
+- a run of at least ``STEP_MIN_SAMPLES`` consecutive samples all older than the window and
+  increasing among themselves is a clock step backwards (case 31), not late samples: the
+  stream is split there and the later segment re-based to continue one nominal period after
+  the last sample before the step, so no negative or zero dt ever leaves ingest; the step,
+  its size and the shift are reported;
+- equal timestamps (case 30): exact duplicates (every column equal, NaN == NaN) are dropped
+  and counted; non-identical ones keep the first arrival and are counted as conflicting;
+  a table keyed by time and a second column (``gnss_obs``: ``t_ns``, ``sv``) sorts by both
+  and only rows equal in both are duplicates (one epoch holds many satellites);
+- ``--strict`` turns re-sorting, late drops, conflicting duplicates and clock steps into a
+  ``CorruptLogError`` naming the file and the record offset.
+
+Rows are held only while they may still be preceded by a late arrival (W of data), plus the
+output block being assembled, so memory does not grow with the log.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from ingest.errors import CorruptLogError
+
+STEP_MIN_SAMPLES = 3
+_MAX_LISTED = 10
+
+I64Array = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+@dataclass
+class Rows:
+    """Rows of one stream: canonical columns, per-row record offsets and null masks."""
+
+    columns: dict[str, np.ndarray]
+    offsets: I64Array
+    nulls: dict[str, BoolArray] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.offsets)
+
+    @property
+    def t(self) -> I64Array:
+        return self.columns["t_ns"]
+
+    def take(self, idx: npt.NDArray[Any]) -> Rows:
+        return Rows(
+            {k: v[idx] for k, v in self.columns.items()},
+            self.offsets[idx],
+            {k: v[idx] for k, v in self.nulls.items()},
+        )
+
+    @staticmethod
+    def concat(parts: list[Rows]) -> Rows:
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return Rows({}, np.empty(0, np.int64))
+        if len(parts) == 1:
+            return parts[0]
+        names = list(parts[0].columns)
+        null_names = sorted({k for p in parts for k in p.nulls})
+        return Rows(
+            {k: np.concatenate([p.columns[k] for p in parts]) for k in names},
+            np.concatenate([p.offsets for p in parts]),
+            {
+                k: np.concatenate([p.nulls.get(k, np.zeros(len(p), bool)) for p in parts])
+                for k in null_names
+            },
+        )
+
+
+@dataclass
+class TimeStep:
+    """A clock step backwards, handled by re-basing what follows."""
+
+    offset: int
+    t_ns: int
+    step_ns: int
+    shift_ns: int
+    path: str
+
+
+@dataclass
+class HygieneCounts:
+    rows_in: int = 0
+    rows_out: int = 0
+    reordered: int = 0
+    dropped_late: int = 0
+    dropped_late_offsets: list[int] = field(default_factory=list)
+    duplicates_exact: int = 0
+    duplicates_conflicting: int = 0
+    duplicates_conflicting_offsets: list[int] = field(default_factory=list)
+    steps: list[TimeStep] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "rows_in": self.rows_in,
+            "rows_out": self.rows_out,
+            "reordered": self.reordered,
+            "dropped_late": self.dropped_late,
+            "dropped_late_offsets": self.dropped_late_offsets,
+            "duplicates_exact_dropped": self.duplicates_exact,
+            "duplicates_conflicting_dropped": self.duplicates_conflicting,
+            "duplicates_conflicting_offsets": self.duplicates_conflicting_offsets,
+            "clock_steps_backward": [
+                {
+                    "file": s.path,
+                    "offset": s.offset,
+                    "t_ns": s.t_ns,
+                    "step_s": s.step_ns * 1e-9,
+                    "shift_applied_s": s.shift_ns * 1e-9,
+                }
+                for s in self.steps
+            ],
+        }
+
+
+class StreamCleaner:
+    """Re-sort, de-duplicate and de-step one stream (see the module docstring).
+
+    Args:
+        name: stream name for messages.
+        window_ns: the reorder window W in ns.
+        strict: raise on any defect that changes or drops data.
+        secondary: a column completing the row key (``sv`` for ``gnss_obs``), or None.
+    """
+
+    def __init__(
+        self, name: str, window_ns: int, *, strict: bool, secondary: str | None = None
+    ) -> None:
+        self.name = name
+        self.secondary = secondary
+        self.window_ns = window_ns
+        self.strict = strict
+        self.counts = HygieneCounts()
+        self._pending = Rows({}, np.empty(0, np.int64))
+        self._held = Rows({}, np.empty(0, np.int64))  # undecided late run at a batch end
+        self._held_path = ""
+        self._max_t: int | None = None
+        self._shift = 0
+        self._nominal_ns: int | None = None
+        self._last_out: Rows | None = None
+
+    def push(self, rows: Rows, path: Path) -> Rows:
+        """Add a batch (arrival order); return the rows that are now final (sorted, unique)."""
+        self.counts.rows_in += len(rows)
+        if not len(rows):
+            return self._empty_like(rows)
+        rows.columns["t_ns"] = rows.t + self._shift
+        if len(self._held):
+            rows = Rows.concat([self._held, rows])
+            self._held = Rows({}, np.empty(0, np.int64))
+        if self._nominal_ns is None:
+            self._nominal_ns = _median_dt(rows.t)
+        accepted = self._admit(rows, path, final=False)
+        return self._emit(accepted, path, final=False)
+
+    def finish(self, path: Path) -> Rows:
+        """Flush everything held; returns the last final rows."""
+        accepted = self._admit(self._held, path, final=True) if len(self._held) else None
+        self._held = Rows({}, np.empty(0, np.int64))
+        return self._emit(accepted, path, final=True)
+
+    # ------------------------------------------------------------------------------ admission
+    def _admit(self, rows: Rows, path: Path, *, final: bool) -> Rows | None:
+        """Drop late samples, re-base clock steps; return admitted rows (arrival order).
+
+        One running maximum serves every decision of a pass (late samples never raise it);
+        only a clock step, which shifts what follows, starts a new pass. Cost: O(n) per batch
+        plus O(1) per late sample.
+        """
+        keep = np.ones(len(rows), bool)
+        start = 0
+        while start < len(rows):
+            seg = rows.t[start:]
+            prev = self._max_t if self._max_t is not None else int(seg[0])
+            before = np.maximum.accumulate(np.concatenate([[prev], seg]))[:-1]
+            late = seg < before - self.window_ns
+            stop, step_at = len(rows), None
+            skip_until = 0
+            for i in (np.flatnonzero(late) + start).tolist():
+                if i < skip_until:
+                    continue
+                run = _late_run(rows.t, i, int(before[i - start]) - self.window_ns)
+                if run >= STEP_MIN_SAMPLES:
+                    stop = step_at = i
+                    break
+                if i + run == len(rows) and not final:  # undecided: wait for the next batch
+                    self._held = rows.take(np.arange(i, len(rows)))
+                    keep[i:] = False
+                    stop = i
+                    break
+                self._drop_late(rows, np.arange(i, i + run), path)
+                keep[i : i + run] = False
+                skip_until = i + run
+            n = stop - start
+            ooo = np.flatnonzero((seg[:n] < before[:n]) & ~late[:n])
+            if ooo.size:
+                self._strict(path, int(rows.offsets[start + int(ooo[0])]), "re-sorted")
+                self.counts.reordered += int(ooo.size)
+            if n:
+                self._max_t = max(int(before[n - 1]), int(seg[n - 1]))
+            if step_at is None:
+                break
+            self._step(rows, step_at, path)
+            start = step_at
+        if not keep.any():
+            return None
+        return rows.take(np.flatnonzero(keep)) if not keep.all() else rows
+
+    def _step(self, rows: Rows, i: int, path: Path) -> None:
+        assert self._max_t is not None
+        t_at = int(rows.t[i])
+        nominal = self._nominal_ns or 1
+        shift = self._max_t + nominal - t_at
+        if self.strict:
+            raise CorruptLogError(
+                f"stream {self.name}: time goes backwards by {(self._max_t - t_at) * 1e-9:.3f} s",
+                path=path,
+                offset=int(rows.offsets[i]),
+                hint="--strict refuses clock steps; without it the stream is split and the "
+                "later segment re-based",
+            )
+        rows.columns["t_ns"] = np.concatenate([rows.t[:i], rows.t[i:] + shift])
+        self._shift += shift
+        self.counts.steps.append(
+            TimeStep(
+                int(rows.offsets[i]),
+                t_at - self._shift + shift,
+                t_at - self._max_t,
+                shift,
+                str(path),
+            )
+        )
+
+    def _drop_late(self, rows: Rows, idx: I64Array, path: Path) -> None:
+        self._strict(path, int(rows.offsets[idx[0]]), "older than the reorder window")
+        self.counts.dropped_late += len(idx)
+        room = _MAX_LISTED - len(self.counts.dropped_late_offsets)
+        self.counts.dropped_late_offsets.extend(rows.offsets[idx[:room]].tolist())
+
+    # -------------------------------------------------------------------------------- emission
+    def _emit(self, accepted: Rows | None, path: Path, *, final: bool) -> Rows:
+        parts = [self._pending] + ([accepted] if accepted is not None else [])
+        pool = Rows.concat(parts)
+        if not len(pool):
+            return pool
+        if self.secondary is None:
+            order = np.argsort(pool.t, kind="stable")
+        else:
+            order = np.lexsort((pool.columns[self.secondary], pool.t))
+        pool = pool.take(order)
+        pool = self._dedupe(pool, path)
+        if final or self._max_t is None:
+            cut = len(pool)
+        else:
+            cut = int(np.searchsorted(pool.t, self._max_t - self.window_ns, side="left"))
+        out = pool.take(np.arange(cut))
+        self._pending = pool.take(np.arange(cut, len(pool)))
+        self.counts.rows_out += len(out)
+        return out
+
+    def _dedupe(self, pool: Rows, path: Path) -> Rows:
+        t = pool.t
+        equal = t[1:] == t[:-1]
+        if self.secondary is not None:
+            key = pool.columns[self.secondary]
+            equal &= key[1:] == key[:-1]
+        same = np.flatnonzero(equal) + 1
+        if not same.size:
+            return pool
+        starts = np.ones(len(t), bool)
+        starts[same] = False
+        group_first = np.maximum.accumulate(np.where(starts, np.arange(len(t)), 0))
+        rows = same
+        firsts = group_first[rows]
+        exact = np.ones(len(rows), bool)
+        for col in pool.columns.values():
+            a, b = col[rows], col[firsts]
+            eq = a == b
+            if col.dtype.kind == "f":
+                eq |= np.isnan(a) & np.isnan(b)
+            exact &= eq
+        for mask in pool.nulls.values():
+            exact &= mask[rows] == mask[firsts]
+        conflicting = rows[~exact]
+        self.counts.duplicates_exact += int(exact.sum())
+        if conflicting.size:
+            self._strict(path, int(pool.offsets[conflicting[0]]), "duplicate time, other values")
+            self.counts.duplicates_conflicting += int(conflicting.size)
+            room = _MAX_LISTED - len(self.counts.duplicates_conflicting_offsets)
+            self.counts.duplicates_conflicting_offsets.extend(
+                pool.offsets[conflicting[:room]].tolist()
+            )
+        keep = np.ones(len(t), bool)
+        keep[rows] = False
+        return pool.take(np.flatnonzero(keep))
+
+    def _strict(self, path: Path, offset: int, what: str) -> None:
+        if self.strict:
+            raise CorruptLogError(
+                f"stream {self.name}: a sample {what}",
+                path=path,
+                offset=int(offset),
+                hint="--strict refuses reordered, late or conflicting samples",
+            )
+
+    @staticmethod
+    def _empty_like(rows: Rows) -> Rows:
+        return rows.take(np.arange(0))
+
+
+def _late_run(t: I64Array, i: int, threshold: int) -> int:
+    """Length of the run from ``i`` of samples below ``threshold`` that do not decrease,
+    counted up to ``STEP_MIN_SAMPLES`` (all that the step decision needs)."""
+    end = min(len(t), i + STEP_MIN_SAMPLES)
+    j = i + 1
+    while j < end and t[j] < threshold and t[j] >= t[j - 1]:
+        j += 1
+    return j - i
+
+
+def _median_dt(t: I64Array) -> int | None:
+    dt = np.diff(np.sort(t))
+    dt = dt[dt > 0]
+    return int(np.median(dt)) if dt.size else None

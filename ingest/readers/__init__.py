@@ -1,0 +1,45 @@
+"""Log readers, one module per format, looked up by detected format.
+
+``REGISTRY`` maps a ``Format`` to ``"module:Class"`` of its ``LogReader`` subclass (imported
+lazily, so ``navreplay --help`` does not load numba or rosbags). A later reader adds one line
+here and its module; see ``ingest.readers.base`` for the contract.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from ingest.detect import Detected, Format
+from ingest.errors import UnsupportedFormatError
+from ingest.readers.base import LogReader, ReadContext
+
+REGISTRY: dict[Format, str] = {
+    Format.MCAP: "ingest.readers.mcap:McapReader",
+    Format.ROS1BAG: "ingest.readers.ros1bag:Ros1BagReader",
+    Format.ROS2BAG: "ingest.readers.ros2bag:Ros2BagReader",
+    Format.CSV: "ingest.readers.csv:CsvReader",
+    Format.COMMA2K19: "ingest.readers.comma2k19:Comma2k19Reader",
+    Format.LIBRSF: "ingest.readers.librsf:LibrsfReader",
+    Format.NMEA: "ingest.readers.nmea:NmeaReader",
+}
+
+
+def open_reader(detected: Detected, ctx: ReadContext) -> LogReader:
+    """The reader for ``detected.format``.
+
+    Raises:
+        UnsupportedFormatError: the format is recognised but no reader is registered yet.
+    """
+    target = REGISTRY.get(detected.format)
+    if target is None:
+        known = ", ".join(f.value for f in REGISTRY)
+        raise UnsupportedFormatError(
+            f"recognised as {detected.format.value}, which this version cannot convert yet "
+            f"(readers: {known})",
+            path=detected.path,
+        )
+    module, _, name = target.partition(":")
+    cls = getattr(importlib.import_module(module), name)
+    reader = cls(detected, ctx)
+    assert isinstance(reader, LogReader)
+    return reader

@@ -1,0 +1,316 @@
+"""The reader interface every log format implements, and the damage log they share.
+
+Developer note: adding a reader
+-------------------------------
+1. ``ingest/detect.py`` already recognises the format (add a recogniser there if not).
+2. Write ``ingest/readers/<format>.py`` with a subclass of ``LogReader``:
+
+   - ``__init__(detected, ctx)``: open nothing expensive; keep ``ctx.damage`` for defects.
+   - ``inventory()``: every stream the log holds (``StreamInfo``: key, message type, count,
+     first/last time, the canonical table it can feed, time base, frame). ``--list`` prints
+     it and the automatic selection (``ingest.select``) chooses from it. Keys are stable
+     strings: a ROS topic, ``RAW_IMU[1]`` for a MAVLink instance, ``sensor_combined[0]``.
+   - ``read(selections)``: yield ``Batch`` objects for the selected streams, in file order,
+     each a chunk of column arrays already named and scaled as the canonical table wants
+     (``t_ns`` int64 on the stream's declared time base, SI units, angles in rad,
+     lat/lon in deg), in the stream's declared axis ``frame`` (``frd``/``ned`` or ``flu``/
+     ``enu``; ``ingest.frames`` converts). Decode straight into arrays: per-message Python
+     costs more than the arithmetic (see ``ingest.readers.rosmsg`` for the pattern).
+     ``offsets`` gives, per row, the byte offset of its record (or of its enclosing chunk).
+   - Damage: call ``ctx.damage.record(Defect(...))`` for every recoverable defect
+     (truncation, corrupt chunk, garbage bytes, a trailing partial record); it raises
+     ``CorruptLogError`` itself under ``--strict``. Raise ``CorruptLogError`` /
+     ``UnsupportedFormatError`` with path and offset for what cannot be recovered, chained
+     ``from err``. Never modify the input file.
+3. Add one line to ``REGISTRY`` in ``ingest/readers/__init__.py``.
+
+Everything downstream (time-base reconciliation, reorder/duplicate/gap hygiene, frame and
+mounting conversion, plausibility checks, the audit, atomic Parquet output) is shared and
+needs nothing from the reader beyond this interface.
+
+Time bases: a stream on GPS time declares ``TimeBase.GPS`` (week/TOW already combined with
+``ingest.timebase.gps_week_tow_to_ns``); a recorder clock that the reader can pair with GPS
+time (MAVLink ``time_boot_ms`` with ``GPS_RAW_INT.time_usec``) should be converted by the
+reader and declared GPS; a clock it cannot pair stays ``RECORDER``.
+"""
+
+from __future__ import annotations
+
+import logging
+from abc import ABC, abstractmethod
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Self
+
+import numpy as np
+import numpy.typing as npt
+
+from ingest.config import DatasetConfig
+from ingest.detect import Detected, Format
+from ingest.errors import CorruptLogError
+from ingest.schema import TableName
+from ingest.timebase import TimeBase
+
+log = logging.getLogger(__name__)
+
+
+class Completeness(StrEnum):
+    """How complete the data read from one file is (a file can carry several flags)."""
+
+    COMPLETE = "complete"
+    TRUNCATED = "truncated"
+    CORRUPT_CHUNKS_SKIPPED = "corrupt_chunks_skipped"
+    CORRUPT_TAIL = "corrupt_tail"
+    NO_SUMMARY = "no_summary"
+    UNINDEXED = "unindexed"
+    BAD_DATA_SKIPPED = "bad_data_skipped"
+    PARTIAL_RECORD_DROPPED = "partial_record_dropped"
+    MISSING_METADATA = "missing_metadata"
+    CHECKSUM_MISMATCH = "checksum_mismatch"
+
+
+@dataclass(frozen=True)
+class Defect:
+    """One recoverable defect of a file and what was done about it.
+
+    Attributes:
+        kind: the completeness flag it sets.
+        reason: what is wrong and what was done, in one sentence.
+        offset: byte offset in the file where it starts (or the line number for text files).
+        messages_lost: messages known to be lost (from an index), if known.
+        messages_recovered: messages recovered despite it (e.g. from a partial chunk).
+        time_range_ns: log-time range affected, if known.
+        bytes_skipped: bytes skipped, if known.
+    """
+
+    kind: Completeness
+    reason: str
+    offset: int | None = None
+    messages_lost: int | None = None
+    messages_recovered: int | None = None
+    time_range_ns: tuple[int, int] | None = None
+    bytes_skipped: int | None = None
+
+
+class DamageLog:
+    """Collects the defects of one file; under ``strict`` the first defect is an error.
+
+    Args:
+        path: the file the defects belong to.
+        strict: raise ``CorruptLogError`` on ``record`` instead of collecting.
+    """
+
+    def __init__(self, path: Path, *, strict: bool) -> None:
+        self.path = path
+        self.strict = strict
+        self.offsets_are_lines = False  # text readers report line numbers as offsets
+        self.defects: list[Defect] = []
+        self.notes: list[str] = []
+        self.counters: dict[str, int] = {}
+
+    def record(self, defect: Defect) -> None:
+        """Record a recoverable defect; raises ``CorruptLogError`` under ``--strict``."""
+        if self.strict:
+            line = self.offsets_are_lines and defect.offset is not None
+            raise CorruptLogError(
+                f"{defect.reason} [{defect.kind.value}]",
+                path=self.path,
+                offset=None if line else defect.offset,
+                record=f"line {defect.offset}" if line else None,
+                hint="--strict refuses recoverable defects; rerun without it to salvage what "
+                "is readable",
+            )
+        log.warning("%s: %s", self.path, defect.reason)
+        self.defects.append(defect)
+
+    def note(self, text: str) -> None:
+        """A remark for the report that is not a defect (e.g. "CRC checks on")."""
+        self.notes.append(text)
+
+    def count(self, name: str, n: int = 1) -> None:
+        self.counters[name] = self.counters.get(name, 0) + n
+
+    @property
+    def completeness(self) -> list[str]:
+        kinds = sorted({d.kind.value for d in self.defects})
+        return kinds or [Completeness.COMPLETE.value]
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "completeness": self.completeness,
+            "defects": [
+                {k: v for k, v in d.__dict__.items() if v is not None} for d in self.defects
+            ],
+            "notes": list(self.notes),
+            "counters": dict(sorted(self.counters.items())),
+        }
+
+
+@dataclass(frozen=True)
+class ReadContext:
+    """What a reader gets besides the file.
+
+    Attributes:
+        damage: where the reader records defects (strict handling included).
+        batch_rows: a hint for the number of rows per ``Batch``.
+        config: the dataset descriptor, if one was given (CSV column mappings, instances).
+        config_dir: the descriptor's folder (its relative paths resolve against it).
+    """
+
+    damage: DamageLog
+    batch_rows: int = 65_536
+    config: DatasetConfig | None = None
+    config_dir: Path | None = None
+
+
+@dataclass(frozen=True)
+class StreamInfo:
+    """One stream of a log, as ``--list`` shows it and selection sees it.
+
+    Attributes:
+        key: stable identifier within the file (ROS topic, ``RAW_IMU[1]``, ...).
+        msgtype: message type (``sensor_msgs/msg/Imu``, ``RAW_IMU``, ...).
+        count: number of messages, None if unknown without a full pass.
+        start_ns: first log time, None if unknown.
+        end_ns: last log time, None if unknown.
+        table: the canonical table this stream can feed, None if none.
+        time_base: the clock ``t_ns`` of this stream's batches counts on.
+        frame: axis convention of the batches' vector columns: ``frd``/``ned`` (canonical) or
+            ``flu``/``enu`` (REP-103); None when the stream has no vectors.
+        instance: sensor instance number for multi-instance sensors, else None.
+        detail: anything else worth showing (encoding, frame_id ...).
+        role: ``""`` for a stream that can be a table's primary stream; ``velocity`` for a
+            GNSS velocity stream joined to the fixes by time (``ingest.sink``).
+    """
+
+    key: str
+    msgtype: str
+    count: int | None
+    start_ns: int | None
+    end_ns: int | None
+    table: TableName | None
+    time_base: TimeBase
+    frame: str | None = None
+    instance: int | None = None
+    detail: str = ""
+    role: str = ""
+
+    @property
+    def rate_hz(self) -> float | None:
+        """Mean message rate over the stream's span, None if not computable."""
+        if self.count is None or self.start_ns is None or self.end_ns is None:
+            return None
+        span = self.end_ns - self.start_ns
+        if self.count < 2 or span <= 0:
+            return None
+        return (self.count - 1) / (span * 1e-9)
+
+
+@dataclass(frozen=True)
+class Inventory:
+    """Everything a log holds, before conversion."""
+
+    path: Path
+    format: Format
+    streams: tuple[StreamInfo, ...]
+    notes: tuple[str, ...] = ()
+
+    def stream(self, key: str) -> StreamInfo | None:
+        for s in self.streams:
+            if s.key == key:
+                return s
+        return None
+
+    @property
+    def start_ns(self) -> int | None:
+        starts = [s.start_ns for s in self.streams if s.start_ns is not None]
+        return min(starts) if starts else None
+
+
+@dataclass(frozen=True)
+class Selection:
+    """A stream chosen to fill a canonical table."""
+
+    key: str
+    table: TableName
+
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+@dataclass
+class Batch:
+    """A chunk of rows of one stream, decoded into canonical columns.
+
+    Attributes:
+        key: the stream's key.
+        table: the canonical table the rows go to.
+        columns: canonical column name -> 1-D array, ``t_ns`` (int64) included; floats in SI
+            units, vectors in the stream's declared frame.
+        offsets: int64 byte offset per row of its record (or enclosing chunk) in the file.
+        nulls: column -> boolean mask of rows where the value is "not provided" (null).
+        frame: axis convention of this batch's vectors when it overrides the stream's
+            (e.g. a ROS ``frame_id`` ending in ``_ned``).
+        counters: per-stream counts for the report (``time_from_log``, ``no_fix`` ...).
+        info: per-stream facts for the report (``frame_id`` ...); the first value is kept.
+    """
+
+    key: str
+    table: TableName
+    columns: dict[str, np.ndarray]
+    offsets: IntArray
+    nulls: dict[str, npt.NDArray[np.bool_]] = field(default_factory=dict)
+    frame: str | None = None
+    counters: dict[str, int] = field(default_factory=dict)
+    info: dict[str, str] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.offsets)
+
+
+class LogReader(ABC):
+    """Base class of every format reader (see the module docstring for the contract).
+
+    Args:
+        detected: what ``ingest.detect.detect`` found (format, files, variant).
+        ctx: the damage log and read options.
+    """
+
+    format: Format
+
+    def __init__(self, detected: Detected, ctx: ReadContext) -> None:
+        self.detected = detected
+        self.path = detected.path
+        self.ctx = ctx
+        self.damage = ctx.damage
+
+    @abstractmethod
+    def inventory(self) -> Inventory:
+        """Every stream in the log (may scan the file when it has no index)."""
+
+    @abstractmethod
+    def read(self, selections: Sequence[Selection]) -> Iterator[Batch]:
+        """Yield batches of the selected streams, in file order."""
+
+    def close(self) -> None:  # noqa: B027 (optional hook: most readers hold nothing open)
+        """Release open files; called once after reading."""
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def selected_tables(selections: Sequence[Selection]) -> Mapping[str, TableName]:
+    """Stream key -> table for a selection list (the form readers look keys up in)."""
+    return {s.key: s.table for s in selections}

@@ -1,0 +1,1 @@
+"""Vehicle controllers used in closed-loop simulation (paper 000's LQR line tracker)."""

@@ -1,0 +1,48 @@
+"""Synthesized datasets with exact truth, written as the log files users' own tools open.
+
+``DATASETS`` maps each synthesized dataset id to the module that makes it; such a module has
+``write_dataset(name, synth_params, out_dir) -> list[Path]`` (the files it wrote). A
+synthesizer's pure entry point returns a ``SynthResult``: the canonical tables (validated) and
+the sensor metadata that matches what was simulated.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+    from ingest.gnss import Ephemeris
+    from ingest.meta import SensorMeta
+
+# dataset id -> module with write_dataset(name, synth_params, out_dir)
+DATASETS: dict[str, str] = {
+    "seoul_campus_cw": "pipeline.synth.seoul_campus",
+    "seoul_campus_ccw": "pipeline.synth.seoul_campus",
+    "tractor_straight": "pipeline.synth.tractor_log",
+    "fwekf_reference": "pipeline.synth.fwekf",
+    "fwekf_reference_noise_free": "pipeline.synth.fwekf",
+    "car_speed_ramp": "pipeline.synth.car",
+}
+
+
+@dataclass(frozen=True)
+class SynthResult:
+    """What a synthesizer produced.
+
+    Attributes:
+        tables: canonical tables by name (``imu``, ``gnss``, ``gnss_obs``, ``truth`` ...), each
+            validated against ``ingest.schema``; t_ns on ``time_base``.
+        sensors: sensor metadata matching the simulation (IMU noise model, lever arm).
+        ephemeris: the broadcast ephemerides the satellites used, if any.
+        time_base: the clock of ``t_ns`` (``gps``: ns since 1980-01-06, no leap seconds;
+            ``utc``: UNIX time, as the MAVLink and CSV datasets use).
+    """
+
+    tables: Mapping[str, pa.Table]
+    sensors: SensorMeta
+    ephemeris: Ephemeris | None = None
+    time_base: str = "gps"
