@@ -20,7 +20,8 @@ from pipeline.params import load_params
 from pipeline.synth.seoul_campus import simulate
 
 REPO = Path(__file__).resolve().parents[3]
-ALL_FILTERS = tuple(FILTER_KINDS)
+# The six filters of paper 001 (issue 5); fwekf (paper 004) has its own tests.
+ALL_FILTERS = tuple(name for name, kind in FILTER_KINDS.items() if not kind.fading)
 
 
 @pytest.fixture(scope="session")
