@@ -1,6 +1,7 @@
 """Fixtures of the report tests: a small dataset with real runs, written by the real writers.
 
-``dataset_dir`` holds a 60 s seoul_campus-type drive (``tests.pipeline.estimation.drive``) as
+``dataset_dir`` holds a 70 s seoul_campus drive (the synthesizer with params.yaml's settings,
+10 s at rest first) as
 canonical tables with meta.json and an ingest report, and two real ``lc_ekf`` runs written by
 ``navreplay run``'s own code: ``nominal`` and ``outage_15s`` (the fixes inside one 15 s window
 removed before the replay, and the window recorded in metrics.json as the scenario engine
@@ -10,6 +11,7 @@ records it).
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +23,7 @@ from ingest.schema import TableName
 from ingest.tables import Provenance, write_table
 from pipeline.estimation.run import run_tables, write_run
 from pipeline.params import load_params
-from tests.pipeline.estimation.drive import DriveSpec, simulate
+from pipeline.synth.seoul_campus import simulate
 
 REPO = Path(__file__).resolve().parents[3]
 OUTAGE_START_S = 30.0
@@ -76,8 +78,10 @@ def write_tables(directory: Path, tables: dict[str, pa.Table], sensors: object) 
 def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """``<root>/tables``, ``<root>/runs/lc_ekf/{nominal,outage_15s}`` (see the module doc)."""
     root = tmp_path_factory.mktemp("tiny")
-    tables, sensors = simulate(DriveSpec(duration_s=60.0), seed=11)
-    tables = {k: v for k, v in tables.items() if k in ("imu", "gnss", "truth")}
+    sp = load_params(REPO / "params.yaml").synth.seoul_campus
+    result = simulate(replace(sp, duration_s=70.0, stationary_s=10.0), seed=11, variant="cw")
+    tables = {k: v for k, v in result.tables.items() if k in ("imu", "gnss", "truth")}
+    sensors = result.sensors
     write_tables(root / "tables", tables, sensors)
     params = load_params(REPO / "params.yaml").filters.get("lc_ekf")
     out = run_tables(root / "tables", "lc_ekf", params, "numba")
