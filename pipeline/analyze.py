@@ -155,7 +155,6 @@ def analyze(
     report = render_dataset(
         data,
         out_dir / "report",
-        reduction_pairs=params.report.reduction_pairs,
         params_hash=params_hash(to_plain(params)),
         title=f"navreplay analysis: {', '.join(p.name for p in logs)}",
     )

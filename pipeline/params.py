@@ -99,19 +99,13 @@ class ReportParams:
 
     Attributes:
         figure_dpi: resolution of raster (PNG) figures; the report's own figures are SVG.
-        reduction_pairs: (baseline, candidate) filter pairs of the per-satellite-count
-            reduction table (paper 001, Table 1), e.g. ``[tc_ukf, tc_ukf_nhc]``.
     """
 
     figure_dpi: int
-    reduction_pairs: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
         if not 50 <= self.figure_dpi <= 600:
             raise FieldError("figure_dpi", "must be within 50..600")
-        for i, (a, b) in enumerate(self.reduction_pairs):
-            if a == b:
-                raise FieldError(f"reduction_pairs[{i}]", f"compares {a} with itself")
 
 
 @dataclass(frozen=True)

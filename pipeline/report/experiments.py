@@ -18,9 +18,13 @@ A directory without ``section.json`` is rendered generically: each ``*.csv`` a t
 first ``sections.MAX_TABLE_ROWS`` rows on the page; every CSV is copied whole to
 ``reports/<id>/tables/experiments/<name>/``) and each ``*.svg``/``*.png`` (also in a
 ``figures/`` sub-directory; an SVG wins over a PNG of the same name) a figure, in name order.
-A file named ``sat_reduction.csv`` (columns of ``SAT_REDUCTION_COLUMNS``) is the dataset's
-per-satellite-count reduction table (issue 6) wherever it lies; the report shows it in its own
-section and copies it to ``reports/<id>/tables/``.
+Each ``*.md`` file of a generic directory is a note rendered as prose (``markdown``).
+
+The outages stage (issue 6) writes the dataset-level results the report shows in their own
+sections rather than as an experiment (``find_outage_results``), wherever they lie under
+``experiments/``: ``sat_reduction.csv`` (columns of ``SAT_REDUCTION_COLUMNS``; paper 001's
+Table 1) with ``sat_reduction_vs_paper.md`` beside it (why ours differs from the paper), and
+``drift_vs_length.csv``. The report copies both CSVs to ``reports/<id>/tables/``.
 
 Unknown keys, a referenced file that does not exist, a CSV that does not parse or a figure
 of another type are ``ReportInputError``s naming the file.
@@ -38,6 +42,9 @@ from pipeline.report.inputs import ReportInputError, read_json
 
 SECTION_NAME = "section.json"
 SAT_REDUCTION_NAME = "sat_reduction.csv"
+SAT_REDUCTION_NOTE = "sat_reduction_vs_paper.md"
+DRIFT_NAME = "drift_vs_length.csv"
+_OUTAGE_FILES = {SAT_REDUCTION_NAME, SAT_REDUCTION_NOTE, DRIFT_NAME}
 SAT_REDUCTION_COLUMNS = (
     "pair",
     "sats",
@@ -86,6 +93,17 @@ class Experiment:
     claims: list[dict[str, str]] = field(default_factory=list)
     tables: list[CsvTable] = field(default_factory=list)
     figures: list[Figure] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)  # Markdown texts
+
+
+@dataclass(frozen=True)
+class OutageResults:
+    """The outages stage's tables: the reduction per satellite count (with its explanatory
+    note against the paper, Markdown) and drift against outage length; each may be absent."""
+
+    sat_reduction: CsvTable | None = None
+    sat_reduction_note: str | None = None
+    drift: CsvTable | None = None
 
 
 def read_csv(path: Path, title: str = "", caption: str = "") -> CsvTable:
@@ -186,8 +204,11 @@ def _figure_files(directory: Path) -> list[Path]:
 def _generic(directory: Path, name: str) -> Experiment:
     exp = Experiment(name, directory, name.replace("_", " "))
     for p in sorted(directory.glob("*.csv")):
-        if p.name != SAT_REDUCTION_NAME:
+        if p.name not in _OUTAGE_FILES:
             exp.tables.append(read_csv(p))
+    for p in sorted(directory.glob("*.md")):
+        if p.name not in _OUTAGE_FILES:
+            exp.notes.append(_read_text(p))
     exp.figures = [read_figure(p) for p in _figure_files(directory)]
     return exp
 
@@ -215,18 +236,38 @@ def load_experiments(experiments_dir: Path) -> list[Experiment]:
         out.append(_load(experiments_dir, "results"))
     for d in sorted(p for p in experiments_dir.iterdir() if p.is_dir() and p.name != "figures"):
         out.append(_load(d, d.name))
-    out = [e for e in out if e.tables or e.figures or e.summary or e.claims]
+    out = [e for e in out if e.tables or e.figures or e.summary or e.claims or e.notes]
     return sorted(out, key=lambda e: (e.order, e.name))
 
 
-def find_sat_reduction(experiments_dir: Path | None) -> CsvTable | None:
-    """The dataset's ``sat_reduction.csv`` (first in path order), checked for its columns."""
+def _read_text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except OSError as err:
+        raise ReportInputError(path, f"cannot read: {err.strerror}") from err
+    except UnicodeDecodeError as err:
+        raise ReportInputError(path, f"not UTF-8 text: {err}") from err
+
+
+def _first(experiments_dir: Path, name: str) -> Path | None:
+    return next(iter(sorted(experiments_dir.rglob(name))), None)
+
+
+def find_outage_results(experiments_dir: Path | None) -> OutageResults:
+    """The outages stage's tables under ``experiments_dir`` (first in path order of each),
+    the reduction table checked for its columns (see the module docstring)."""
     if experiments_dir is None or not experiments_dir.is_dir():
-        return None
-    for path in sorted(experiments_dir.rglob(SAT_REDUCTION_NAME)):
-        table = read_csv(path, "Error reduction per satellite count")
-        missing = [c for c in SAT_REDUCTION_COLUMNS if c not in table.header]
+        return OutageResults()
+    red = note = drift = None
+    path = _first(experiments_dir, SAT_REDUCTION_NAME)
+    if path is not None:
+        red = read_csv(path, "Error reduction per satellite count")
+        missing = [c for c in SAT_REDUCTION_COLUMNS if c not in red.header]
         if missing:
             raise ReportInputError(path, f"missing columns {missing}")
-        return table
-    return None
+        if (path.parent / SAT_REDUCTION_NOTE).is_file():
+            note = _read_text(path.parent / SAT_REDUCTION_NOTE)
+    path = _first(experiments_dir, DRIFT_NAME)
+    if path is not None:
+        drift = read_csv(path, "Drift against outage length")
+    return OutageResults(red, note, drift)

@@ -23,7 +23,8 @@ header { background: #12263a; color: #fff; padding: 14px 28px; }
 header h1 { margin: 0; font-size: 22px; }
 header p { margin: 4px 0 0; color: #c9d6e3; }
 nav { position: sticky; top: 0; background: #fff; border-bottom: 1px solid var(--line);
-      padding: 6px 28px; z-index: 5; font-size: 13px; }
+      padding: 6px 28px; z-index: 5; font-size: 13px; display: flex; flex-wrap: wrap;
+      row-gap: 2px; }
 nav a { margin-right: 14px; color: var(--accent); text-decoration: none; white-space: nowrap; }
 main { padding: 8px 28px 40px; max-width: 1280px; }
 section { margin-top: 26px; }

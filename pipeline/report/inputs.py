@@ -10,8 +10,9 @@
   come from ``metrics.json`` (``filter``, ``scenario``). A run whose ``status`` is
   ``skipped`` carries a ``reason`` and no tables. Outage windows come from
   ``metrics.json`` ``outage_windows`` (or ``windows``): a list of objects with either
-  ``start_ns``/``end_ns`` or ``start_s``/``duration_s`` (seconds after the run's first
-  estimate), plus the per-window metrics of architecture section 5 when present (``sats``,
+  ``start_ns`` (or ``start_t_ns``, as the scenario engine writes it) and ``end_ns`` or
+  ``duration_s``, or ``start_s``/``duration_s`` (seconds after the run's first estimate),
+  plus the per-window metrics of architecture section 5 when present (``sats``,
   ``err_end_m``, ``err_max_m``, ``err_rms_m``, ``drift_pct_distance``, ``reconverge_s``);
 - every experiment under ``experiments_dir`` (``pipeline.report.experiments``).
 
@@ -152,8 +153,9 @@ def _windows(path: Path, metrics: dict[str, Any], t_first_ns: int | None) -> lis
         if not isinstance(w, dict):
             raise ReportInputError(path, f"outage_windows[{i}]: expected an object")
         try:
-            if "start_ns" in w:
-                a = int(w["start_ns"])
+            start_key = next((k for k in ("start_ns", "start_t_ns") if k in w), None)
+            if start_key is not None:
+                a = int(w[start_key])
                 b = int(w["end_ns"]) if "end_ns" in w else a + round(float(w["duration_s"]) * 1e9)
             else:
                 if t_first_ns is None:

@@ -5,9 +5,10 @@
 - ``index.html``: self-contained (inline CSS, script and SVG; no network);
 - ``tables/runs.csv|json`` (one row per run: accuracy, consistency, gating, cost),
   ``tables/nis.csv`` (per run and stream), ``tables/windows.csv`` (per outage window),
-  ``tables/drift_by_length.csv``, ``tables/sat_reduction.csv|json`` (when the dataset has
-  runs with k-satellite windows, or an experiment wrote one), ``tables/audit.csv`` and
-  ``tables/provenance.json``;
+  ``tables/drift_by_length.csv`` (complete outages of the runs by length), the outages
+  stage's ``tables/sat_reduction.csv`` and ``tables/drift_vs_length.csv`` copied as they are
+  (when ``experiments_dir`` holds them: ``experiments.find_outage_results``),
+  ``tables/audit.csv`` and ``tables/provenance.json``;
 - ``metrics.json``: the headline numbers per filter and scenario, flat, for
   ``dvc metrics show/diff``.
 
@@ -30,7 +31,7 @@ from ingest.tables import git_commit, package_version
 from pipeline.report import audit, figures, figures_outage, sections
 from pipeline.report import html as h
 from pipeline.report import tables as tb
-from pipeline.report.experiments import find_sat_reduction
+from pipeline.report.experiments import DRIFT_NAME, SAT_REDUCTION_NAME, find_outage_results
 from pipeline.report.inputs import DatasetInputs
 
 log = logging.getLogger(__name__)
@@ -63,7 +64,6 @@ def render_dataset(
     out_dir: Path,
     *,
     experiments_dir: Path | None = None,
-    reduction_pairs: Sequence[tuple[str, str]] = (),
     params_hash: str | None = None,
     title: str | None = None,
 ) -> RenderedReport:
@@ -73,8 +73,7 @@ def render_dataset(
     nis_rows = tb.nis_rows(data.runs)
     win_rows = tb.window_rows(data, series)
     drift_rows = tb.drift_by_length(win_rows)
-    external = find_sat_reduction(experiments_dir)
-    red_rows = tb.sat_reduction(win_rows, reduction_pairs) if external is None else []
+    outage = find_outage_results(experiments_dir)
     audit_rows = audit.audit_rows(data.ingest_report)
     filters = data.filters()
     figs: list[str] = []
@@ -148,11 +147,15 @@ def render_dataset(
         ("metrics", "Accuracy and consistency", sections.metrics(run_rows)),
         ("errors", "Errors against time", "".join(err_parts)),
         ("outages", "Outage windows", sections.windows(win_rows) + "".join(outage_parts)),
-        ("drift", "Drift against outage length", sections.drift(drift_rows) + drift_fig),
+        (
+            "drift",
+            "Drift against outage length",
+            sections.drift(drift_rows, outage.drift) + drift_fig,
+        ),
         (
             "satellites",
             "Error reduction per satellite count",
-            sections.sat_reduction(red_rows, external),
+            sections.sat_reduction(outage.sat_reduction, outage.sat_reduction_note),
         ),
         ("nis", "Innovation consistency (NIS)", sections.nis(nis_rows) + "".join(nis_parts)),
         ("biases", "Bias estimates", bias_fig),
@@ -180,11 +183,9 @@ def render_dataset(
                 dest = tmp / "tables" / "experiments" / e.name / t.path.name
                 dest.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(t.path, dest)
-        if external is not None:
-            shutil.copyfile(external.path, tmp / "tables" / "sat_reduction.csv")
-        elif red_rows:
-            atomic_write_text(tmp / "tables" / "sat_reduction.csv", tb.to_csv(red_rows))
-            atomic_write_json(tmp / "tables" / "sat_reduction.json", red_rows)
+        for table, name in ((outage.sat_reduction, SAT_REDUCTION_NAME), (outage.drift, DRIFT_NAME)):
+            if table is not None:
+                shutil.copyfile(table.path, tmp / "tables" / name)
         atomic_write_json(tmp / "metrics.json", _headline(run_rows))
     log.info("wrote %s (%d figures)", out_dir / "index.html", len(figs))
     return RenderedReport(

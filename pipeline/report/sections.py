@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from typing import Any
 
 from pipeline.report import html as h
+from pipeline.report import markdown
 from pipeline.report.experiments import CsvTable, Experiment
 from pipeline.report.inputs import DatasetInputs
-from pipeline.report.tables import PAPER_REDUCTION_PCT
+from pipeline.report.tables import PAPER_PAIR, PAPER_REDUCTION_PCT
 
 Row = dict[str, Any]
 MAX_TABLE_ROWS = 40  # rows of an experiment's CSV shown on the page
@@ -97,37 +99,55 @@ def windows(rows: Sequence[Row]) -> str:
     )
 
 
-def drift(rows: Sequence[Row]) -> str:
+def _pair(text: str) -> tuple[str, ...]:
+    """``"tc_ukf -> tc_ukf_nhc"`` (any separator) as its filter names."""
+    return tuple(re.findall(r"[A-Za-z0-9_]+", text))
+
+
+def sat_reduction(table: CsvTable | None, note_md: str | None) -> str:
+    """Paper 001 Table 1 as the outages stage computed it, beside the paper's values.
+
+    A ``paper %`` column joins the paper's numbers (its pair, ``PAPER_PAIR``, by ``sats``);
+    ``note_md`` is the stage's explanation of the differences (Markdown).
+    """
+    if table is None:
+        return ""
+    i_pair, i_sats = table.header.index("pair"), table.header.index("sats")
+    rows = []
+    for r in table.rows:
+        paper = ""
+        if _pair(r[i_pair]) == PAPER_PAIR and r[i_sats].strip().isdigit():
+            paper = str(PAPER_REDUCTION_PCT.get(int(r[i_sats]), ""))
+        rows.append((*r, paper))
+    src = f"{table.path.parent.name}/{table.path.name}"
+    parts = [
+        h.text_table((*table.header, "paper %"), rows),
+        h.para(
+            "Reduction = 100 (e_A - e_B) / e_A, e the mean 3-D error over the outage windows "
+            f"with k satellites, with its 95 % interval (from the outages stage's {src}). "
+            f"Paper 001, Table 1 gives {' -> '.join(PAPER_PAIR)} only.",
+            "note",
+        ),
+    ]
+    if note_md:
+        parts.append(f'<div class="md">{markdown.to_html(note_md)}</div>')
+    return "".join(parts)
+
+
+def drift(rows: Sequence[Row], table: CsvTable | None) -> str:
+    """Drift against outage length: the outages stage's table when there is one, else the
+    complete outages of the runs grouped by length (``tables.drift_by_length``)."""
+    if table is not None:
+        src = f"{table.path.parent.name}/{table.path.name}"
+        return h.text_table(table.header, table.rows[:MAX_TABLE_ROWS]) + h.para(
+            f"From the outages stage's {src}.", "note"
+        )
     if not rows:
         return ""
     cols = (("filter", "filter"), ("outage_s", "outage s"), ("windows", "windows"),
             ("err_end_mean_m", "mean err at end m"), ("ci_low_m", "95 % low"),
             ("ci_high_m", "95 % high"))  # fmt: skip
     return h.table(rows, cols)
-
-
-def sat_reduction(rows: Sequence[Row], external: CsvTable | None) -> str:
-    """Paper 001 Table 1: from an experiment's ``sat_reduction.csv``, else from the windows."""
-    paper = ", ".join(f"{k}: {v} %" for k, v in PAPER_REDUCTION_PCT.items())
-    note = h.para(f"Paper 001, Table 1 (60 s outages, tc_ukf -> tc_ukf_nhc): {paper}.", "note")
-    if external is not None:
-        src = h.para(f"From {external.path.parent.name}/{external.path.name}.", "note")
-        return h.text_table(external.header, external.rows) + src + note
-    if not rows:
-        return ""
-    cols = (("pair", "pair A -> B"), ("sats", "satellites"), ("windows", "windows"),
-            ("err_baseline_m", "e_A m"), ("err_candidate_m", "e_B m"),
-            ("reduction_pct", "reduction %"), ("ci_low_pct", "95 % low"),
-            ("ci_high_pct", "95 % high"), ("paper_pct", "paper %"))  # fmt: skip
-    return (
-        h.table(rows, cols)
-        + h.para(
-            "Reduction = 100 (e_A - e_B) / e_A with e the mean 3-D error over the outage "
-            "windows with k satellites; interval: paired bootstrap over windows.",
-            "note",
-        )
-        + note
-    )
 
 
 def nis(rows: Sequence[Row]) -> str:
@@ -189,6 +209,7 @@ def experiments(exps: Sequence[Experiment], figs: list[str]) -> str:
     for e in exps:
         parts.append(f'<h3 id="exp-{h.esc(e.name)}">{h.esc(e.title)}</h3>')
         parts += [h.para(p) for p in e.summary]
+        parts += [f'<div class="md">{markdown.to_html(n)}</div>' for n in e.notes]
         if e.claims:
             parts.append(
                 h.table(

@@ -9,10 +9,8 @@
   ``reconverge_s`` come from the window's metrics when the run wrote them.
 - ``drift_by_length``: complete outages (0 satellites) grouped per filter and window length:
   mean error at the window's end with a 95 % t-interval across windows.
-- ``sat_reduction``: paper 001's Table 1 from the runs' windows: for a pair (A -> B) and k
-  satellites, ``100 (e_A - e_B) / e_A`` with e the mean 3-D error over the windows with k
-  satellites, and a 95 % interval from a paired bootstrap over windows (seeded, so the same
-  inputs give the same bounds).
+The per-satellite-count reduction (paper 001, Table 1) is the outages stage's table
+(``experiments.find_outage_results``); this module does not recompute it.
 """
 
 from __future__ import annotations
@@ -31,8 +29,7 @@ from pipeline.report.series import ErrorSeries, error_series, local_en
 
 Row = dict[str, Any]
 PAPER_REDUCTION_PCT = {0: 54.4, 1: 53.2, 2: 52.6, 3: 52.4, 4: 22.6}  # paper 001, Table 1
-BOOTSTRAP = 2000
-BOOTSTRAP_SEED = 20261122
+PAPER_PAIR = ("tc_ukf", "tc_ukf_nhc")  # its baseline -> candidate
 
 
 def _num(v: Any) -> float | int | None:
@@ -208,47 +205,6 @@ def drift_by_length(windows: Sequence[Row]) -> list[Row]:
                 "ci_high_m": hi,
             }
         )
-    return rows
-
-
-def sat_reduction(windows: Sequence[Row], pairs: Sequence[tuple[str, str]]) -> list[Row]:
-    """Paper 001 Table 1 from the windows (see the module docstring); pairs A -> B."""
-    by: dict[tuple[str, int], dict[tuple[str, int], float]] = {}
-    for w in windows:
-        if w["sats"] is None or w["err_mean_m"] is None:
-            continue
-        k = int(w["sats"])
-        by.setdefault((str(w["filter"]), k), {})[(str(w["scenario"]), int(w["window"]))] = float(
-            w["err_mean_m"]
-        )
-    rng = np.random.default_rng(BOOTSTRAP_SEED)
-    rows = []
-    for a, b in pairs:
-        for k in range(5):
-            ea, eb = by.get((a, k), {}), by.get((b, k), {})
-            keys = sorted(set(ea) & set(eb))
-            if not keys:
-                continue
-            xa = np.array([ea[q] for q in keys])
-            xb = np.array([eb[q] for q in keys])
-            red = 100.0 * (xa.mean() - xb.mean()) / xa.mean()
-            idx = rng.integers(0, len(keys), size=(BOOTSTRAP, len(keys)))
-            ma, mb = xa[idx].mean(axis=1), xb[idx].mean(axis=1)
-            boot = 100.0 * (ma - mb) / ma
-            lo, hi = np.percentile(boot, [2.5, 97.5]) if len(keys) > 1 else (math.nan,) * 2
-            rows.append(
-                {
-                    "pair": f"{a} -> {b}",
-                    "sats": k,
-                    "windows": len(keys),
-                    "err_baseline_m": float(xa.mean()),
-                    "err_candidate_m": float(xb.mean()),
-                    "reduction_pct": float(red),
-                    "ci_low_pct": float(lo),
-                    "ci_high_pct": float(hi),
-                    "paper_pct": PAPER_REDUCTION_PCT[k],
-                }
-            )
     return rows
 
 

@@ -67,7 +67,6 @@ def run(args: argparse.Namespace) -> int:
         data,
         args.out,
         experiments_dir=experiments,
-        reduction_pairs=params.report.reduction_pairs,
         params_hash=params_hash(to_plain(params)),
     )
     print(f"{args.dataset}: {out.index} ({len(out.runs)} runs, {out.figures} figures)")

@@ -15,7 +15,6 @@ from pipeline.report.inputs import ReportInputError, load_dataset
 from pipeline.report.render import render_dataset
 from pipeline.report.summary import paired, ranking, render_summary
 from pipeline.report.svg import decimate_minmax
-from pipeline.report.tables import sat_reduction
 
 
 def test_decimation_keeps_every_extreme_and_the_order() -> None:
@@ -33,31 +32,57 @@ def test_decimation_keeps_every_extreme_and_the_order() -> None:
     assert decimate_minmax(short, short)[0] is short
 
 
-def _windows(filt: str, errs: list[float], k: int) -> list[dict[str, object]]:
-    return [
-        {
-            "filter": filt,
-            "scenario": f"sats_{k}",
-            "window": i,
-            "sats": float(k),
-            "err_mean_m": e,
-        }
-        for i, e in enumerate(errs)
-    ]
+_REDUCTION = """pair,sats,err_baseline_m,err_candidate_m,reduction_pct,ci_low_pct,ci_high_pct
+tc_ukf->tc_ukf_nhc,0,40.0,20.0,50.0,41.5,57.25
+tc_ukf->tc_ukf_nhc,4,3.0,2.5,16.666666666666668,5.0,25.0
+tc_ekf->tc_ukf,0,41.0,40.0,2.4390243902439024,-1.0,6.0
+"""
+_NOTE = """# Against the paper
+
+Our drive is **shorter** than the paper's; <script>alert(1)</script> stays text.
+
+| k | ours | paper |
+|---|---|---|
+| 0 | 50.0 | 54.4 |
+
+![remote](http://example.invalid/x.png)
+"""
 
 
-def test_reduction_is_paired_over_the_same_windows_with_an_interval() -> None:
-    rows = _windows("a", [10.0, 12.0, 8.0, 10.0], 2) + _windows("b", [5.0, 6.0, 4.0, 5.0], 2)
-    rows += _windows("b", [1.0], 3)  # no baseline window with 3 satellites: no row
-    out = sat_reduction(rows, [("a", "b")])
-    assert len(out) == 1
-    r = out[0]
-    assert r["sats"] == 2
-    assert r["windows"] == 4
-    assert r["reduction_pct"] == pytest.approx(50.0)
-    assert r["ci_low_pct"] <= 50.0 <= r["ci_high_pct"]
-    assert r["paper_pct"] == 52.6
-    assert sat_reduction(rows, [("a", "b")]) == out  # seeded: the same bounds every time
+def test_outage_results_are_shown_beside_the_paper_and_copied(
+    dataset_dir: Path, tmp_path: Path
+) -> None:
+    root = tmp_path / "ds"
+    shutil.copytree(dataset_dir, root)
+    exp = root / "experiments"
+    exp.mkdir()
+    (exp / "sat_reduction.csv").write_text(_REDUCTION)
+    (exp / "sat_reduction_vs_paper.md").write_text(_NOTE)
+    (exp / "drift_vs_length.csv").write_text("filter,outage_s,err_end_mean_m\nlc_ekf,10,2.5\n")
+    data = load_dataset("tiny", root / "tables", root / "runs", exp)
+    assert data.experiments == []  # the outage results have their own sections
+    render_dataset(data, tmp_path / "r", experiments_dir=exp)
+    page = (tmp_path / "r" / "index.html").read_text()
+    sat = page[page.index('id="satellites"') : page.index('id="nis"')]
+    # the paper's value beside ours for its pair only; ours to 4 significant digits
+    assert "<td>tc_ukf-&gt;tc_ukf_nhc</td><td>0</td><td>40</td>" in sat
+    assert "<td>50</td><td>41.5</td><td>57.25</td><td>54.4</td></tr>" in sat
+    assert "<td>16.67</td><td>5</td><td>25</td><td>22.6</td></tr>" in sat
+    assert "<td>6</td><td></td></tr>" in sat
+    # the stage's explanation as prose, its raw HTML escaped and no remote image
+    assert "<h4>Against the paper</h4>" in sat
+    assert "<strong>shorter</strong>" in sat
+    assert "&lt;script&gt;" in sat
+    assert "<img" not in page
+    assert "image: remote (http://example.invalid/x.png)" in sat
+    drift = page[page.index('id="drift"') : page.index('id="satellites"')]
+    assert "<td>lc_ekf</td><td>10</td><td>2.5</td>" in drift
+    tables = tmp_path / "r" / "tables"
+    assert (tables / "sat_reduction.csv").read_text() == _REDUCTION
+    assert (tables / "drift_vs_length.csv").is_file()
+    (exp / "sat_reduction.csv").write_text("pair,sats\na->b,0\n")
+    with pytest.raises(ReportInputError, match="missing columns"):
+        render_dataset(data, tmp_path / "r2", experiments_dir=exp)
 
 
 def test_ranking_and_paired_ratio() -> None:
