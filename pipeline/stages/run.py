@@ -59,12 +59,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.estimation.run import run_tables, write_run
+    from pipeline.estimation.families import family
     from pipeline.params import load_params
 
     params = load_params(args.params)
     try:
-        section = params.filters.get(args.filter)
+        runner = family(args.filter)
+        section = params.filters.section(args.filter)
     except KeyError as err:
         raise ParamsError(
             f"filters.{args.filter}", str(err.args[0]), source=str(args.params)
@@ -75,8 +76,8 @@ def run(args: argparse.Namespace) -> int:
             "arrives (issue 'Outage and satellite-count experiments'); nothing was written"
         )
     backend = args.backend or params.run.backend
-    out = run_tables(args.tables, args.filter, section, backend)
-    write_run(args.out, out, section, args.scenario)
+    out = runner.run_tables(args.tables, args.filter, section, backend)
+    runner.write_run(args.out, out, section, args.scenario)
     m = out.metrics
     summary = f"{args.filter} ({backend}): {m['status']}, {m['epochs']} epochs"
     if m.get("truth"):
