@@ -99,7 +99,7 @@ CTL_BLOCK_OF_ROW = np.array([0, 1, 2], np.int64)  # each vehicle sensor its own 
 CTL_STREAMS = np.array([S_YAW_RATE, S_SPEED, S_STEER], np.int64)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _nav_predict(
     t_ns: int, x1: F64, P1: F64, mem: F64, imem: I64, cfg: F64, q: F64, par: F64, wm: F64,
     wc: F64, ekf_mean: I64, ev_i: I64, ev_f: F64, counts: I64,
@@ -127,7 +127,7 @@ def _nav_predict(
     return True
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _ctl_predict(
     t_ns: int, x2: F64, P2: F64, mem: F64, imem: I64, cfg: F64, q: F64, par: F64, wm: F64,
     wc: F64,
@@ -152,7 +152,7 @@ def _ctl_predict(
     return True
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def finish(t_ns: int, x: F64, P: F64, cfg: F64, ev_i: I64, ev_f: F64, counts: I64) -> int:
     """Positive definiteness of both covariances and the NaN barrier; a status code."""
     L = np.empty((NX, NX))
@@ -166,7 +166,7 @@ def finish(t_ns: int, x: F64, P: F64, cfg: F64, ev_i: I64, ev_f: F64, counts: I6
     return STATUS_OK
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _update(
     model: int, est: int, t_ns: int, x: F64, P: F64, z: F64, r: F64, block_of_row: I64,
     streams: I64, gate: F64, cfg: F64, rej: I64, wm: F64, wc: F64, inn_i: I64, inn_f: F64,
@@ -183,7 +183,7 @@ def _update(
     return True
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def cascade_sample(
     t_ns: int, veh: F64, gps: F64, nav_only: bool, x: F64, P: F64, mem: F64, imem: I64,
     cfg: F64, q: F64, r: F64, par: F64, wm: F64, wc: F64, gate: F64, ekf_mean: I64,
@@ -226,18 +226,29 @@ def cascade_sample(
             mem[M_RADAR] = radar
         if math.isfinite(gyro):
             mem[M_GYRO] = gyro
-        z2 = np.array([gyro - x1[NAV_GB], radar - x1[NAV_RB], veh[V_POT]])
+        z2 = np.empty(3)
+        z2[0], z2[1], z2[2] = gyro - x1[NAV_GB], radar - x1[NAV_RB], veh[V_POT]
         ok = _update(MODEL_CTL, upd, t_ns, x2, P2, z2, r[1], CTL_BLOCK_OF_ROW, CTL_STREAMS, gate,
                      cfg, rej, wm, wc, inn_i, inn_f, ev_i, ev_f, counts)  # fmt: skip
     if not ok:
         return fail(t_ns, STATUS_INDEFINITE, ev_i, ev_f, counts)
     status = finish(t_ns, x, P, cfg, ev_i, ev_f, counts)
     if status == STATUS_OK and not nav_only:
-        k = counts[CNT_OUT]
-        if k < out_t.shape[0]:
-            out_t[k] = t_ns
-            out_x[k] = x
-            out_P[k] = P
-        counts[CNT_OUT] = k + 1
-        counts[CNT_STOP] += 1
+        _record(t_ns, x, P, out_t, out_x, out_P, counts)
     return status
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _record(t_ns: int, x: F64, P: F64, out_t: I64, out_x: F64, out_P: F64, counts: I64) -> None:
+    """Append the output row of a sample (counted past the capacity)."""
+    k = counts[CNT_OUT]
+    if k < out_t.shape[0]:
+        out_t[k] = t_ns
+        for i in range(2 * NX):
+            out_x[k, i] = x[i]
+        for f in range(2):
+            for i in range(NX):
+                for j in range(NX):
+                    out_P[k, f, i, j] = P[f, i, j]
+    counts[CNT_OUT] = k + 1
+    counts[CNT_STOP] += 1

@@ -52,6 +52,8 @@ from pipeline.estimation.kernels.common import (
     cho_solve,
     cholesky,
     gate_blocks,
+    innovation_cov,
+    propagate_cov,
     record_event,
     record_innovations,
 )
@@ -63,39 +65,19 @@ EST_EKF, EST_UKF, EST_HYBRID = 0, 1, 2
 NSIG = 2 * NX + 1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def ekf_predict(model: int, x: F64, P: F64, u: F64, dt: float, par: F64, disc: F64, Q: F64) -> None:
     """EKF time update (eq. 22-23): ``F`` at the prior, ``x <- f(x)``, ``P <- F P F^T + Q``."""
     F = np.empty((NX, NX))
     xn = np.empty(NX)
     model_jacobian(model, x, u, dt, par, disc, F)
     model_f(model, x, u, dt, par, disc, xn)
-    x[:] = xn
-    sandwich(F, P, NX, NX, Q, P)
+    for j in range(NX):
+        x[j] = xn[j]
+    propagate_cov(P, F, Q, NX, np.empty((NX, NX)))
 
 
-@nb.njit(cache=True)
-def sandwich(A: F64, P: F64, m: int, n: int, Q: F64, out: F64) -> None:
-    """``out[:m, :m] = A P A^T + Q`` for ``A`` (m, n), ``P`` (n, n) symmetric, by loops
-    (no BLAS call and no temporaries beyond one (m, n) product: for these 6-state filters
-    the loops are several times faster than two ``@``); ``out`` may be ``P``."""
-    AP = np.empty((m, n))
-    for i in range(m):
-        for j in range(n):
-            a = 0.0
-            for k in range(n):
-                a += A[i, k] * P[k, j]
-            AP[i, j] = a
-    for i in range(m):
-        for j in range(i, m):
-            a = Q[i, j]
-            for k in range(n):
-                a += AP[i, k] * A[j, k]
-            out[i, j] = a
-            out[j, i] = a
-
-
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def ukf_predict(
     model: int,
     x: F64,
@@ -128,11 +110,12 @@ def ukf_predict(
     centered_mean_cov(Y, wm, wc, NX, mean, cov)
     for j in range(NX):
         x[j] = Y[0, j] if ekf_mean[j] else mean[j]
-    P[:, :] = cov + Q
+        for k in range(NX):
+            P[j, k] = cov[j, k] + Q[j, k]
     return True
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def measurement_layout(z: F64, block_of_row: I64, stream_of_block: I64, rows: I64, blocks: I64
                        ) -> tuple[int, int]:  # fmt: skip
     """The available rows of ``z`` (finite entries) and their gating blocks.
@@ -166,14 +149,16 @@ def measurement_layout(z: F64, block_of_row: I64, stream_of_block: I64, rows: I6
     return m, nb_
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _prior_rows(
-    model: int, est: int, x: F64, P: F64, z: F64, rows: I64, m: int, r: F64, wm: F64, wc: F64,
-    gamma: float, nu: F64, S: F64, Pxz: F64,
+    model: int, est: int, x: F64, P: F64, z: F64, rows: I64, m: int, Hm: F64, rm: F64, wm: F64,
+    wc: F64, gamma: float, nu: F64, S: F64, Pxz: F64,
 ) -> bool:  # fmt: skip
     """Innovations ``nu``, their covariance ``S`` (and for the UKF the cross covariance
-    ``Pxz``) of the available rows, from the prior; False if a UKF prior is not PD."""
+    ``Pxz``) of the available rows (``Hm``, variances ``rm``), from the prior; False if a
+    UKF prior is not PD."""
     hx = np.empty(NZ)
+    zp = np.empty(m)
     if est == EST_UKF:
         L = np.empty((NX, NX))
         sig = np.empty((NSIG, NX))
@@ -184,27 +169,22 @@ def _prior_rows(
             model_h(model, sig[i], hx)
             for k in range(m):
                 Z[i, k] = hx[rows[k]]
-        zp = np.empty(m)
         centered_mean_cov(Z, wm, wc, m, zp, S)
         cross_cov(sig, x, Z, zp, wc, NX, m, Pxz)
+        for k in range(m):
+            S[k, k] += rm[k]
     else:
         model_h(model, x, hx)
-        zp = np.empty(m)
-        H = np.empty((NZ, NX))
-        model_meas_jacobian(model, H)
-        Hm = np.empty((m, NX))
         for k in range(m):
             zp[k] = hx[rows[k]]
-            Hm[k] = H[rows[k]]
-        sandwich(Hm, P, m, NX, np.zeros((m, m)), S)
+        innovation_cov(Hm, P, rm, m, NX, Pxz, S)
     for k in range(m):
-        S[k, k] += r[rows[k]]
         d = z[rows[k]] - zp[k]
         nu[k] = wrap_pi(d) if is_angle_row(model, rows[k]) else d
     return True
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def prepare_update(
     model: int,
     est: int,
@@ -263,16 +243,18 @@ def prepare_update(
     rm = np.empty(m)
     acc = np.empty(m, np.int64)
     for k in range(m):
-        Hm[k] = H[rows[k]]
+        for j in range(NX):
+            Hm[k, j] = H[rows[k], j]
         rm[k] = r[rows[k]]
     if m == 0:
         return 0, rows, Hm, rm, nu, S, Pxz, acc, 0
     nis = np.empty(nb_)
     accepted = np.empty(nb_, np.int64)
+    gwork = np.empty((3, 6))
     for attempt in range(2):
-        if not _prior_rows(model, est, x, P, z, rows, m, r, wm, wc, gamma, nu, S, Pxz):
+        if not _prior_rows(model, est, x, P, z, rows, m, Hm, rm, wm, wc, gamma, nu, S, Pxz):
             return -1, rows, Hm, rm, nu, S, Pxz, acc, 0
-        gate_blocks(nu, S, blocks, nb_, gate, nis, accepted, np.empty((3, 6)))
+        gate_blocks(nu, S, blocks, nb_, gate, nis, accepted, gwork)
         if attempt == 1:
             break
         reset = stream_resets(t_ns, blocks, nb_, accepted, reject_since, timeout_s)
@@ -289,7 +271,7 @@ def prepare_update(
     return m, rows, Hm, rm, nu, S, Pxz, acc, ma
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def apply_update(
     est: int, x: F64, P: F64, Hm: F64, rm: F64, nu: F64, S: F64, Pxz: F64, acc: I64, ma: int
 ) -> None:
@@ -306,21 +288,27 @@ def apply_update(
     _ukf_apply(x, P, Pxz, S, nu, acc, ma)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _ukf_apply(x: F64, P: F64, Pxz: F64, S: F64, nu: F64, acc: I64, ma: int) -> None:
     """``K = P_xz P_y^-1``, ``x += K nu``, ``P -= K P_y K^T`` on the accepted rows (eq. 27)."""
     Sa = np.empty((ma, ma))
     Kt = np.empty((ma, NX))
-    nua = np.empty(ma)
     for i in range(ma):
-        nua[i] = nu[acc[i]]
-        Kt[i] = Pxz[:, acc[i]]
+        for j in range(NX):
+            Kt[i, j] = Pxz[j, acc[i]]
         for j in range(ma):
             Sa[i, j] = S[acc[i], acc[j]]
     L = np.empty((ma, ma))
     if not cholesky(Sa, ma, L):
         return
     cho_solve(L, ma, Kt, NX)  # Kt = S^-1 Pxz^T = K^T
-    K = Kt.T.copy()
-    x += K @ nua
-    P -= K @ Sa @ Kt
+    for j in range(NX):
+        for i in range(ma):
+            x[j] += Kt[i, j] * nu[acc[i]]
+    # P -= K S K^T = Pxz_a K^T (K S = Pxz_a)
+    for r in range(NX):
+        for c in range(NX):
+            a = 0.0
+            for i in range(ma):
+                a += Pxz[r, acc[i]] * Kt[i, c]
+            P[r, c] -= a
