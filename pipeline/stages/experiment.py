@@ -53,8 +53,8 @@ def run(args: argparse.Namespace) -> int:
     doc = write_experiment(args.out, inputs, params.report.figure_dpi)
     verdicts = ", ".join(f"{r['verdict']}" for r in doc["paper_comparison"])
     print(
-        f"tractor_cascaded: {len(doc['labels'])} filters x {len(doc['scenarios'])} scenarios x "
-        f"{exp.seeds} seeds in {time.perf_counter() - t0:.0f} s -> {args.out} "
-        f"(paper claims: {verdicts})"
+        f"tractor_cascaded: {doc['runs']} closed-loop runs ({len(doc['labels'])} filter "
+        f"variants, {len(doc['scenarios'])} scenarios, {exp.seeds} seeds) in "
+        f"{time.perf_counter() - t0:.0f} s -> {args.out}\npaper's claims: {verdicts}"
     )
     return 0

@@ -220,6 +220,7 @@ def write_experiment(
             "experiment": "tractor_cascaded",
             "params": {k: v for k, v in to_plain(exp).items() if k != "workers"},
             "labels": labels(exp),
+            "runs": len(runs),
             "scenarios": {s: [list(w) for w in ws] for s, ws in scenarios.items()},
             "convergence_band": dict(zip((n for n, _ in BIASES), bands, strict=True)),
             "paper_comparison": comparison,

@@ -16,8 +16,9 @@ step), so runs of one seed are paired.
 
 from __future__ import annotations
 
+import copy
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,6 +86,90 @@ def truth_states(truth: F64, params: TractorStraightParams) -> F64:
     )  # fmt: skip
 
 
+class _Loop:
+    """The closed loop of one seed, advanced sample by sample; ``fork`` copies it whole.
+
+    The simulator is stepped lazily at the start of the next sample (with the command of the
+    previous one), so a copy taken between samples can still change the outage windows of
+    the readings it has not drawn yet.
+    """
+
+    def __init__(self, setup: CascadeSetup, params: TractorStraightParams,
+                 seed: int | np.random.SeedSequence, backend: Backend) -> None:  # fmt: skip
+        self.params = params
+        self.sim = TractorSim(params, seed)
+        self.gain = tractor_lqr_gain(params.speed_mps, params.dt_s, params.model)
+        self.line = params.line()
+        n = params.steps + 1
+        self.stepper = make_stepper(setup, n, backend)
+        self.truth = np.empty((n, 9))
+        self.u = np.zeros(n)
+        self.valid = np.zeros(n, bool)
+        self.k = 0  # next sample to process
+        self.k_end = n
+        self.outages: tuple[tuple[float, float], ...] = ()
+
+    def set_outages(self, windows: Sequence[tuple[float, float]]) -> None:
+        """GPS outage windows of the readings not drawn yet (half-open, s from the start)."""
+        self.outages = tuple((float(a), float(b)) for a, b in windows)
+        for a, b in self.outages:
+            if not b > a:
+                raise ValueError(f"GPS outage window ({a}, {b}) must have end > start")
+        self.sim.gps_outages_s = self.outages
+
+    def run(self, k_stop: int) -> None:
+        """Process samples ``k`` up to ``k_stop`` (exclusive) or the end of the run."""
+        sim, stepper, line, x = self.sim, self.stepper, self.line, self.stepper.x
+        dt_ns = self.params.dt_ns
+        veh = np.full(cs.VEH_COLS, math.nan)
+        gps = np.empty(cs.GPS_COLS)
+        for k in range(self.k, min(k_stop, self.k_end)):
+            if k > 0:
+                sim.step(self.u[k - 1])
+            z = sim.measurement
+            self.truth[k] = sim.truth
+            self.valid[k] = z.gps_valid
+            veh[cs.V_RADAR], veh[cs.V_GYRO], veh[cs.V_POT] = (
+                z.speed_mps,
+                z.yaw_rate_radps,
+                z.steer_rad,
+            )
+            gps[cs.G_E], gps[cs.G_N], gps[cs.G_PSI] = z.east_m, z.north_m, z.heading_rad
+            stepper.sample(k * dt_ns, veh, gps)
+            if not stepper.ok:
+                self.k_end = k
+                break
+            xc = line.control_state(
+                x[NAV_E], x[NAV_N], x[NAV_PSI], x[NX + CTL_PD], x[NX + CTL_PDD],
+                x[NX + CTL_DEL], x[NX + CTL_DELD],
+            )  # fmt: skip
+            self.u[k] = lqr_command(self.gain, xc)
+            stepper.set_command(self.u[k])
+            self.k = k + 1
+
+    def fork(self) -> _Loop:
+        """An independent copy (simulator, noise generator, filter state, logs)."""
+        return copy.deepcopy(self)
+
+    def finish(self) -> ClosedLoopRun:
+        result = self.stepper.result()
+        k_end = min(self.k_end, self.k, result.t_ns.size)
+        truth = self.truth[:k_end]
+        line = self.line
+        c, s = math.cos(line.heading_rad), math.sin(line.heading_rad)
+        lateral = (truth[:, 1] - line.east_m) * c - (truth[:, 2] - line.north_m) * s  # eq. 9
+        return ClosedLoopRun(
+            result=result,
+            t_s=truth[:, 0].copy(),
+            truth=truth,
+            truth_x=truth_states(truth, self.params),
+            u=self.u[:k_end].copy(),
+            gps_valid=self.valid[:k_end].copy(),
+            lateral_err_m=lateral,
+            outages_s=self.outages,
+        )
+
+
 def run_closed_loop(
     setup: CascadeSetup,
     params: TractorStraightParams,
@@ -98,48 +183,32 @@ def run_closed_loop(
     A filter that diverges (``on_divergence: flag``) ends the run at that sample (the
     result says ``diverged``); with ``raise`` its ``DivergenceError`` propagates.
     """
-    sim = TractorSim(params, seed, gps_outages_s=gps_outages_s)
-    gain = tractor_lqr_gain(params.speed_mps, params.dt_s, params.model)
-    line = params.line()
-    n = params.steps + 1
-    stepper = make_stepper(setup, n, backend)
-    truth = np.empty((n, 9))
-    u = np.zeros(n)
-    valid = np.zeros(n, bool)
-    veh = np.full(cs.VEH_COLS, math.nan)
-    gps = np.empty(cs.GPS_COLS)
-    x = stepper.x
-    k_end = n
-    for k in range(n):
-        z = sim.measurement
-        truth[k] = sim.truth
-        valid[k] = z.gps_valid
-        veh[cs.V_RADAR], veh[cs.V_GYRO], veh[cs.V_POT] = z.speed_mps, z.yaw_rate_radps, z.steer_rad
-        gps[cs.G_E], gps[cs.G_N], gps[cs.G_PSI] = z.east_m, z.north_m, z.heading_rad
-        stepper.sample(k * params.dt_ns, veh, gps)
-        if not stepper.ok:
-            k_end = k
-            break
-        xc = line.control_state(
-            x[NAV_E], x[NAV_N], x[NAV_PSI], x[NX + CTL_PD], x[NX + CTL_PDD], x[NX + CTL_DEL],
-            x[NX + CTL_DELD],
-        )  # fmt: skip
-        u[k] = lqr_command(gain, xc)
-        stepper.set_command(u[k])
-        if k < n - 1:
-            sim.step(u[k])
-    result = stepper.result()
-    k_end = min(k_end, result.t_ns.size)
-    truth = truth[:k_end]
-    c, s = math.cos(line.heading_rad), math.sin(line.heading_rad)
-    lateral = (truth[:, 1] - line.east_m) * c - (truth[:, 2] - line.north_m) * s  # eq. 9
-    return ClosedLoopRun(
-        result=result,
-        t_s=truth[:, 0].copy(),
-        truth=truth,
-        truth_x=truth_states(truth, params),
-        u=u[:k_end],
-        gps_valid=valid[:k_end],
-        lateral_err_m=lateral,
-        outages_s=tuple((float(a), float(b)) for a, b in gps_outages_s),
-    )
+    loop = _Loop(setup, params, seed, backend)
+    loop.set_outages(gps_outages_s)
+    loop.run(params.steps + 1)
+    return loop.finish()
+
+
+def run_closed_loop_scenarios(
+    setup: CascadeSetup,
+    params: TractorStraightParams,
+    seed: int | np.random.SeedSequence,
+    scenarios: Mapping[str, Sequence[tuple[float, float]]],
+    *,
+    backend: Backend = "numba",
+) -> dict[str, ClosedLoopRun]:
+    """``run_closed_loop`` for several outage scenarios of one seed, sharing the samples
+    before the first outage: the loop runs once up to it and is then copied per scenario
+    (identical to separate runs, since the noise of a seed does not depend on the outages;
+    saves a third of the work for a nominal run and two outages starting halfway)."""
+    starts = [a for windows in scenarios.values() for a, _ in windows]
+    k_fork = math.ceil(min(starts) / params.dt_s - 1e-9) if starts else params.steps + 1
+    trunk = _Loop(setup, params, seed, backend)
+    trunk.run(k_fork)
+    out: dict[str, ClosedLoopRun] = {}
+    for name, windows in scenarios.items():
+        branch = trunk.fork()
+        branch.set_outages(windows)
+        branch.run(params.steps + 1)
+        out[name] = branch.finish()
+    return out

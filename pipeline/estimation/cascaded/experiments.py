@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 import zlib
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -30,7 +31,7 @@ import numpy as np
 from scipy import stats
 
 from ingest.typed import FieldError
-from pipeline.estimation.cascaded.closed_loop import ClosedLoopRun, run_closed_loop
+from pipeline.estimation.cascaded.closed_loop import ClosedLoopRun, run_closed_loop_scenarios
 from pipeline.estimation.cascaded.config import (
     CASCADED_KINDS,
     CascadedFilterParams,
@@ -291,38 +292,44 @@ def _series(run: ClosedLoopRun, rate_hz: float, dt_s: float) -> dict[str, F64]:
     return out
 
 
-def run_one(spec: RunSpec, inputs: ExperimentInputs) -> RunSummary:
-    """One closed-loop run, summarized (with its time series for the example seed)."""
-    import time
-
-    name, section = section_for(spec.label, inputs.sections, inputs.sim)
+def run_seed_label(label: str, seed_index: int, inputs: ExperimentInputs) -> list[RunSummary]:
+    """Every scenario of one label and seed in closed loop (sharing the samples before the
+    outages: ``closed_loop.run_closed_loop_scenarios``), summarized; with the time series
+    for the example seed."""
+    name, section = section_for(label, inputs.sections, inputs.sim)
     flag = dataclasses.replace(section.divergence, on_divergence="flag")
     setup = make_setup(name, dataclasses.replace(section, divergence=flag))
-    outages = inputs.exp.scenarios()[spec.scenario]
+    scenarios = {s: w for s, w in inputs.exp.scenarios().items()
+                 if not is_variant(label) or s == NOMINAL}  # fmt: skip
     t0 = time.perf_counter()
-    run = run_closed_loop(setup, inputs.sim, run_seed(inputs.seed, spec.seed_index),
-                          gps_outages_s=outages)  # fmt: skip
-    wall = time.perf_counter() - t0
-    summary = summarize_run(run, spec, inputs)
-    summary.wall_s = wall
-    if spec.seed_index == inputs.exp.example_seed:
-        summary.series = _series(run, inputs.exp.timeseries_rate_hz, inputs.sim.dt_s)
-    return summary
+    runs = run_closed_loop_scenarios(setup, inputs.sim, run_seed(inputs.seed, seed_index),
+                                     scenarios)  # fmt: skip
+    wall = (time.perf_counter() - t0) / len(runs)
+    out = []
+    for scen, run in runs.items():
+        summary = summarize_run(run, RunSpec(label, scen, seed_index), inputs)
+        summary.wall_s = wall
+        if seed_index == inputs.exp.example_seed:
+            summary.series = _series(run, inputs.exp.timeseries_rate_hz, inputs.sim.dt_s)
+        out.append(summary)
+    return out
 
 
-def _run_chunk(chunk: Sequence[RunSpec], inputs: ExperimentInputs) -> list[RunSummary]:
-    return [run_one(s, inputs) for s in chunk]
+def _run_chunk(chunk: Sequence[tuple[str, int]], inputs: ExperimentInputs) -> list[RunSummary]:
+    return [s for label, seed in chunk for s in run_seed_label(label, seed, inputs)]
 
 
 def run_experiment(inputs: ExperimentInputs) -> list[RunSummary]:
     """Every run of the experiment, in ``specs`` order (independent of ``workers``)."""
     todo = specs(inputs.exp)
-    workers = min(inputs.exp.workers, len(todo))
+    units = list(dict.fromkeys((s.label, s.seed_index) for s in todo))
+    workers = min(inputs.exp.workers, len(units))
     if workers <= 1:
-        return _run_chunk(todo, inputs)
-    chunks = [todo[i::workers] for i in range(workers)]
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        parts = list(pool.map(_run_chunk, chunks, [inputs] * workers))
+        parts = [_run_chunk(units, inputs)]
+    else:
+        chunks = [units[i::workers] for i in range(workers)]
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            parts = list(pool.map(_run_chunk, chunks, [inputs] * workers))
     by_spec = {s.spec: s for part in parts for s in part}
     return [by_spec[s] for s in todo]
 

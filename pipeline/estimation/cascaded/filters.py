@@ -14,9 +14,31 @@ filters, and the filterpy backend (``reference``) reproduces it step for step.
   the sigma points of the prior again, predicts the rows through ``h`` and applies
   ``K = P_xz P_y^-1``, ``P <- P - K P_y K^T``.
 - **Hybrid** (paper 000 section 9.3, after Andrade-Cetto et al.): the time update is the UKF's
-  (sigma points, unscented covariance) except that the mean of the states flagged in
-  ``ekf_mean`` is the EKF's ``f(x_hat)`` (the propagated central sigma point); the update is
-  the EKF's. See ``config.HybridParams`` for which states and why.
+  (sigma points, unscented covariance, unscented means) except that the mean of the states
+  flagged in ``ekf_mean`` (default East and North) is the EKF's ``f(x_hat)`` (the propagated
+  central sigma point); the update is the EKF's; the control filter is the EKF's.
+
+**Why this hybrid.** The paper proposes UKF propagation with an EKF update, hoping to keep
+the UKF's fast bias convergence and the EKF's precise East/North. In this cascade:
+
+- both measurement models are linear (``Y1 = C1 X1``, ``Y2 = C2 X2``), so the EKF update is
+  exact and equal to the UKF's (the sigma points add only cost): the update is the EKF's;
+- the control model is linear, so its UKF *is* its EKF: the control filter is the EKF;
+- in the navigation model the biases and the heading propagate linearly (the unscented
+  propagation of these "bias-sensitive" states equals the EKF's), and the only curvature is
+  ``(E, N)_dot = (V - r_b)(sin, cos) psi``. With paper 000's ``alpha = 1e-3`` the unscented
+  transform is its second-order limit: it adds ``1/2 tr(f'' P)`` to the predicted East/North
+  (``(V - r_b) cos(psi) P_psipsi / 2`` per unit time on North) and ``(beta - alpha^2)
+  delta delta^T`` to their covariance. Table 1's heading variance makes ``P_psipsi`` about
+  0.16 rad^2 with GPS and grows it by 0.5 rad^2/s without, so that term biases the UKF:
+  with GPS it ends up in the radar-bias estimate, in an outage in the position.
+
+So the hybrid propagates the covariance and the bias-sensitive states by the unscented
+transform and takes the position mean from the EKF (the state GPS measures directly, where
+the unscented second-order term does harm), and updates like the EKF. What this buys is
+measured in the experiment (``experiments``); it behaves like the EKF, because here the
+unscented covariance equals the EKF's to second order, so no faster bias convergence exists
+to inherit.
 
 An update is ``prepare_update`` (rows, innovations, gating per block with
 ``kernels.common.gate_blocks``, the timeout reset of a stream rejected for too long, logs with

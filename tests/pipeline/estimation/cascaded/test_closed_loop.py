@@ -4,10 +4,16 @@ second-order term accounts for it."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from pipeline.estimation.cascaded.closed_loop import ClosedLoopRun, run_closed_loop
+from pipeline.estimation.cascaded.closed_loop import (
+    ClosedLoopRun,
+    run_closed_loop,
+    run_closed_loop_scenarios,
+)
 from pipeline.estimation.cascaded.config import CascadedFilterParams
 from pipeline.estimation.cascaded.engine import make_setup
 from pipeline.estimation.cascaded.metrics import BIASES, bias_convergence
@@ -74,3 +80,23 @@ def test_the_ukf_radar_bias_settles_where_the_unscented_second_order_term_puts_i
     assert abs(err) > 5 * sections["cascaded_ukf"].convergence_band.radar_bias_mps
     ekf = nominal["cascaded_ekf"]
     assert abs(np.mean(ekf.result.x[settled, NAV_RB] - ekf.truth_x[settled, NAV_RB])) < 0.04
+
+
+def test_scenarios_forked_after_the_common_prefix_equal_separate_runs(
+    sections: dict[str, CascadedFilterParams], sim_params: TractorStraightParams
+) -> None:
+    short = dataclasses.replace(sim_params, duration_s=12.0)
+    setup = make_setup("cascaded_ukf", sections["cascaded_ukf"])
+    scenarios = {"nominal": (), "a": ((6.0, 8.0),), "b": ((7.01, 11.0),)}
+    forked = run_closed_loop_scenarios(setup, short, 9, scenarios)
+    for name, windows in scenarios.items():
+        alone = run_closed_loop(setup, short, 9, gps_outages_s=windows)
+        f = forked[name]
+        np.testing.assert_array_equal(f.result.x, alone.result.x)
+        np.testing.assert_array_equal(f.result.P, alone.result.P)
+        np.testing.assert_array_equal(f.truth, alone.truth)
+        np.testing.assert_array_equal(f.gps_valid, alone.gps_valid)
+        np.testing.assert_array_equal(f.result.inn_i, alone.result.inn_i)
+    assert not forked["a"].gps_valid[300:400].any()  # 6.0 <= t < 8.0 s
+    assert forked["a"].gps_valid[299]
+    assert forked["a"].gps_valid[400]
