@@ -43,7 +43,7 @@ def run(options: argparse.Namespace) -> None:
     repeat = options.cascaded_repeat
     rows: list[list[object]] = []
     for name in CASCADED_KINDS:
-        setup = make_setup(name, params.filters.section(name))
+        setup = make_setup(name, params.filters.cascaded(name))
         replay(setup, inp.veh_t, inp.veh, inp.gps_t, inp.gps, "numba")  # compile / load cache
         fast = timed(partial(replay, setup, inp.veh_t, inp.veh, inp.gps_t, inp.gps, "numba"),
                      repeat)  # fmt: skip
@@ -61,7 +61,7 @@ def run(options: argparse.Namespace) -> None:
     t_sim = timed(sim_only, repeat).seconds
     rows = []
     for name in CASCADED_KINDS:
-        setup = make_setup(name, params.filters.section(name))
+        setup = make_setup(name, params.filters.cascaded(name))
         loop = timed(partial(run_closed_loop, setup, sim, 1), repeat).seconds
         rows.append([name, loop, loop / sim.steps * 1e6])
     rows.append(["simulator alone", t_sim, t_sim / sim.steps * 1e6])

@@ -36,6 +36,7 @@ from ingest.schema import TableName
 from ingest.typed import FieldError, KeyPathError, load_dataclass
 
 _ID_RE = re.compile(r"^[a-z][a-z0-9_]*$")
+_DATE_RE = re.compile(r"^(19[89]\d|2\d{3})-(0[1-9]|1[0-2])-(0[1-9]|[12]\d|3[01])$")
 _TABLES = tuple(t.value for t in TableName)
 
 Vec3 = tuple[float, float, float]
@@ -141,6 +142,23 @@ class VehicleConfig:
 
 
 @dataclass(frozen=True)
+class MavlinkConfig:
+    """The ``mavlink`` section: how MAVLink tlogs are decoded.
+
+    Attributes:
+        dialect: pymavlink dialect module whose definitions (field layout, scalings,
+            ``crc_extra``) decode the packets: ``ardupilotmega`` (default, includes
+            ``common``), ``common``, ``development``, ...
+    """
+
+    dialect: str = "ardupilotmega"
+
+    def __post_init__(self) -> None:
+        if not self.dialect.isidentifier():
+            raise FieldError("dialect", f"{self.dialect!r} is not a pymavlink dialect name")
+
+
+@dataclass(frozen=True)
 class CsvSource:
     """One CSV/text file mapped onto a canonical table.
 
@@ -181,19 +199,26 @@ class CsvSource:
 
 @dataclass(frozen=True)
 class DatasetConfig:
-    """A whole ``dataset.yaml``."""
+    """A whole ``dataset.yaml``.
+
+    Attributes:
+        utc_date: UTC date (``YYYY-MM-DD``) of the first record, for logs whose records carry
+            only a time of day (NMEA without a valid RMC or ZDA sentence).
+    """
 
     id: str
     description: str = ""
     logs: tuple[str, ...] = ()
     required: tuple[str, ...] = ()
     time_base: Literal["auto", "gps", "utc", "recorder"] = "auto"
+    utc_date: str | None = None
     imu: ImuConfig = field(default_factory=ImuConfig)
     gnss: GnssConfig = field(default_factory=GnssConfig)
     gnss_obs: StreamConfig = field(default_factory=StreamConfig)
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     truth: StreamConfig = field(default_factory=StreamConfig)
     estimator: StreamConfig = field(default_factory=StreamConfig)
+    mavlink: MavlinkConfig = field(default_factory=MavlinkConfig)
     csv: tuple[CsvSource, ...] = ()
 
     def __post_init__(self) -> None:
@@ -202,6 +227,8 @@ class DatasetConfig:
         for i, name in enumerate(self.required):
             if name not in _TABLES:
                 raise FieldError(f"required[{i}]", f"{name!r} is not one of {', '.join(_TABLES)}")
+        if self.utc_date is not None and not _DATE_RE.match(self.utc_date):
+            raise FieldError("utc_date", f"{self.utc_date!r} is not a date YYYY-MM-DD")
 
 
 def parse_dataset_config(data: object, *, source: str | Path | None = None) -> DatasetConfig:

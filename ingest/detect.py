@@ -13,6 +13,8 @@ MCAP           ``\\x89MCAP0\\r\\n``
 ROS 1 bag      ``#ROSBAG V2.0\\n`` (other versions are refused with their version)
 rosbag2        a directory with ``metadata.yaml``; without it, ``.mcap`` storage is read
                directly (recorded as a recovery), ``.db3`` storage is refused (reindex first)
+comma2k19      a directory with ``processed_log/`` and/or ``global_pose/`` holding ``.npy``
+               arrays (``\x93NUMPY``) without extension: one segment of the comma2k19 dataset
 SQLite         ``SQLite format 3\\0``: a rosbag2 ``.db3`` outside its directory is refused
 ULog           ``ULog\\x01\\x12\\x35``
 DataFlash      ``\\xa3\\x95\\x80``: the FMT record describing FMT, always first
@@ -21,7 +23,11 @@ MAVLink tlog   ``[8-byte big-endian us since 1970][0xFE or 0xFD packet]`` repeat
 RINEX          ``RINEX VERSION / TYPE`` (or ``CRINEX VERS   / TYPE``) in columns 61-80 of line
                1; gzip-compressed RINEX is recognised through the compression
 GnssLogger     text whose ``#`` header defines ``Raw,...TimeNanos``
-NMEA           text lines starting ``$GP``/``$GN``/... (recognised; no reader yet)
+NMEA           text lines starting ``$GP``/``$GN``/...
+libRSF         whitespace text whose lines start with a libRSF measurement type and a time
+               (``pseudorange3 0.2 ...``, ``odom3``, ``point3``): the smartLoc dataset
+GSDC           CSV of the Google Smartphone Decimeter Challenge, by its header: 2021
+               ``*_derived.csv`` and ground truth, 2022 ``device_gnss.csv`` and ground truth
 CSV            other UTF-8 text with a consistent delimiter
 =============  ===============================================================================
 
@@ -49,13 +55,14 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 ULOG_MAGIC = b"ULog\x01\x12\x35"
 DATAFLASH_MAGIC = b"\xa3\x95\x80"
 GZIP_MAGIC = b"\x1f\x8b"
+NPY_MAGIC = b"\x93NUMPY"
 
 _NON_LOGS = (
     (b"\x89PNG\r\n\x1a\n", "a PNG image"),
     (b"\xff\xd8\xff", "a JPEG image"),
     (b"%PDF-", "a PDF document"),
     (b"PK\x03\x04", "a ZIP archive (extract the log first)"),
-    (b"\x93NUMPY", "a NumPy array file (map it through a CSV export or a custom reader)"),
+    (NPY_MAGIC, "a NumPy array file (for a comma2k19 stream, ingest its segment directory)"),
     (b"\x7fELF", "an executable"),
 )
 
@@ -63,6 +70,11 @@ _NON_LOGS = (
 _TLOG_MIN_US = 946_684_800 * 10**6  # 2000-01-01
 _TLOG_MAX_US = 4_102_444_800 * 10**6  # 2100-01-01
 _NMEA_RE = re.compile(rb"^\$(G[PNLABQ]|B[DS]|P[A-Z]{3})[A-Z]{3},")
+# libRSF dataset text (TU Chemnitz): "<type> <time_s> <values...>", one measurement per line.
+_LIBRSF_RE = re.compile(
+    r"^(pseudorange[23]|odom[234]|point[23]|imu|range[23]|gnss)\s+[-+0-9.eE]+\s"
+)
+_COMMA_PARTS = ("processed_log", "global_pose")
 
 
 class Format(StrEnum):
@@ -77,6 +89,9 @@ class Format(StrEnum):
     RINEX = "rinex"
     GNSSLOGGER = "gnsslogger"
     NMEA = "nmea"
+    LIBRSF = "librsf"
+    COMMA2K19 = "comma2k19"
+    GSDC = "gsdc"
     CSV = "csv"
 
 
@@ -226,9 +241,37 @@ def _detect_text(path: Path, text: str) -> Detected | None:
         return Detected(path, Format.GNSSLOGGER, one)
     if lines and sum(bool(_NMEA_RE.match(ln.encode())) for ln in lines) >= max(1, len(lines) // 2):
         return Detected(path, Format.NMEA, one)
+    return _detect_delimited(path, lines)
+
+
+def _detect_delimited(path: Path, lines: list[str]) -> Detected | None:
+    """A GSDC CSV (by its header), libRSF text, another delimited text, or None."""
+    gsdc = _gsdc_variant(lines[0]) if lines else None
+    if gsdc is not None:
+        return Detected(path, Format.GSDC, (path,), variant=gsdc)
     data_lines = [ln for ln in lines if not ln.lstrip().startswith("#")]
     if data_lines and all(ln.isprintable() or "\t" in ln for ln in data_lines):
-        return Detected(path, Format.CSV, one)
+        # The last line of the head may be cut short.
+        librsf = all(_LIBRSF_RE.match(ln) for ln in lines[:-1] or lines)
+        return Detected(path, Format.LIBRSF if librsf else Format.CSV, (path,))
+    return None
+
+
+_GSDC_HEADERS = (
+    ("collectionName,phoneName,millisSinceGpsEpoch,constellationType,svid,", "derived2021"),
+    ("collectionName,phoneName,millisSinceGpsEpoch,latDeg,lngDeg,", "truth2021"),
+    ("MessageType,Provider,LatitudeDegrees,LongitudeDegrees,", "truth2022"),
+)
+
+
+def _gsdc_variant(header: str) -> str | None:
+    """The kind of GSDC CSV whose header line is ``header``, or None."""
+    for start, variant in _GSDC_HEADERS:
+        if header.startswith(start):
+            return variant
+    names = set(header.split(","))
+    if header.startswith("MessageType,") and {"SvPositionXEcefMeters", "TimeNanos"} <= names:
+        return "device_gnss2022"
     return None
 
 
@@ -290,6 +333,9 @@ def _detect_dir(path: Path) -> Detected:
     if meta.is_file():
         storage, files = _read_rosbag2_metadata(path, meta)
         return Detected(path, Format.ROS2BAG, files, variant=storage)
+    arrays = _comma2k19_arrays(path)
+    if arrays:
+        return Detected(path, Format.COMMA2K19, arrays, variant="segment")
     mcaps = sorted(p for p in path.iterdir() if p.is_file() and _has_magic(p, MCAP_MAGIC))
     if mcaps:
         return Detected(
@@ -304,9 +350,18 @@ def _detect_dir(path: Path) -> Detected:
     if dbs:
         raise _db3_without_metadata(dbs[0])
     raise UnsupportedFormatError(
-        "a directory that is not a rosbag2 bag (no metadata.yaml, no .mcap or .db3 storage)",
+        "a directory that is not a rosbag2 bag (no metadata.yaml, no .mcap or .db3 storage) "
+        "nor a comma2k19 segment (no processed_log/ or global_pose/ arrays)",
         path=path,
     )
+
+
+def _comma2k19_arrays(path: Path) -> tuple[Path, ...]:
+    """The ``.npy`` files of a comma2k19 segment directory (empty if it is not one)."""
+    parts = [path / p for p in _COMMA_PARTS if (path / p).is_dir()]
+    found = sorted(f for part in parts for f in part.rglob("*") if f.is_file())
+    arrays = tuple(f for f in found if _has_magic(f, NPY_MAGIC))
+    return arrays if len(arrays) * 2 >= len(found) else ()
 
 
 def _has_magic(path: Path, magic: bytes) -> bool:

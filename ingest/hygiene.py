@@ -13,6 +13,8 @@ sorted and unique, applying the catalogue's rules (bad-inputs.md, cases 29-32):
   its size and the shift are reported;
 - equal timestamps (case 30): exact duplicates (every column equal, NaN == NaN) are dropped
   and counted; non-identical ones keep the first arrival and are counted as conflicting;
+  a table keyed by time and a second column (``gnss_obs``: ``t_ns``, ``sv``) sorts by both
+  and only rows equal in both are duplicates (one epoch holds many satellites);
 - ``--strict`` turns re-sorting, late drops, conflicting duplicates and clock steps into a
   ``CorruptLogError`` naming the file and the record offset.
 
@@ -132,10 +134,14 @@ class StreamCleaner:
         name: stream name for messages.
         window_ns: the reorder window W in ns.
         strict: raise on any defect that changes or drops data.
+        secondary: a column completing the row key (``sv`` for ``gnss_obs``), or None.
     """
 
-    def __init__(self, name: str, window_ns: int, *, strict: bool) -> None:
+    def __init__(
+        self, name: str, window_ns: int, *, strict: bool, secondary: str | None = None
+    ) -> None:
         self.name = name
+        self.secondary = secondary
         self.window_ns = window_ns
         self.strict = strict
         self.counts = HygieneCounts()
@@ -251,7 +257,10 @@ class StreamCleaner:
         pool = Rows.concat(parts)
         if not len(pool):
             return pool
-        order = np.argsort(pool.t, kind="stable")
+        if self.secondary is None:
+            order = np.argsort(pool.t, kind="stable")
+        else:
+            order = np.lexsort((pool.columns[self.secondary], pool.t))
         pool = pool.take(order)
         pool = self._dedupe(pool, path)
         if final or self._max_t is None:
@@ -265,7 +274,11 @@ class StreamCleaner:
 
     def _dedupe(self, pool: Rows, path: Path) -> Rows:
         t = pool.t
-        same = np.flatnonzero(t[1:] == t[:-1]) + 1
+        equal = t[1:] == t[:-1]
+        if self.secondary is not None:
+            key = pool.columns[self.secondary]
+            equal &= key[1:] == key[:-1]
+        same = np.flatnonzero(equal) + 1
         if not same.size:
             return pool
         starts = np.ones(len(t), bool)

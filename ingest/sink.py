@@ -27,7 +27,7 @@ from ingest.frames import flu_to_frd
 from ingest.hygiene import Rows, StreamCleaner
 from ingest.plausibility import GnssDecision, ImuDecision, decide_gnss, decide_imu
 from ingest.readers.base import Batch
-from ingest.schema import TableName, from_columns
+from ingest.schema import TableName, from_columns, spec
 from ingest.select import TablePlan
 from ingest.tables import Provenance, SourceFile, TableWriter
 from ingest.timebase import TimeBase, convert
@@ -74,7 +74,10 @@ class TableSink:
         self.params = params
         self.block_rows = block_rows
         self.stack = stack
-        self.cleaner = StreamCleaner(plan.key, window_ns, strict=strict)
+        key = spec(plan.table).key
+        self.cleaner = StreamCleaner(
+            plan.key, window_ns, strict=strict, secondary=key[1] if len(key) > 1 else None
+        )
         self.audit = StreamAudit()
         self.counters: dict[str, int] = {}
         self.info: dict[str, str] = {}

@@ -37,7 +37,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "synth": ("pipeline.stages.synth", "generate a synthesized dataset with exact truth"),
     "experiment": (
         "pipeline.stages.experiment",
-        "run a paper's experiment (Monte Carlo, figures, the paper's claims beside ours)",
+        "run a paper experiment (tables + figures; Monte Carlo where the paper's claims need it)",
     ),
     "report": ("pipeline.stages.report", "render the HTML report of one dataset"),
     "summarize": ("pipeline.stages.summarize", "rank filters across datasets"),

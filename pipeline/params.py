@@ -16,8 +16,8 @@ import yaml
 
 from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
-from pipeline.estimation.cascaded.experiments import TractorExperimentParams
-from pipeline.estimation.families import FiltersParams
+from pipeline.estimation.config import FiltersParams
+from pipeline.experiments.tractor_cascaded.runs import TractorExperimentParams
 from pipeline.synth.car import CarSpeedRampParams
 from pipeline.synth.fwekf import FwekfReferenceParams
 from pipeline.synth.seoul_params import SeoulCampusParams
@@ -89,7 +89,7 @@ class ExperimentsParams:
 @dataclass(frozen=True)
 class Params:
     """The whole of ``params.yaml``; ``filters`` holds one section per filter
-    (``pipeline.estimation.families``)."""
+    (``pipeline.estimation.config``)."""
 
     datasets: tuple[str, ...]
     synth: SynthParams

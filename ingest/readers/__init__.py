@@ -18,6 +18,15 @@ REGISTRY: dict[Format, str] = {
     Format.ROS1BAG: "ingest.readers.ros1bag:Ros1BagReader",
     Format.ROS2BAG: "ingest.readers.ros2bag:Ros2BagReader",
     Format.CSV: "ingest.readers.csv:CsvReader",
+    Format.RINEX: "ingest.readers.rinex:RinexReader",
+    Format.GNSSLOGGER: "ingest.readers.gnsslogger:GnssLoggerReader",
+    Format.GSDC: "ingest.readers.gsdc:GsdcReader",
+    Format.TLOG: "ingest.readers.tlog:TlogReader",
+    Format.DATAFLASH: "ingest.readers.dataflash:DataFlashReader",
+    Format.ULOG: "ingest.readers.ulog:UlogReader",
+    Format.COMMA2K19: "ingest.readers.comma2k19:Comma2k19Reader",
+    Format.LIBRSF: "ingest.readers.librsf:LibrsfReader",
+    Format.NMEA: "ingest.readers.nmea:NmeaReader",
 }
 
 

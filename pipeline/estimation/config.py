@@ -18,6 +18,9 @@ from typing import Literal
 
 from ingest.config import ImuNoise
 from ingest.typed import FieldError
+from pipeline.estimation.cascaded.config import CASCADED_KINDS, CascadedFilterParams, check_sections
+from pipeline.estimation.fuzzy import FuzzyParams
+from pipeline.estimation.vehicle_config import VehicleFilterParams
 
 Estimator = Literal["ekf", "ukf"]
 Coupling = Literal["loose", "tight"]
@@ -278,6 +281,7 @@ class InsFilterParams:
         divergence: the NaN barrier.
         nhc: the non-holonomic constraint (required by and only by ``*_nhc`` filters).
         ukf: the unscented transform (required by and only by UKF filters).
+        fuzzy: the fuzzy fading factor (required by and only by ``fwekf``, paper 004).
     """
 
     imu_noise: ImuNoise
@@ -289,15 +293,17 @@ class InsFilterParams:
     divergence: DivergenceParams
     nhc: NhcParams | None = None
     ukf: UkfParams | None = None
+    fuzzy: FuzzyParams | None = None
 
 
 @dataclass(frozen=True)
 class FilterKind:
-    """What a filter name means: estimator, coupling and NHC."""
+    """What a filter name means: estimator, coupling, NHC and fuzzy fading (paper 004)."""
 
     estimator: Estimator
     coupling: Coupling
     nhc: bool
+    fading: bool = False
 
 
 FILTER_KINDS: dict[str, FilterKind] = {
@@ -307,12 +313,13 @@ FILTER_KINDS: dict[str, FilterKind] = {
     "lc_ekf_nhc": FilterKind("ekf", "loose", nhc=True),
     "tc_ekf_nhc": FilterKind("ekf", "tight", nhc=True),
     "tc_ukf_nhc": FilterKind("ukf", "tight", nhc=True),
+    "fwekf": FilterKind("ekf", "loose", nhc=False, fading=True),
 }
 
 
 @dataclass(frozen=True)
 class FiltersParams:
-    """The ``filters`` section: one sub-section per INS/GNSS filter of architecture section 3."""
+    """The ``filters`` section: one sub-section per filter of architecture section 3."""
 
     lc_ekf: InsFilterParams
     tc_ekf: InsFilterParams
@@ -320,8 +327,17 @@ class FiltersParams:
     lc_ekf_nhc: InsFilterParams
     tc_ekf_nhc: InsFilterParams
     tc_ukf_nhc: InsFilterParams
+    fwekf: InsFilterParams
+    vehicle_kinematic: VehicleFilterParams
+    vehicle_dynamic: VehicleFilterParams
+    vehicle_switched: VehicleFilterParams
+    vehicle_imm: VehicleFilterParams
+    cascaded_ekf: CascadedFilterParams
+    cascaded_ukf: CascadedFilterParams
+    cascaded_hybrid: CascadedFilterParams
 
     def __post_init__(self) -> None:
+        check_sections({name: getattr(self, name) for name in CASCADED_KINDS})
         for name, kind in FILTER_KINDS.items():
             section: InsFilterParams = getattr(self, name)
             if kind.nhc and section.nhc is None:
@@ -332,6 +348,8 @@ class FiltersParams:
                 raise FieldError(f"{name}.ukf", "missing: a UKF needs a ukf section")
             if kind.estimator != "ukf" and section.ukf is not None:
                 raise FieldError(f"{name}.ukf", "only UKF filters take a ukf section")
+            if kind.fading != (section.fuzzy is not None):
+                raise FieldError(f"{name}.fuzzy", "fwekf needs a fuzzy section; no other filter")
 
     def get(self, name: str) -> InsFilterParams:
         """The section of filter ``name`` (a key of ``FILTER_KINDS``)."""
@@ -339,4 +357,20 @@ class FiltersParams:
             known = ", ".join(FILTER_KINDS)
             raise KeyError(f"unknown filter {name!r} (known: {known})")
         section: InsFilterParams = getattr(self, name)
+        return section
+
+    def cascaded(self, name: str) -> CascadedFilterParams:
+        """The section of cascaded filter ``name`` (``cascaded.config.CASCADED_KINDS``)."""
+        if name not in CASCADED_KINDS:
+            raise KeyError(f"unknown cascaded filter {name!r} (known: {', '.join(CASCADED_KINDS)})")
+        section: CascadedFilterParams = getattr(self, name)
+        return section
+
+    def vehicle(self, name: str) -> VehicleFilterParams:
+        """The section of vehicle filter ``name`` (``vehicle_config.VEHICLE_FILTERS``)."""
+        from pipeline.estimation.vehicle_config import VEHICLE_FILTERS
+
+        if name not in VEHICLE_FILTERS:
+            raise KeyError(f"unknown vehicle filter {name!r} (known: {', '.join(VEHICLE_FILTERS)})")
+        section: VehicleFilterParams = getattr(self, name)
         return section

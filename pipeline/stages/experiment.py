@@ -1,60 +1,151 @@
-"""Run an experiment of the parameter file and write its data tables and figures.
+"""Run one paper experiment over ingested tables; write JSON/CSV tables and figures.
 
-Experiments: tractor_cascaded (paper 000: the cascaded EKF, UKF and hybrid filters steering
-the simulated tractor in closed loop; bias convergence, tracking error, GPS-outage drift,
-Monte Carlo with confidence intervals, the paper's claims beside ours). Parameters come from
-`experiments.<name>`, the filters' sections and `synth`; the output folder is replaced
-atomically, and everything but timing.json is byte-identical for the same parameters.
+Experiments (pure functions in pipeline/experiments/):
+  vehicle_bands      paper 003: the four vehicle filters per speed band, nominal and with
+                     periodic GNSS outages, and the switched/IMM acceptance check
+                     (--tables: car_speed_ramp)
+  fwekf_convergence  paper 004: EKF against FWEKF from the same start, noisy and noise-free
+                     (--tables: fwekf_reference, --tables-noise-free: fwekf_reference_noise_free)
+  fwekf_faults       paper 004 on seoul_campus: nominal, F7 multipath burst, F8 optimistic
+                     accuracy, outages (--tables: seoul_campus_cw)
+  vehicle_smartloc   paper 003 on the real smartLoc drive: least-squares fixes from the
+                     pseudoranges, the four vehicle filters with and without outages
+                     (--tables: `navreplay ingest` of the smartLoc Input and GT files)
+  tractor_cascaded   paper 000: the cascaded EKF, UKF and hybrid steering the simulated
+                     tractor in closed loop (no --tables: the simulator runs each filter's
+                     own trajectory); Monte Carlo with GPS outages, the paper's claims beside
+                     ours (experiments.tractor_cascaded; everything but timing.json is
+                     byte-identical for the same parameters)
 
 examples:
-  navreplay experiment tractor_cascaded --out datasets/tractor_straight/experiments
+  navreplay experiment vehicle_bands --tables datasets/car_speed_ramp/tables \\
+      --out datasets/car_speed_ramp/experiments/vehicle_bands
+  navreplay experiment tractor_cascaded --out datasets/tractor_straight/experiments/tractor_cascaded
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
-import time
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+from pipeline.errors import ParamsError
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+    from ingest.meta import SensorMeta
+    from pipeline.params import Params
 
 log = logging.getLogger(__name__)
 
-EXPERIMENTS = ("tractor_cascaded",)
+EXPERIMENTS = (
+    "vehicle_bands",
+    "fwekf_convergence",
+    "fwekf_faults",
+    "vehicle_smartloc",
+    "tractor_cascaded",
+)
+#: experiments that simulate instead of reading ingested tables
+NO_TABLES = ("tractor_cascaded",)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("name", choices=EXPERIMENTS, metavar="NAME", help="experiment name")
+    parser.add_argument("name", choices=EXPERIMENTS, help="experiment")
     parser.add_argument(
-        "--params",
+        "--tables", type=Path, metavar="DIR", help="tables dir (all but tractor_cascaded)"
+    )
+    parser.add_argument(
+        "--tables-noise-free",
         type=Path,
-        default=Path("params.yaml"),
-        help="parameter file (default: params.yaml)",
+        metavar="DIR",
+        help="fwekf_convergence: tables of the noise-free dataset",
     )
-    parser.add_argument(
-        "--out", type=Path, required=True, metavar="DIR", help="output directory (replaced)"
-    )
+    parser.add_argument("--params", type=Path, default=Path("params.yaml"), help="parameters")
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output dir")
+
+
+def _read(tables_dir: Path) -> tuple[dict[str, pa.Table], SensorMeta]:
+    from ingest.meta import read_meta
+    from ingest.schema import TableName
+    from ingest.tables import read_table
+
+    tables: dict[str, pa.Table] = {}
+    for name in TableName:
+        path = tables_dir / f"{name.value}.parquet"
+        if path.is_file():
+            tables[name.value] = read_table(path, name).table
+    return tables, read_meta(tables_dir).sensors
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.estimation.cascaded.artifacts import write_experiment
-    from pipeline.estimation.cascaded.config import CASCADED_KINDS
-    from pipeline.estimation.cascaded.experiments import ExperimentInputs
+    from pipeline.experiments import fwekf_faults, fwekf_paper, vehicle_bands, vehicle_smartloc
+    from pipeline.experiments.outputs import write_rows
     from pipeline.params import load_params
 
     params = load_params(args.params)
+    out: Path = args.out
+    dpi = params.report.figure_dpi
+    if args.name == "tractor_cascaded":
+        return _tractor_cascaded(params, out)
+    if args.tables is None:
+        raise ParamsError("--tables", f"experiment {args.name} needs --tables DIR")
+    tables, sensors = _read(args.tables)
+    if args.name == "vehicle_bands":
+        rows = vehicle_bands.band_table(tables, params.filters)
+        checks = vehicle_bands.acceptance([r for r in rows if r["subset"] == "all"])
+        write_rows(out, "bands", rows)
+        write_rows(out, "acceptance", checks, all_ok=all(c["ok"] for c in checks))
+        vehicle_bands.band_figure(rows, out / "bands.png", dpi)
+        print(f"vehicle_bands: {sum(c['ok'] for c in checks)}/{len(checks)} checks ok -> {out}")
+    elif args.name == "fwekf_convergence":
+        if args.tables_noise_free is None:
+            raise ParamsError("--tables-noise-free", "fwekf_convergence needs both datasets")
+        nf_tables, nf_sensors = _read(args.tables_noise_free)
+        rest = params.synth.fwekf_reference.alignment_s
+        cases, rows = {}, []
+        for case, tabs, sens in (("noisy", tables, sensors), ("noise_free", nf_tables, nf_sensors)):
+            for paper_r in (False, True):
+                runs = fwekf_paper.run_case(tabs, sens, params.filters, rest, paper_r=paper_r)
+                tuning = "paper_r" if paper_r else "declared"
+                rows += [dict(r, tuning=tuning) for r in fwekf_paper.convergence_rows(case, runs)]
+                if not paper_r:
+                    cases[case] = runs
+        write_rows(out, "convergence", rows)
+        fwekf_paper.convergence_figure(cases, out / "convergence.png", dpi)
+        print(f"fwekf_convergence: {len(rows)} rows -> {out}")
+    elif args.name == "vehicle_smartloc":
+        rows = vehicle_smartloc.smartloc_rows(tables, params.filters)
+        write_rows(out, "smartloc", rows)
+        print(f"vehicle_smartloc: {len(rows)} rows -> {out}")
+    else:
+        rows = fwekf_faults.fault_rows(tables, sensors, params.filters, params.synth.seed)
+        write_rows(out, "faults", rows)
+        print(f"fwekf_faults: {len(rows)} rows -> {out}")
+    return 0
+
+
+def _tractor_cascaded(params: Params, out: Path) -> int:
+    import time
+
+    from pipeline.estimation.cascaded.config import CASCADED_KINDS
+    from pipeline.experiments.tractor_cascaded.artifacts import write_experiment
+    from pipeline.experiments.tractor_cascaded.runs import ExperimentInputs
+
     exp = params.experiments.tractor_cascaded
     inputs = ExperimentInputs(
         sim=params.synth.tractor_straight,
-        sections={n: params.filters.section(n) for n in CASCADED_KINDS},
+        sections={n: params.filters.cascaded(n) for n in CASCADED_KINDS},
         exp=exp,
         seed=params.synth.seed,
     )
     t0 = time.perf_counter()
-    doc = write_experiment(args.out, inputs, params.report.figure_dpi)
-    verdicts = ", ".join(f"{r['verdict']}" for r in doc["paper_comparison"])
+    doc = write_experiment(out, inputs, params.report.figure_dpi)
+    verdicts = ", ".join(r["verdict"] for r in doc["paper_comparison"])
     print(
         f"tractor_cascaded: {doc['runs']} closed-loop runs ({len(doc['labels'])} filter "
         f"variants, {len(doc['scenarios'])} scenarios, {exp.seeds} seeds) in "
-        f"{time.perf_counter() - t0:.0f} s -> {args.out}\npaper's claims: {verdicts}"
+        f"{time.perf_counter() - t0:.0f} s -> {out}\npaper's claims: {verdicts}"
     )
     return 0

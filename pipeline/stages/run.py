@@ -59,13 +59,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.estimation.families import family
+    from pipeline.estimation.families import runner
     from pipeline.params import load_params
 
     params = load_params(args.params)
     try:
-        runner = family(args.filter)
-        section = params.filters.section(args.filter)
+        run_filter = runner(args.filter)
     except KeyError as err:
         raise ParamsError(
             f"filters.{args.filter}", str(err.args[0]), source=str(args.params)
@@ -76,9 +75,7 @@ def run(args: argparse.Namespace) -> int:
             "arrives (issue 'Outage and satellite-count experiments'); nothing was written"
         )
     backend = args.backend or params.run.backend
-    out = runner.run_tables(args.tables, args.filter, section, backend)
-    runner.write_run(args.out, out, section, args.scenario)
-    m = out.metrics
+    m = run_filter(args.tables, args.filter, params.filters, backend, args.out, args.scenario)
     summary = f"{args.filter} ({backend}): {m['status']}, {m['epochs']} epochs"
     if m.get("truth"):
         summary += f", horizontal RMS {m['pos_err_h_rms_m']:.2f} m"

@@ -13,7 +13,6 @@ from typing import Any, Literal
 
 from ingest.typed import FieldError
 from pipeline.control.lqr import YawSteerModel
-from pipeline.estimation.config import UkfParams
 
 Estimator = Literal["ekf", "ukf", "hybrid"]
 
@@ -128,6 +127,29 @@ class InitialCovariance:
 
     navigation: NavVariances
     control: CtlVariances
+
+
+@dataclass(frozen=True)
+class UnscentedParams:
+    """Scaled unscented transform of ``cascaded_ukf`` and ``cascaded_hybrid`` (paper 000
+    section 8: alpha 1e-3, beta 2, kappa 0; the same parametrization as the INS UKF's
+    ``estimation.config.UkfParams``, which this module cannot import: that module imports
+    this one).
+
+    Attributes:
+        alpha: spread of the sigma points. beta: prior knowledge (2: Gaussian). kappa:
+            secondary scaling.
+    """
+
+    alpha: float = 1.0e-3
+    beta: float = 2.0
+    kappa: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.alpha <= 1.0:
+            raise FieldError("alpha", "must be within (0, 1]")
+        if self.beta < 0 or self.kappa < 0:
+            raise FieldError("beta", "beta and kappa must be >= 0")
 
 
 @dataclass(frozen=True)
@@ -265,7 +287,7 @@ class CascadedFilterParams:
     divergence: CascadedDivergenceParams
     convergence_band: ConvergenceBand
     linearization: LinearizationParams | None = None
-    ukf: UkfParams | None = None
+    ukf: UnscentedParams | None = None
     hybrid: HybridParams | None = None
 
 

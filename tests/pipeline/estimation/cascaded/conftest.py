@@ -25,7 +25,7 @@ def params() -> Params:
 @pytest.fixture(scope="session")
 def sections(params: Params) -> dict[str, CascadedFilterParams]:
     """The ``filters.cascaded_*`` sections of the repository's params.yaml."""
-    return {n: params.filters.section(n) for n in CASCADED}
+    return {n: params.filters.cascaded(n) for n in CASCADED}
 
 
 @pytest.fixture(scope="session")

@@ -19,7 +19,7 @@ from pipeline.estimation.cascaded.config import CascadedFilterParams
 from pipeline.estimation.cascaded.engine import make_setup, replay
 from pipeline.estimation.cascaded.inputs import prepare_inputs
 from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
-from pipeline.estimation.families import family
+from pipeline.estimation.families import runner
 from pipeline.synth.tractor import TractorStraightParams
 from pipeline.synth.tractor_log import synthesize, write
 from tests.pipeline.estimation.cascaded.conftest import REPO
@@ -67,16 +67,12 @@ def test_navreplay_run_writes_the_run_directory_contract(
     np.testing.assert_allclose(est.column("steer_bias_rad").to_numpy(), ref.x[:, 11], atol=1e-9)
 
 
-def test_the_dispatch_routes_each_family_to_its_own_code() -> None:
-    import pipeline.estimation.cascaded.run as cascaded_run
-    import pipeline.estimation.run as ins_run
-
-    assert family("lc_ekf") is ins_run
-    assert family("tc_ukf_nhc") is ins_run
-    for name in ("cascaded_ekf", "cascaded_ukf", "cascaded_hybrid"):
-        assert family(name) is cascaded_run
+def test_the_dispatch_routes_each_family_to_its_own_runner() -> None:
+    assert runner("cascaded_ekf") is runner("cascaded_hybrid")
+    assert runner("cascaded_ukf") is not runner("lc_ekf")
+    assert runner("lc_ekf") is runner("tc_ukf_nhc")
     with pytest.raises(KeyError, match="cascaded_hybrid"):
-        family("cascaded_pf")
+        runner("cascaded_pf")
 
 
 def test_an_unknown_filter_is_a_params_error_naming_the_known_ones(

@@ -1,6 +1,7 @@
 """The tractor experiment's output folder: data tables (CSV/JSON) and figures.
 
-Layout of ``OUT`` (``navreplay experiment tractor_cascaded --out OUT``)::
+Layout of ``OUT`` (``navreplay experiment tractor_cascaded --out OUT``; the dvc stage writes
+``datasets/tractor_straight/experiments/tractor_cascaded``)::
 
     summary.json            every aggregate: stats and paired differences per label,
                             scenario and metric; the paper comparison; the mechanism checks
@@ -31,8 +32,11 @@ import numpy as np
 
 from ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
 from ingest.typed import to_plain
-from pipeline.estimation.cascaded.comparison import mechanisms, paper_comparison
-from pipeline.estimation.cascaded.experiments import (
+from pipeline.estimation.cascaded.metrics import BIASES
+from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
+from pipeline.experiments.tractor_cascaded.comparison import mechanisms, paper_comparison
+from pipeline.experiments.tractor_cascaded.figures import draw_all
+from pipeline.experiments.tractor_cascaded.runs import (
     BASELINE,
     NOMINAL,
     ExperimentInputs,
@@ -41,9 +45,6 @@ from pipeline.estimation.cascaded.experiments import (
     run_experiment,
     summarize,
 )
-from pipeline.estimation.cascaded.figures import draw_all
-from pipeline.estimation.cascaded.metrics import BIASES
-from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
 
 _STAT_COLS = ("n", "mean", "std", "ci_low", "ci_high")
 

@@ -10,14 +10,28 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.estimation.cascaded.artifacts import write_experiment
-from pipeline.estimation.cascaded.config import CascadedFilterParams
-from pipeline.estimation.cascaded.experiments import (
+from pipeline.estimation.cascaded.config import CASCADED_KINDS, CascadedFilterParams
+from pipeline.experiments.tractor_cascaded.artifacts import write_experiment
+from pipeline.experiments.tractor_cascaded.runs import (
     ExperimentInputs,
     TractorExperimentParams,
     mean_ci,
 )
+from pipeline.params import load_params
 from pipeline.synth.tractor import TractorStraightParams
+
+REPO = Path(__file__).resolve().parents[3]
+
+
+@pytest.fixture(scope="module")
+def sim_params() -> TractorStraightParams:
+    return load_params(REPO / "params.yaml").synth.tractor_straight
+
+
+@pytest.fixture(scope="module")
+def sections() -> dict[str, CascadedFilterParams]:
+    filters = load_params(REPO / "params.yaml").filters
+    return {n: filters.cascaded(n) for n in CASCADED_KINDS}
 
 
 def small(sim: TractorStraightParams, sections: dict[str, CascadedFilterParams],

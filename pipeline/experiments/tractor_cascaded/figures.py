@@ -262,7 +262,8 @@ def monte_carlo(summary: dict[str, Any], labels: list[str], scenarios: list[str]
     axes[-1].set(title="Horizontal error at the outage end", ylabel="m")
     for ax in axes:
         ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
     return _save(fig, out_dir, "monte_carlo", dpi)
 
 

@@ -26,7 +26,7 @@ import math
 from typing import Any
 
 from pipeline.estimation.cascaded.config import CascadedFilterParams
-from pipeline.estimation.cascaded.experiments import (
+from pipeline.experiments.tractor_cascaded.runs import (
     BASELINE,
     NOMINAL,
     PSI_D_LABEL,

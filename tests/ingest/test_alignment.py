@@ -1,0 +1,104 @@
+"""Cross-stream time alignment from speed signals (catalogue case 36, filter fault F20): a known
+offset between two streams is recovered within 20 ms, and an 18 s leap-second mix-up in an
+ingest is reported as a warning."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pymap3d
+import pytest
+
+from ingest.alignment import WARN_LAG_S, estimate_lag, speed_signal
+from ingest.api import ingest
+from ingest.config import parse_dataset_config
+
+
+def _speed(t_s: np.ndarray) -> np.ndarray:
+    """An urban speed profile: stops, accelerations and a slow trend."""
+    return (
+        8.0
+        + 4.0 * np.sin(2 * np.pi * t_s / 37.0)
+        + 2.5 * np.sin(2 * np.pi * t_s / 11.0 + 1.0)
+        + 0.02 * t_s
+    )
+
+
+@pytest.mark.parametrize("lag_s", [0.0, 0.137, -0.45, 18.0])
+def test_a_known_offset_is_recovered_within_20_ms(lag_s: float) -> None:
+    rng = np.random.default_rng(7)
+    t_a = np.arange(0.0, 300.0, 0.1)  # a 10 Hz receiver
+    t_b = np.arange(0.013, 300.0, 0.012)  # an 83 Hz CAN bus, stamped lag_s late
+    v_a = _speed(t_a) + rng.normal(0.0, 0.05, t_a.size)
+    v_b = _speed(t_b - lag_s) * 1.01 + rng.normal(0.0, 0.02, t_b.size)
+    ns = 1e9
+    est = estimate_lag((t_a * ns).astype(np.int64), v_a, (t_b * ns).astype(np.int64), v_b)
+    assert est is not None
+    lag, corr, overlap = est
+    assert lag == pytest.approx(lag_s, abs=0.02)
+    assert corr > 0.99
+    assert overlap == pytest.approx(299.9, abs=0.1)
+
+
+def test_a_flat_signal_gives_no_estimate() -> None:
+    t = (np.arange(0.0, 60.0, 0.1) * 1e9).astype(np.int64)
+    assert estimate_lag(t, np.full(t.size, 10.0), t, np.full(t.size, 10.0)) is None
+
+
+def test_speed_from_positions_on_a_long_straight_road() -> None:
+    # 10 m/s east at 52 deg N: the speed must not depend on the longitude's magnitude.
+    t = np.arange(0.0, 100.0, 1.0)
+    lat, lon, _ = pymap3d.ned2geodetic(0.0 * t, 10.0 * t, 0.0 * t, 52.5, 113.4, 0.0)
+    sig = speed_signal(
+        {"t_ns": (t * 1e9).astype(np.int64), "lat_deg": lat, "lon_deg": lon}, "truth"
+    )
+    assert sig is not None
+    assert sig[2] == "position differences"
+    np.testing.assert_allclose(sig[1], 10.0, rtol=2e-3)
+
+
+def test_an_18_s_offset_between_files_is_a_warning(tmp_path: Path) -> None:
+    t = np.arange(0.0, 120.0, 0.1)
+    course = math.radians(30.0)
+    v = _speed(t)
+    wheel = tmp_path / "wheel.csv"
+    wheel.write_text(
+        "t,v\n" + "".join(f"{a + 18.0:.3f},{b:.4f}\n" for a, b in zip(t, v, strict=True))
+    )
+    fix = tmp_path / "fix.csv"
+    lines = [
+        f"{a:.3f},{37.0 + 1e-5 * a:.8f},-122.0,10.0,{b * math.cos(course):.4f},"
+        f"{b * math.sin(course):.4f}\n"
+        for a, b in zip(t, v, strict=True)
+    ]
+    fix.write_text("t,lat,lon,alt,vn,ve\n" + "".join(lines))
+    common = {"time_column": "t", "time_unit": "s", "time_base": "gps"}
+    cfg = parse_dataset_config(
+        {
+            "id": "leap",
+            "csv": [
+                {"path": "wheel.csv", "table": "vehicle", "columns": {"speed_mps": "v"}, **common},
+                {
+                    "path": "fix.csv",
+                    "table": "gnss",
+                    "columns": {
+                        "lat_deg": "lat",
+                        "lon_deg": "lon",
+                        "alt_m": "alt",
+                        "vel_n_mps": "vn",
+                        "vel_e_mps": "ve",
+                    },
+                    "constants": {"fix_type": 3},
+                    **common,
+                },
+            ],
+        }
+    )
+    result = ingest([wheel, fix], tmp_path / "out", config=cfg, config_dir=tmp_path)
+    (align,) = result.report["time_base"]["alignment"]
+    assert align["streams"] == ["gnss", "vehicle"]
+    assert align["lag_s"] == pytest.approx(18.0, abs=0.02)
+    assert abs(align["lag_s"]) > WARN_LAG_S
+    assert any("time bases disagree" in w and "+18.0" in w for w in result.report["warnings"])
