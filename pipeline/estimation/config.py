@@ -78,9 +78,17 @@ class GnssNoiseParams:
     Attributes:
         pos_sigma_floor_m: floor on the receiver's h_acc / v_acc, m.
         pos_sigma_default_m: position 1-sigma when the receiver reports none, m.
+        pos_error_corr_time_s: correlation time of the fixes' position errors (multipath,
+            atmosphere), s. A first-order Gauss-Markov error sampled every dt carries about
+            the information of one independent fix per 2 tau, so the fix variance is inflated
+            by ``1 + 2 tau / dt`` (0: white errors, no inflation). Reported accuracies are
+            per-fix sigmas and say nothing about correlation; without this a loosely coupled
+            filter averages correlated errors as if they were white and becomes overconfident.
         vel_sigma_floor_mps: floor on the receiver's speed accuracy, m/s.
         vel_sigma_default_mps: velocity 1-sigma when the receiver reports none, m/s.
         use_velocity: fuse the receiver velocity where present (loose coupling).
+        use_fix_latency: apply each fix at its own epoch, ``t_ns - latency_s``, where the
+            table has a ``latency_s`` column (arrival minus the receiver's epoch).
         pseudorange_sigma_floor_m: floor on the pseudorange 1-sigma, m.
         pseudorange_sigma_default_m: pseudorange 1-sigma when the table has none, m.
         pseudorange_rate_sigma_floor_mps: floor on the pseudorange-rate 1-sigma, m/s.
@@ -90,9 +98,11 @@ class GnssNoiseParams:
 
     pos_sigma_floor_m: float = 0.5
     pos_sigma_default_m: float = 3.0
+    pos_error_corr_time_s: float = 0.0
     vel_sigma_floor_mps: float = 0.05
     vel_sigma_default_mps: float = 0.2
     use_velocity: bool = True
+    use_fix_latency: bool = True
     pseudorange_sigma_floor_m: float = 0.5
     pseudorange_sigma_default_m: float = 3.0
     pseudorange_rate_sigma_floor_mps: float = 0.02
@@ -100,6 +110,7 @@ class GnssNoiseParams:
     elevation_mask_deg: float = 10.0
 
     def __post_init__(self) -> None:
+        _positive(self, "pos_error_corr_time_s", allow_zero=True)
         _positive(
             self,
             "pos_sigma_floor_m",
@@ -119,13 +130,16 @@ class GnssNoiseParams:
 class ClockParams:
     """Receiver clock model (tight coupling): bias and drift as random walks (paper 001).
 
+    The defaults are a typical TCXO (Allan coefficients h0 = 2e-19, h-2 = 2e-20:
+    ``c^2 h0 / 2`` and ``2 pi^2 c^2 h-2``).
+
     Attributes:
         bias_psd_m2ps: white-noise density driving the clock bias, m^2/s.
         drift_psd_m2ps3: white-noise density driving the clock drift, m^2/s^3.
     """
 
-    bias_psd_m2ps: float = 0.1
-    drift_psd_m2ps3: float = 0.01
+    bias_psd_m2ps: float = 0.01
+    drift_psd_m2ps3: float = 0.04
 
     def __post_init__(self) -> None:
         _positive(self, "bias_psd_m2ps", "drift_psd_m2ps3", allow_zero=True)
