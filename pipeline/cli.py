@@ -35,7 +35,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "one-off post-mission analysis of a log: ingest + filters + report",
     ),
     "synth": ("pipeline.stages.synth", "generate a synthesized dataset with exact truth"),
-    "experiment": ("pipeline.stages.experiment", "run a paper experiment (tables + figures)"),
+    "experiment": (
+        "pipeline.stages.experiment",
+        "run a paper experiment (tables + figures; Monte Carlo where the paper's claims need it)",
+    ),
     "report": ("pipeline.stages.report", "render the HTML report of one dataset"),
     "summarize": ("pipeline.stages.summarize", "rank filters across datasets"),
     "bench": ("pipeline.stages.bench", "run the speed benchmarks against reference backends"),

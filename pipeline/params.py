@@ -17,6 +17,7 @@ import yaml
 from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
 from pipeline.estimation.config import FiltersParams
+from pipeline.experiments.tractor_cascaded.runs import TractorExperimentParams
 from pipeline.synth.car import CarSpeedRampParams
 from pipeline.synth.fwekf import FwekfReferenceParams
 from pipeline.synth.seoul_params import SeoulCampusParams
@@ -109,6 +110,13 @@ class ReportParams:
 
 
 @dataclass(frozen=True)
+class ExperimentsParams:
+    """``experiments``: the experiments run by ``navreplay experiment NAME``."""
+
+    tractor_cascaded: TractorExperimentParams
+
+
+@dataclass(frozen=True)
 class Params:
     """The whole of ``params.yaml``; ``filters`` holds one section per filter
     (``pipeline.estimation.config``). ``datasets`` are the built-in, synthesized datasets;
@@ -120,6 +128,7 @@ class Params:
     run: RunParams
     report: ReportParams
     filters: FiltersParams
+    experiments: ExperimentsParams
     recorded: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:

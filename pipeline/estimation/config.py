@@ -18,6 +18,7 @@ from typing import Literal
 
 from ingest.config import ImuNoise
 from ingest.typed import FieldError
+from pipeline.estimation.cascaded.config import CASCADED_KINDS, CascadedFilterParams, check_sections
 from pipeline.estimation.fuzzy import FuzzyParams
 from pipeline.estimation.vehicle_config import VehicleFilterParams
 
@@ -345,8 +346,12 @@ class FiltersParams:
     vehicle_dynamic: VehicleFilterParams
     vehicle_switched: VehicleFilterParams
     vehicle_imm: VehicleFilterParams
+    cascaded_ekf: CascadedFilterParams
+    cascaded_ukf: CascadedFilterParams
+    cascaded_hybrid: CascadedFilterParams
 
     def __post_init__(self) -> None:
+        check_sections({name: getattr(self, name) for name in CASCADED_KINDS})
         for name, kind in FILTER_KINDS.items():
             section: InsFilterParams = getattr(self, name)
             if kind.nhc and section.nhc is None:
@@ -366,6 +371,13 @@ class FiltersParams:
             known = ", ".join(FILTER_KINDS)
             raise KeyError(f"unknown filter {name!r} (known: {known})")
         section: InsFilterParams = getattr(self, name)
+        return section
+
+    def cascaded(self, name: str) -> CascadedFilterParams:
+        """The section of cascaded filter ``name`` (``cascaded.config.CASCADED_KINDS``)."""
+        if name not in CASCADED_KINDS:
+            raise KeyError(f"unknown cascaded filter {name!r} (known: {', '.join(CASCADED_KINDS)})")
+        section: CascadedFilterParams = getattr(self, name)
         return section
 
     def vehicle(self, name: str) -> VehicleFilterParams:

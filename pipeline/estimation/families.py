@@ -12,6 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
 
+from pipeline.estimation.cascaded.config import CASCADED_KINDS
 from pipeline.estimation.config import FILTER_KINDS, FiltersParams
 from pipeline.estimation.vehicle_config import VEHICLE_FILTERS
 
@@ -41,10 +42,22 @@ def _run_vehicle(
     return run.metrics
 
 
+def _run_cascaded(
+    tables: Path, name: str, filters: FiltersParams, backend: Backend, out: Path, scenario: str
+) -> dict[str, Any]:
+    from pipeline.estimation.cascaded.run import run_tables, write_run
+
+    section = filters.cascaded(name)
+    run = run_tables(tables, name, section, backend)
+    write_run(out, run, section, scenario)
+    return run.metrics
+
+
 #: family name -> (its filter names, its runner)
 FAMILIES: dict[str, tuple[tuple[str, ...], RunFn]] = {
     "ins": (tuple(FILTER_KINDS), _run_ins),
     "vehicle": (VEHICLE_FILTERS, _run_vehicle),
+    "cascaded": (tuple(CASCADED_KINDS), _run_cascaded),
 }
 
 

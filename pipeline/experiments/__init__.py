@@ -18,6 +18,10 @@ reports under ``datasets/<id>/experiments/<NAME>/``:
 - ``fwekf_faults`` (paper 004, seoul_campus_cw): ``faults.{json,csv}`` one row per scenario
   (``nominal``, ``F7_multipath_burst``, ``F8_optimistic_accuracy``, ``outages``) and filter.
 
+- ``tractor_cascaded`` (paper 000, simulated in closed loop; no tables): the cascaded EKF,
+  UKF and hybrid steering the tractor, Monte Carlo over seeds with GPS outages; the folder's
+  layout is documented in ``tractor_cascaded.artifacts``.
+
 - ``vehicle_smartloc`` (the real smartLoc drive, tables from ``navreplay ingest`` of its two
   text files; not a dvc stage, the data lives outside the repository): ``smartloc.{json,csv}``
   with the layout of ``bands`` plus whole-drive rows (``band_hi_mps`` null) and a

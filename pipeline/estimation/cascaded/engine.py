@@ -1,0 +1,332 @@
+"""Run set-up and the backend-neutral stepper of the cascaded filters.
+
+``make_setup`` packs a ``filters.cascaded_*`` section into the arrays the kernels take;
+``CascadeState`` allocates one run's state and logs; a *stepper* processes one sample at a
+time, which is what the closed loop needs (the plant is stepped in Python between samples):
+
+- ``NumbaStepper`` calls the compiled ``cascade.cascade_sample``;
+- ``reference.FilterpyStepper`` does the same with filterpy's filters.
+
+Both expose ``x`` (the current estimate, (12,)), ``ok``, ``sample(t_ns, veh, gps)``,
+``nav_epoch(t_ns, gps)``, ``set_command(u)`` and ``result()``. ``replay`` runs a whole
+recording through either.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Literal, Protocol
+
+import numpy as np
+from scipy.stats import chi2
+
+from pipeline.errors import DivergenceError
+from pipeline.estimation.cascaded import cascade as cs
+from pipeline.estimation.cascaded.config import (
+    CASCADED_KINDS,
+    NAV_STATE_NAMES,
+    CascadedFilterParams,
+)
+from pipeline.estimation.cascaded.filters import EST_EKF, EST_HYBRID, EST_UKF
+from pipeline.estimation.cascaded.model import NX, ctl_discretize, model_params
+from pipeline.estimation.inputs import Event
+from pipeline.estimation.kernels import common as cm
+from pipeline.estimation.kernels.unscented import ukf_weights
+from pipeline.nav.earth import F64, I64
+
+Backend = Literal["numba", "filterpy"]
+
+_EST_CODE = {"ekf": EST_EKF, "ukf": EST_UKF, "hybrid": EST_HYBRID}
+EVENT_NAMES = {**cm.EVENT_NAMES, cs.EV_GAP: "input_gap"}
+_NAN4 = np.full(cs.VEH_COLS, math.nan)
+
+
+@dataclass(frozen=True)
+class CascadeSetup:
+    """Everything a backend needs besides the data (see ``cascade`` for the layouts)."""
+
+    name: str
+    estimator: str
+    cfg: F64
+    q: F64
+    r: F64
+    par: F64
+    wm: F64
+    wc: F64
+    gate: F64
+    ekf_mean: I64
+    x0: F64
+    P0: F64
+    on_divergence: str
+    ut_params: tuple[float, float, float]  # alpha, beta, kappa (UKF and hybrid)
+
+
+def make_setup(name: str, params: CascadedFilterParams) -> CascadeSetup:
+    """Pack filter ``name`` (a key of ``CASCADED_KINDS``) with its section ``params``."""
+    est = CASCADED_KINDS[name]
+    cfg = np.zeros(cs.CFG_DIM)
+    cfg[cs.C_EST] = _EST_CODE[est]
+    cfg[cs.C_TIMEOUT] = params.gating.timeout_s
+    cfg[cs.C_NOISE_DT] = params.process_noise.interval_s
+    cfg[cs.C_MAX_STEP] = params.step.max_step_s
+    cfg[cs.C_GAP] = params.step.gap_s
+    cfg[cs.C_MAX_POS_SIGMA] = params.divergence.max_pos_sigma_m
+    wm = wc = np.ones(2 * NX + 1)
+    ut = (1.0, 2.0, 0.0)
+    if params.ukf is not None:
+        ut = (params.ukf.alpha, params.ukf.beta, params.ukf.kappa)
+        wm, wc, gamma = ukf_weights(NX, *ut)
+        cfg[cs.C_GAMMA] = gamma
+    pn = params.process_noise
+    q = np.array([pn.navigation.values(), pn.control.values()])
+    sn = params.sensor_noise
+    r = np.array([sn.nav(), sn.ctl()])
+    lin = params.linearization
+    m = params.model
+    par = model_params(
+        m.omega_n_radps,
+        m.zeta,
+        m.k_r,
+        m.k_v,
+        m.tau_v_s,
+        jacobian_at_desired=lin is not None and lin.jacobian_at == "desired_heading",
+        desired_heading_rad=math.radians(lin.desired_heading_deg) if lin is not None else 0.0,
+    )
+    ekf_mean = np.zeros(NX, np.int64)
+    if params.hybrid is not None:
+        for s in params.hybrid.ekf_mean:
+            ekf_mean[NAV_STATE_NAMES.index(s)] = 1
+    gate = np.array([math.inf] + [float(chi2.ppf(params.gating.probability, d)) for d in (1, 2, 3)])
+    P0 = np.zeros((2, NX, NX))
+    P0[0] = np.diag(params.initial.navigation.values())
+    P0[1] = np.diag(params.initial.control.values())
+    return CascadeSetup(
+        name, est, cfg, q, r, par, wm, wc, gate, ekf_mean, np.zeros(2 * NX), P0,
+        params.divergence.on_divergence, ut,
+    )  # fmt: skip
+
+
+@dataclass
+class CascadedResult:
+    """The outcome of one cascaded run.
+
+    Attributes:
+        filter, backend: names. t_ns: output times (K,). x: ``[X1, X2]`` per output (K, 12).
+        P: covariances (K, 2, 6, 6). inn_i (J, 5), inn_f (J, 8): innovations
+            (``kernels.common`` layout; streams ``cascade.STREAM_NAMES``). events: by time.
+        status: ``ok`` or ``diverged``; failure: what and when. runtime_s: wall time of the
+            filter. duration_s: time span processed. extra: free-form (closed loop, frame).
+    """
+
+    filter: str
+    backend: str
+    t_ns: I64
+    x: F64
+    P: F64
+    inn_i: I64
+    inn_f: F64
+    events: list[Event]
+    status: str = "ok"
+    failure: str | None = None
+    runtime_s: float = 0.0
+    duration_s: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class CascadeState:
+    """The arrays of one run: state, memory and logs for up to ``capacity`` samples."""
+
+    def __init__(self, setup: CascadeSetup, capacity: int, n_gps: int = 0) -> None:
+        self.setup = setup
+        self.x = setup.x0.copy()
+        self.P = setup.P0.copy()
+        self.mem = np.zeros(cs.MEM_DIM)
+        self.mem[cs.M_DISC] = math.nan
+        self._discs: dict[int, F64] = {}
+        self.imem = np.zeros(cs.IMEM_DIM, np.int64)
+        self.imem[cs.I_REJ :] = -1
+        n_inn = 5 * capacity + 2 * n_gps + 8
+        n_ev = n_inn + 2 * (capacity + n_gps) + 16
+        self.out_t = np.zeros(capacity, np.int64)
+        self.out_x = np.zeros((capacity, 2 * NX))
+        self.out_P = np.zeros((capacity, 2, NX, NX))
+        self.inn_i = np.zeros((n_inn, cm.INN_I_COLS), np.int64)
+        self.inn_f = np.zeros((n_inn, cm.INN_F_COLS))
+        self.ev_i = np.zeros((n_ev, 4), np.int64)
+        self.ev_f = np.zeros(n_ev)
+        self.counts = np.zeros(cm.CNT_DIM, np.int64)
+
+    def prepare(self, t_ns: int) -> None:
+        """Place the control discretization (eq. 14) of the step to ``t_ns`` in ``mem``,
+        computed once per distinct step length."""
+        if not self.imem[cs.I_STARTED]:
+            return
+        dt_ns = int(t_ns - self.imem[cs.I_T_CTL])
+        if dt_ns <= 0 or self.mem[cs.M_DISC] == dt_ns * 1e-9:
+            return
+        disc = self._discs.get(dt_ns)
+        if disc is None:
+            disc = self._discs[dt_ns] = ctl_discretize(self.setup.par, dt_ns * 1e-9)
+        self.mem[cs.M_DISC :] = disc
+
+    def args(self) -> tuple[Any, ...]:
+        """The state and log arguments of ``cascade_sample`` after ``(t, veh, gps,
+        nav_only)``."""
+        s = self.setup
+        return (
+            self.x, self.P, self.mem, self.imem, s.cfg, s.q, s.r, s.par, s.wm, s.wc, s.gate,
+            s.ekf_mean, self.out_t, self.out_x, self.out_P, self.inn_i, self.inn_f, self.ev_i,
+            self.ev_f, self.counts,
+        )  # fmt: skip
+
+    def result(self, backend: str, status: int, runtime_s: float) -> CascadedResult:
+        """Collect the logs into a ``CascadedResult``."""
+        k_out, k_inn, k_ev = (int(self.counts[c]) for c in (cm.CNT_OUT, cm.CNT_INN, cm.CNT_EV))
+        k_out = min(k_out, self.out_t.size)
+        k_inn = min(k_inn, self.inn_i.shape[0])
+        events = [
+            Event(
+                int(self.ev_i[j, 0]),
+                EVENT_NAMES.get(int(self.ev_i[j, 1]), str(self.ev_i[j, 1])),
+                cs.STREAM_NAMES[self.ev_i[j, 2]] if self.ev_i[j, 2] >= 0 else "",
+                "",
+                float(self.ev_f[j]),
+            )
+            for j in range(min(k_ev, self.ev_i.shape[0]))
+        ]
+        t = self.out_t[:k_out].copy()
+        failure = None
+        if status != cm.STATUS_OK:
+            failure = f"{cm.STATUS_TEXT[status]} at t_ns={int(self.counts[cm.CNT_T_FAIL])}"
+        return CascadedResult(
+            filter=self.setup.name,
+            backend=backend,
+            t_ns=t,
+            x=self.out_x[:k_out].copy(),
+            P=self.out_P[:k_out].copy(),
+            inn_i=self.inn_i[:k_inn].copy(),
+            inn_f=self.inn_f[:k_inn].copy(),
+            events=events,
+            status="ok" if status == cm.STATUS_OK else "diverged",
+            failure=failure,
+            runtime_s=runtime_s,
+            duration_s=float((t[-1] - t[0]) * 1e-9) if t.size else 0.0,
+        )
+
+
+class Stepper(Protocol):
+    """One cascaded filter, one sample at a time (either backend)."""
+
+    @property
+    def x(self) -> F64: ...
+
+    @property
+    def ok(self) -> bool: ...
+
+    def sample(self, t_ns: int, veh: F64, gps: F64) -> None: ...
+
+    def nav_epoch(self, t_ns: int, gps: F64) -> None: ...
+
+    def set_command(self, u: float) -> None: ...
+
+    def result(self) -> CascadedResult: ...
+
+
+class NumbaStepper:
+    """The compiled backend, one ``cascade_sample`` per call (``x`` is live, not a copy).
+
+    Raises ``DivergenceError`` from ``sample`` on divergence unless the section says
+    ``on_divergence: flag``, in which case later samples are ignored and ``result`` reports
+    the run as diverged.
+    """
+
+    backend = "numba"
+
+    def __init__(self, setup: CascadeSetup, capacity: int, n_gps: int = 0) -> None:
+        self.state = CascadeState(setup, capacity, n_gps)
+        self._args = self.state.args()
+        self._status = cm.STATUS_OK
+        self._wall = 0.0
+
+    @property
+    def x(self) -> F64:
+        return self.state.x
+
+    @property
+    def ok(self) -> bool:
+        return self._status == cm.STATUS_OK
+
+    def sample(self, t_ns: int, veh: F64, gps: F64) -> None:
+        self._call(t_ns, veh, gps, False)
+
+    def nav_epoch(self, t_ns: int, gps: F64) -> None:
+        """A GPS fix between vehicle samples."""
+        self._call(t_ns, _NAN4, gps, True)
+
+    def _call(self, t_ns: int, veh: F64, gps: F64, nav_only: bool) -> None:
+        if self._status != cm.STATUS_OK:
+            return
+        t0 = time.perf_counter()
+        if not nav_only:
+            self.state.prepare(t_ns)
+        self._status = int(cs.cascade_sample(t_ns, veh, gps, nav_only, *self._args))
+        self._wall += time.perf_counter() - t0
+        if self._status != cm.STATUS_OK:
+            raise_if_diverged(self.state.setup, self.state.result(self.backend, self._status, 0.0))
+
+    def set_command(self, u: float) -> None:
+        self.state.mem[cs.M_CMD] = u
+
+    def result(self) -> CascadedResult:
+        return self.state.result(self.backend, self._status, self._wall)
+
+
+def raise_if_diverged(setup: CascadeSetup, result: CascadedResult) -> None:
+    """``DivergenceError`` for a diverged run whose section says ``on_divergence: raise``."""
+    if setup.on_divergence == "raise":
+        raise DivergenceError(
+            f"filter {setup.name} ({result.backend}) diverged: {result.failure}; set "
+            f"filters.{setup.name}.divergence.on_divergence: flag to keep the output up to it"
+        )
+
+
+def make_stepper(setup: CascadeSetup, capacity: int, backend: Backend, n_gps: int = 0
+                 ) -> Stepper:  # fmt: skip
+    """A stepper of ``backend`` for up to ``capacity`` samples (and ``n_gps`` extra fixes)."""
+    if backend == "numba":
+        return NumbaStepper(setup, capacity, n_gps)
+    from pipeline.estimation.cascaded.reference import FilterpyStepper
+
+    return FilterpyStepper(setup, capacity, n_gps)
+
+
+def replay(
+    setup: CascadeSetup, veh_t: I64, veh: F64, gps_t: I64, gps: F64, backend: Backend
+) -> CascadedResult:
+    """Run a recording open loop: every vehicle sample with the GPS fix of the same time,
+    GPS fixes between samples as ``nav_epoch``, the recorded command (``veh[:, V_CMD]``,
+    NaN = 0) applied after each sample. Raises ``DivergenceError`` on divergence unless the
+    section says ``flag`` (the result then ends there)."""
+    t0 = time.perf_counter()
+    stepper = make_stepper(setup, veh_t.size, backend, gps_t.size)
+    nan3 = np.full(cs.GPS_COLS, math.nan)
+    j, m = 0, gps_t.size
+    for k in range(veh_t.size):
+        t = int(veh_t[k])
+        while j < m and gps_t[j] < t:
+            stepper.nav_epoch(int(gps_t[j]), gps[j])
+            j += 1
+        g = nan3
+        if j < m and gps_t[j] == t:
+            g = gps[j]
+            j += 1
+        stepper.sample(t, veh[k], g)
+        if not stepper.ok:
+            break
+        cmd = float(veh[k, cs.V_CMD])
+        stepper.set_command(cmd if math.isfinite(cmd) else 0.0)
+    result = stepper.result()
+    result.runtime_s = time.perf_counter() - t0
+    return result

@@ -1,0 +1,102 @@
+"""Closed loop (paper 000 section 9): the LQR on each filter's estimates tracks the line, the
+biases converge within the band; where the UKF's radar bias does not, the unscented
+second-order term accounts for it."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from pipeline.estimation.cascaded.closed_loop import (
+    ClosedLoopRun,
+    run_closed_loop,
+    run_closed_loop_scenarios,
+)
+from pipeline.estimation.cascaded.config import CascadedFilterParams
+from pipeline.estimation.cascaded.engine import make_setup
+from pipeline.estimation.cascaded.metrics import BIASES, bias_convergence
+from pipeline.estimation.cascaded.model import NAV_PSI, NAV_RB
+from pipeline.synth.tractor import TractorStraightParams
+from tests.pipeline.estimation.cascaded.conftest import CASCADED
+
+
+@pytest.fixture(scope="module")
+def nominal(
+    sections: dict[str, CascadedFilterParams], sim_params: TractorStraightParams
+) -> dict[str, ClosedLoopRun]:
+    """The paper's 80 s scenario closed on each filter's estimates (one seed)."""
+    return {n: run_closed_loop(make_setup(n, sections[n]), sim_params, 2026) for n in CASCADED}
+
+
+@pytest.mark.parametrize("name", CASCADED)
+def test_the_closed_loop_brings_the_3_m_step_back_to_the_line(
+    name: str, nominal: dict[str, ClosedLoopRun]
+) -> None:
+    """Within 1 m after 5 s, within 0.1 m from 20 s on (the estimates' heading bias is still
+    converging in the first seconds, so the tractor returns slower than on true states)."""
+    run = nominal[name]
+    assert run.result.status == "ok"
+    assert run.t_s[-1] == pytest.approx(80.0)
+    lat, t = run.lateral_err_m, run.t_s
+    assert lat[0] == pytest.approx(-3.0)
+    assert np.abs(lat[t >= 5.0]).max() < 1.0
+    assert np.abs(lat[t >= 20.0]).max() < 0.1
+    assert np.sqrt(np.mean(lat[t >= 20.0] ** 2)) < 0.05
+
+
+@pytest.mark.parametrize("name", CASCADED)
+def test_each_filters_biases_converge_within_the_band_on_the_nominal_run(
+    name: str, nominal: dict[str, ClosedLoopRun], sections: dict[str, CascadedFilterParams]
+) -> None:
+    """Every bias of the EKF and the hybrid, and the UKF's gyro, heading and steer biases
+    (its radar bias: next test)."""
+    run = nominal[name]
+    conv = bias_convergence(run.t_s, run.result.x, run.truth_x, sections[name].convergence_band)
+    expected = [b for b, _ in BIASES if not (name == "cascaded_ukf" and b == "radar_bias_mps")]
+    for bias in expected:
+        t_conv = conv[bias]
+        assert t_conv is not None, bias
+        assert t_conv < 40.0, bias
+
+
+def test_the_ukf_radar_bias_settles_where_the_unscented_second_order_term_puts_it(
+    nominal: dict[str, ClosedLoopRun],
+    sections: dict[str, CascadedFilterParams],
+    sim_params: TractorStraightParams,
+) -> None:
+    """With alpha = 1e-3 the UKF's predicted North step is ``(V - r_b)(1 - P_psipsi / 2)``;
+    GPS pins North, so the radar-bias estimate absorbs the factor: its error is
+    ``-V (1 / (1 - P_psipsi / 2) - 1)``, -0.26 m/s at Table 1's heading variance (outside
+    the 0.04 m/s band: the paper's claim of a faster UKF radar bias is not reproduced)."""
+    run = nominal["cascaded_ukf"]
+    settled = run.t_s >= 20.0
+    err = np.mean(run.result.x[settled, NAV_RB] - run.truth_x[settled, NAV_RB])
+    q = sections["cascaded_ukf"].process_noise
+    prior = np.mean(run.result.P[settled, 0, NAV_PSI, NAV_PSI]) + q.navigation.heading_rad2
+    predicted = -sim_params.speed_mps * (1.0 / (1.0 - prior / 2.0) - 1.0)
+    assert err == pytest.approx(predicted, rel=0.15)
+    assert abs(err) > 5 * sections["cascaded_ukf"].convergence_band.radar_bias_mps
+    ekf = nominal["cascaded_ekf"]
+    assert abs(np.mean(ekf.result.x[settled, NAV_RB] - ekf.truth_x[settled, NAV_RB])) < 0.04
+
+
+def test_scenarios_forked_after_the_common_prefix_equal_separate_runs(
+    sections: dict[str, CascadedFilterParams], sim_params: TractorStraightParams
+) -> None:
+    short = dataclasses.replace(sim_params, duration_s=12.0)
+    setup = make_setup("cascaded_ukf", sections["cascaded_ukf"])
+    scenarios = {"nominal": (), "a": ((6.0, 8.0),), "b": ((7.01, 11.0),)}
+    forked = run_closed_loop_scenarios(setup, short, 9, scenarios)
+    for name, windows in scenarios.items():
+        alone = run_closed_loop(setup, short, 9, gps_outages_s=windows)
+        f = forked[name]
+        np.testing.assert_array_equal(f.result.x, alone.result.x)
+        np.testing.assert_array_equal(f.result.P, alone.result.P)
+        np.testing.assert_array_equal(f.truth, alone.truth)
+        np.testing.assert_array_equal(f.gps_valid, alone.gps_valid)
+        np.testing.assert_array_equal(f.result.inn_i, alone.result.inn_i)
+    assert not forked["a"].gps_valid[300:400].any()  # 6.0 <= t < 8.0 s
+    assert forked["a"].gps_valid[299]
+    assert forked["a"].gps_valid[400]
