@@ -29,9 +29,13 @@ the UKF's fast bias convergence and the EKF's precise East/North. In this cascad
   ``(E, N)_dot = (V - r_b)(sin, cos) psi``. With paper 000's ``alpha = 1e-3`` the unscented
   transform is its second-order limit: it adds ``1/2 tr(f'' P)`` to the predicted East/North
   (``(V - r_b) cos(psi) P_psipsi / 2`` per unit time on North) and ``(beta - alpha^2)
-  delta delta^T`` to their covariance. Table 1's heading variance makes ``P_psipsi`` about
-  0.16 rad^2 with GPS and grows it by 0.5 rad^2/s without, so that term biases the UKF:
-  with GPS it ends up in the radar-bias estimate, in an outage in the position.
+  delta delta^T`` to their covariance. Table 1's heading-bias random walk and position
+  process noise keep ``P_psipsi`` about 0.15 rad^2 with GPS (``psi`` and ``psi_b`` are
+  separable only through the track), and its heading variance grows it by 0.5 rad^2/s
+  without, so that term biases the UKF: with GPS it ends up in the radar-bias estimate
+  (which settles at ``V_radar - V / (1 - P_psipsi / 2)``, 0.15 instead of 0.4 m/s), in an
+  outage in the position. Everything else of the UKF is the EKF's: with the central point
+  as its mean it reproduces the EKF (``tests/.../test_ukf_radar_bias.py``).
 
 So the hybrid propagates the covariance and the bias-sensitive states by the unscented
 transform and takes the position mean from the EKF (the state GPS measures directly, where

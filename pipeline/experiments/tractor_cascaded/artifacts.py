@@ -204,9 +204,9 @@ def write_experiment(
     exp, sim = inputs.exp, inputs.sim
     runs = run_experiment(inputs)
     summary = summarize(runs, exp)
-    comparison = paper_comparison(summary, exp)
     ukf = inputs.sections.get("cascaded_ukf")
     mech = mechanisms(summary, exp, sim, ukf)
+    comparison = paper_comparison(summary, exp, mech)
     scenarios = exp.scenarios()
     outage_lengths = {s: w[0][1] - w[0][0] for s, w in scenarios.items() if w}
     series: dict[str, dict[str, Any]] = {s: {} for s in scenarios}
