@@ -140,10 +140,20 @@ def _cell(text: str) -> str:
     return text
 
 
+def _td(text: str) -> str:
+    """A CSV cell as ``<td>``: numbers right-aligned (the default), text left-aligned."""
+    try:
+        float(text)
+    except ValueError:
+        return f'<td class="t">{esc(text)}</td>'
+    return f"<td>{esc(_cell(text))}</td>"
+
+
 def text_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    """A table of text cells as read from a CSV file (numbers rounded for display)."""
+    """A table of text cells as read from a CSV file (numbers rounded for display, text
+    left-aligned; an empty cell counts as text)."""
     head = "".join(f"<th>{esc(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{esc(_cell(c))}</td>" for c in r) + "</tr>" for r in rows)
+    body = "".join("<tr>" + "".join(_td(c) for c in r) + "</tr>" for r in rows)
     return (
         f'<div class="scroll"><table class="data"><thead><tr>{head}</tr></thead>'
         f"<tbody>{body}</tbody></table></div>"

@@ -65,10 +65,10 @@ def test_outage_results_are_shown_beside_the_paper_and_copied(
     page = (tmp_path / "r" / "index.html").read_text()
     sat = page[page.index('id="satellites"') : page.index('id="nis"')]
     # the paper's value beside ours for its pair only; ours to 4 significant digits
-    assert "<td>tc_ukf-&gt;tc_ukf_nhc</td><td>0</td><td>40</td>" in sat
+    assert '<td class="t">tc_ukf-&gt;tc_ukf_nhc</td><td>0</td><td>40</td>' in sat
     assert "<td>50</td><td>41.5</td><td>57.25</td><td>54.4</td></tr>" in sat
     assert "<td>16.67</td><td>5</td><td>25</td><td>22.6</td></tr>" in sat
-    assert "<td>6</td><td></td></tr>" in sat
+    assert '<td>6</td><td class="t"></td></tr>' in sat
     # the stage's explanation as prose, its raw HTML escaped and no remote image
     assert "<h4>Against the paper</h4>" in sat
     assert "<strong>shorter</strong>" in sat
@@ -76,7 +76,7 @@ def test_outage_results_are_shown_beside_the_paper_and_copied(
     assert "<img" not in page
     assert "image: remote (http://example.invalid/x.png)" in sat
     drift = page[page.index('id="drift"') : page.index('id="satellites"')]
-    assert "<td>lc_ekf</td><td>10</td><td>2.5</td>" in drift
+    assert '<td class="t">lc_ekf</td><td>10</td><td>2.5</td>' in drift
     tables = tmp_path / "r" / "tables"
     assert (tables / "sat_reduction.csv").read_text() == _REDUCTION
     assert (tables / "drift_vs_length.csv").is_file()
