@@ -197,6 +197,6 @@ _NIS_COLS = ("filter", "scenario", "stream", "count", "nis_mean", "dof_mean", "b
              "bound_high", "consistent", "rejected")  # fmt: skip
 _WIN_COLS = ("filter", "scenario", "window", "start_s", "duration_s", "sats", "err_end_m",
              "err_max_m", "err_mean_m", "err_rms_m", "drift_pct_distance", "reconverge_s",
-             "reference")  # fmt: skip
+             "inside_3sigma_frac", "reference")  # fmt: skip
 _DRIFT = ("filter", "outage_s", "windows", "err_end_mean_m", "ci_low_m", "ci_high_m")
 _AUDIT = tuple(k for k, _ in audit.COLUMNS)

@@ -91,7 +91,7 @@ def windows(rows: Sequence[Row]) -> str:
             ("start_s", "start s"), ("duration_s", "length s"), ("sats", "sats"),
             ("err_end_m", "err at end m"), ("err_max_m", "max m"), ("err_mean_m", "mean m"),
             ("err_rms_m", "RMS m"), ("drift_pct_distance", "drift % dist."),
-            ("reconverge_s", "reconverge s"))  # fmt: skip
+            ("reconverge_s", "reconverge s"), ("inside_3sigma_frac", "inside 3σ"))  # fmt: skip
     return h.table(rows, cols) + h.para(
         "3-D error inside each window against the reference, with no re-alignment at the "
         "window's start; drift is the error at the end over the distance travelled in it.",
@@ -104,6 +104,13 @@ def _pair(text: str) -> tuple[str, ...]:
     return tuple(re.findall(r"[A-Za-z0-9_]+", text))
 
 
+def paper_pct(pair: str, sats: str) -> str:
+    """Paper 001's Table 1 value for a row of a reduction table (its pair only), else ""."""
+    if _pair(pair) != PAPER_PAIR or not sats.strip().isdigit():
+        return ""
+    return str(PAPER_REDUCTION_PCT.get(int(sats), ""))
+
+
 def sat_reduction(table: CsvTable | None, note_md: str | None) -> str:
     """Paper 001 Table 1 as the outages stage computed it, beside the paper's values.
 
@@ -113,12 +120,7 @@ def sat_reduction(table: CsvTable | None, note_md: str | None) -> str:
     if table is None:
         return ""
     i_pair, i_sats = table.header.index("pair"), table.header.index("sats")
-    rows = []
-    for r in table.rows:
-        paper = ""
-        if _pair(r[i_pair]) == PAPER_PAIR and r[i_sats].strip().isdigit():
-            paper = str(PAPER_REDUCTION_PCT.get(int(r[i_sats]), ""))
-        rows.append((*r, paper))
+    rows = [(*r, paper_pct(r[i_pair], r[i_sats])) for r in table.rows]
     src = f"{table.path.parent.name}/{table.path.name}"
     parts = [
         h.text_table((*table.header, "paper %"), rows),

@@ -35,6 +35,8 @@ from pipeline.report import html as h
 from pipeline.report import tables as tb
 from pipeline.report.experiments import SAT_REDUCTION_NAME, read_csv
 from pipeline.report.inputs import ReportInputError, read_json
+from pipeline.report.sections import paper_pct
+from pipeline.report.tables import PAPER_PAIR
 
 Row = dict[str, Any]
 METRIC = "pos_err_3d_rms_m"
@@ -181,8 +183,17 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
     )
     red_html = ""
     if red_rows:
-        keys = list(red_rows[0].keys())
-        red_html = h.text_table(keys, [[str(r.get(k, "")) for k in keys] for r in red_rows])
+        keys = list(dict.fromkeys(k for r in red_rows for k in r))
+        red_cells = [
+            [
+                *(str(r.get(k, "")) for k in keys),
+                paper_pct(str(r.get("pair", "")), str(r.get("sats", ""))),
+            ]
+            for r in red_rows
+        ]
+        red_html = h.text_table([*keys, "paper %"], red_cells) + h.para(
+            f"Paper 001, Table 1 gives {' -> '.join(PAPER_PAIR)} only.", "note"
+        )
     sections = [
         (
             "datasets",

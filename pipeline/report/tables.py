@@ -2,11 +2,12 @@
 
 - ``metrics_rows``: one row per run (filter x scenario) from its ``metrics.json``, plus the
   error against the reference when the run's metrics have none (real logs: the GNSS fixes).
-- ``window_rows``: one row per run and outage window, measured here from the estimate and
-  the reference with the definitions of architecture section 5: error at the window's end,
-  max, mean and RMS of the 3-D error inside it, no re-alignment at the window's start; drift
-  as a percentage of the distance the reference travelled in the window. ``sats`` and
-  ``reconverge_s`` come from the window's metrics when the run wrote them.
+- ``window_rows``: one row per run and outage window. The window metrics the run wrote
+  (``metrics.json`` ``outage_windows``, from ``pipeline.estimation.outage_metrics``: the one
+  implementation of architecture section 5) are taken as they are; a run without them (an
+  older run, a hand-made window list) gets them measured here with the same definitions:
+  error at the window's end, max, mean and RMS of the 3-D error inside it, no re-alignment
+  at the window's start; drift as a percentage of the distance the reference travelled.
 - ``drift_by_length``: complete outages (0 satellites) grouped per filter and window length:
   mean error at the window's end with a 95 % t-interval across windows.
 The per-satellite-count reduction (paper 001, Table 1) is the outages stage's table
@@ -137,6 +138,9 @@ def _path_length_m(data: DatasetInputs, a_ns: int, b_ns: int) -> float | None:
     return float(np.sum(np.hypot(np.diff(e), np.diff(n))))
 
 
+_WINDOW_METRICS = ("err_end_m", "err_max_m", "err_mean_m", "err_rms_m", "drift_pct_distance")
+
+
 def window_rows(data: DatasetInputs, series: dict[tuple[str, str], ErrorSeries]) -> list[Row]:
     """One row per run and outage window (see the module docstring)."""
     rows = []
@@ -157,9 +161,14 @@ def window_rows(data: DatasetInputs, series: dict[tuple[str, str], ErrorSeries])
                 "err_rms_m": None,
                 "drift_pct_distance": None,
                 "reconverge_s": _num(w.metrics.get("reconverge_s")),
+                "inside_3sigma_frac": _num(w.metrics.get("inside_3sigma_frac")),
                 "reference": s.reference if s is not None else None,
             }
-            if s is not None:
+            given = {k: w.metrics[k] for k in _WINDOW_METRICS if k in w.metrics}
+            if given:
+                row.update({k: _num(v) for k, v in given.items()})
+                row["reference"] = w.metrics.get("reference", row["reference"])
+            elif s is not None:
                 sel = (s.t_ns >= w.start_ns) & (s.t_ns <= w.end_ns)
                 e = s.err_3d_m[sel]
                 if e.size:

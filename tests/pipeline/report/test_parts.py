@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import shutil
@@ -80,6 +81,14 @@ def test_outage_results_are_shown_beside_the_paper_and_copied(
     tables = tmp_path / "r" / "tables"
     assert (tables / "sat_reduction.csv").read_text() == _REDUCTION
     assert (tables / "drift_vs_length.csv").is_file()
+    # the summary collects the table of every dataset, beside the paper's values too
+    summary = render_summary([tmp_path / "r"], tmp_path / "s").read_text()
+    assert "<td>50</td><td>41.5</td><td>57.25</td><td>54.4</td></tr>" in summary
+    assert (
+        (tmp_path / "s" / "tables" / "sat_reduction.csv")
+        .read_text()
+        .startswith("dataset,pair,sats,")
+    )
     (exp / "sat_reduction.csv").write_text("pair,sats\na->b,0\n")
     with pytest.raises(ReportInputError, match="missing columns"):
         render_dataset(data, tmp_path / "r2", experiments_dir=exp)
@@ -190,3 +199,36 @@ def test_experiment_files_without_a_section_render_generically(
     assert copied.read_text().count("\n") == 101
     assert '<svg viewBox="0 0 4 4">' in page
     assert "not read" not in page
+
+
+def test_window_metrics_the_run_wrote_are_taken_as_they_are(
+    dataset_dir: Path, tmp_path: Path
+) -> None:
+    root = tmp_path / "ds"
+    shutil.copytree(dataset_dir, root)
+    mpath = root / "runs" / "lc_ekf" / "outage_15s" / "metrics.json"
+    metrics = json.loads(mpath.read_text())
+    (w,) = metrics["outage_windows"]
+    measured = render_dataset(
+        load_dataset("tiny", root / "tables", root / "runs", None), tmp_path / "a"
+    )
+    del measured
+    rows = {r["scenario"]: r for r in _csv_rows(tmp_path / "a" / "tables" / "windows.csv")}
+    assert float(rows["outage_15s"]["err_end_m"]) > 0.0  # measured here: the run wrote none
+    # the scenario engine's layout: start_t_ns + duration_s, and its own window metrics
+    w = {"start_t_ns": w["start_ns"], "duration_s": 15.0, "sats": 0, "err_end_m": 123.0,
+         "err_max_m": 130.0, "err_mean_m": 60.0, "err_rms_m": 70.0, "drift_pct_distance": None,
+         "inside_3sigma_frac": 0.5, "reference": "truth"}  # fmt: skip
+    metrics["outage_windows"] = [w]
+    mpath.write_text(json.dumps(metrics))
+    render_dataset(load_dataset("tiny", root / "tables", root / "runs", None), tmp_path / "b")
+    row = _csv_rows(tmp_path / "b" / "tables" / "windows.csv")[-1]
+    assert row["err_end_m"] == "123.0"
+    assert row["drift_pct_distance"] == ""
+    assert row["inside_3sigma_frac"] == "0.5"
+    assert float(row["start_s"]) == float(rows["outage_15s"]["start_s"])
+
+
+def _csv_rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
