@@ -26,22 +26,15 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ingest.config import ImuNoise
 from pipeline.estimation.config import InitParams
 from pipeline.estimation.inputs import FixData, ImuData, ObsData
 from pipeline.estimation.models import ins
 from pipeline.estimation.models import measurement as me
-from pipeline.nav.earth import (
-    F64,
-    OMEGA_IE,
-    dcm_ecef_to_ned,
-    ecef_to_geodetic,
-    geodetic_to_ecef,
-    gravity,
-    radii,
-)
-from pipeline.nav.rotations import euler_to_dcm, euler_to_quat
+from pipeline.estimation.models.gnss import AN_DIM, AN_RE, AN_VE, antenna
+from pipeline.nav.earth import F64, OMEGA_IE, ecef_to_geodetic, gravity, radii
 
 log = logging.getLogger(__name__)
 
@@ -67,9 +60,8 @@ class Alignment:
     static_window_s: float
 
     def summary(self) -> dict[str, object]:
-        from pipeline.nav.rotations import quat_to_euler
-
-        roll, pitch, yaw = quat_to_euler(self.x0[ins.X_Q : ins.X_Q + 4])
+        q = self.x0[ins.X_Q : ins.X_Q + 4]
+        yaw, pitch, roll = Rotation.from_quat(q[[1, 2, 3, 0]]).as_euler("ZYX")
         return {
             "t_ns": self.t_ns,
             "method": self.method,
@@ -78,9 +70,9 @@ class Alignment:
             "lat_deg": math.degrees(self.x0[ins.X_LAT]),
             "lon_deg": math.degrees(self.x0[ins.X_LON]),
             "alt_m": float(self.x0[ins.X_H]),
-            "roll_rad": roll,
-            "pitch_rad": pitch,
-            "yaw_rad": yaw,
+            "roll_rad": float(roll),
+            "pitch_rad": float(pitch),
+            "yaw_rad": float(yaw),
         }
 
 
@@ -131,7 +123,8 @@ def _track_from_fixes(fixes: FixData) -> _Track | None:
     if t.size < 2:
         return None
     llh = f[:, [me.FX_LAT, me.FX_LON, me.FX_ALT]]
-    vel = np.where(f[:, [me.FX_VEL_OK]] > 0, f[:, me.FX_VN : me.FX_VN + 3], math.nan)
+    vel = np.where(f[:, [me.FX_VEL_DIM]] > 0, f[:, me.FX_VN : me.FX_VN + 3], math.nan)
+    vel[f[:, me.FX_VEL_DIM] == 2, 2] = 0.0  # no vertical velocity given: assume level
     # where the receiver gives no velocity, difference the neighbouring positions
     rm, rn = np.vectorize(radii)(llh[:, 0])
     ned = np.column_stack(
@@ -160,7 +153,7 @@ def _track_from_obs(obs: ObsData) -> _Track | None:
         lat, lon, h = ecef_to_geodetic(r[0], r[1], r[2])
         ts.append(obs.epoch_t_ns[e])
         llh.append((lat, lon, h))
-        vel.append(dcm_ecef_to_ned(lat, lon) @ v)
+        vel.append(_ecef_to_ned(lat, lon) @ v)
         clock.append((cb, cd))
     if len(ts) < 2:
         return None
@@ -222,6 +215,41 @@ def _static_gyro_bias(
     return w[start:end].mean(axis=0) - c_bn.T @ w_ie_n, float(dur)
 
 
+def _initial_navigation(
+    imu: ImuData, lo: int, hi: int, track: _Track, k: int, lever_b: F64
+) -> tuple[F64, F64]:
+    """Full state (biases and clock zero) at track epoch ``k``, and its C_b^n: heading from
+    the GNSS velocity, roll and pitch from the specific force, IMU position from the antenna's
+    (lever arm removed)."""
+    t_imu = imu.t_ns[lo:hi]
+    t0 = int(track.t_ns[k])
+    v = track.vel[k]
+    yaw = math.atan2(v[1], v[0])
+    a_n = np.zeros(3)
+    lo_k, hi_k = max(k - 1, 0), min(k + 1, track.t_ns.size - 1)
+    dt = (track.t_ns[hi_k] - track.t_ns[lo_k]) * 1e-9
+    if hi_k > lo_k and 0 < dt <= 2.5 and np.isfinite(track.vel[[lo_k, hi_k]]).all():
+        a_n = (track.vel[hi_k] - track.vel[lo_k]) / dt
+    lat, lon, h_ant = track.llh[k]
+    half = 250_000_000
+    win = (t_imu >= t0 - half) & (t_imu <= t0 + half)
+    f_b = imu.data[lo:hi][win, :3].mean(axis=0)
+    g_n = np.array([0.0, 0.0, gravity(lat, h_ant)])
+    roll, pitch = _level(f_b, a_n - g_n, yaw)
+    att = Rotation.from_euler("ZYX", [yaw, pitch, roll])
+    c_bn = att.as_matrix()
+    lever_n = c_bn @ lever_b
+    rm, rn = radii(lat)
+    x0 = np.zeros(ins.FULL_DIM)
+    x0[ins.X_LAT] = lat - lever_n[0] / (rm + h_ant)
+    x0[ins.X_LON] = lon - lever_n[1] / ((rn + h_ant) * math.cos(lat))
+    x0[ins.X_H] = h_ant + lever_n[2]
+    x0[ins.X_VEL : ins.X_VEL + 3] = v
+    q = att.as_quat()[[3, 0, 1, 2]]
+    x0[ins.X_Q : ins.X_Q + 4] = q if q[0] >= 0 else -q
+    return x0, c_bn
+
+
 def align(
     imu: ImuData,
     segment: tuple[int, int],
@@ -253,27 +281,8 @@ def align(
         return None
     k = int(np.flatnonzero(ok)[0])
     t0 = int(track.t_ns[k])
-    v = track.vel[k]
-    yaw = math.atan2(v[1], v[0])
-    a_n = np.zeros(3)
-    lo_k, hi_k = max(k - 1, 0), min(k + 1, track.t_ns.size - 1)
-    dt = (track.t_ns[hi_k] - track.t_ns[lo_k]) * 1e-9
-    if hi_k > lo_k and 0 < dt <= 2.5 and np.isfinite(track.vel[[lo_k, hi_k]]).all():
-        a_n = (track.vel[hi_k] - track.vel[lo_k]) / dt
-    lat, lon, h_ant = track.llh[k]
-    win = (t_imu >= t0 - half) & (t_imu <= t0 + half)
-    f_b = imu.data[lo:hi][win, :3].mean(axis=0)
-    g_n = np.array([0.0, 0.0, gravity(lat, h_ant)])
-    roll, pitch = _level(f_b, a_n - g_n, yaw)
-    c_bn = euler_to_dcm(roll, pitch, yaw)
-    lever_n = c_bn @ lever_b
-    rm, rn = radii(lat)
-    x0 = np.zeros(ins.FULL_DIM)
-    x0[ins.X_LAT] = lat - lever_n[0] / (rm + h_ant)
-    x0[ins.X_LON] = lon - lever_n[1] / ((rn + h_ant) * math.cos(lat))
-    x0[ins.X_H] = h_ant + lever_n[2]
-    x0[ins.X_VEL : ins.X_VEL + 3] = v
-    x0[ins.X_Q : ins.X_Q + 4] = euler_to_quat(roll, pitch, yaw)
+    x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b)
+    lat, h_ant = track.llh[k, 0], track.llh[k, 2]
     i_start = int(np.searchsorted(t_imu, t0))
     bg, static_s = _static_gyro_bias(imu, lo, lo + i_start, init, c_bn, lat, h_ant)
     x0[ins.X_BG : ins.X_BG + 3] = bg
@@ -300,9 +309,9 @@ def _clock(
         return 0.0, 0.0
     e = min(int(np.searchsorted(obs.epoch_t_ns, t0)), obs.epoch_t_ns.size - 1)
     rows = obs.obs[obs.start[e] : obs.start[e + 1]]
-    from pipeline.estimation.models.gnss import antenna_ecef
-
-    r_ant, v_ant, _ = antenna_ecef(x0, lever_b, np.zeros(3))
+    ant = np.empty(AN_DIM)
+    antenna(x0, lever_b, np.zeros(3), np.empty((3, 3)), ant)
+    r_ant, v_ant = ant[AN_RE : AN_RE + 3], ant[AN_VE : AN_VE + 3]
     pr = rows[rows[:, me.OB_PR_OK] > 0]
     if pr.shape[0] == 0:
         return (
@@ -325,4 +334,7 @@ def _clock(
     return cb, cd
 
 
-__all__ = ["Alignment", "align", "geodetic_to_ecef", "spp"]
+def _ecef_to_ned(lat: float, lon: float) -> F64:
+    """C_e^n at (lat, lon) (numpy; the kernels have their own)."""
+    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+    return np.array([[-sl * co, -sl * so, cl], [-so, co, 0.0], [-cl * co, -cl * so, -sl]])

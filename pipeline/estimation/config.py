@@ -168,8 +168,10 @@ class StepParams:
     rate) and at every update epoch. Between stops the navigation state (and every UKF sigma
     point) is integrated through the IMU samples by RK4 with ``substeps`` steps per sample
     interval, more where an interval exceeds ``max_rk4_step_s``. IMU intervals longer than
-    ``imu_gap_s`` are gaps (bridged, process noise inflated by ``gap_*_sigma``); longer than
-    ``imu_gap_max_s`` they end a segment and the filter re-aligns after them.
+    ``imu_gap_s`` are gaps: bridged by interpolating the samples on both sides, with white
+    process noise of densities ``gap_*_psd`` added for the unknown manoeuvres (a 2 s gap adds
+    sqrt(2 q) to the velocity sigma); longer than ``imu_gap_max_s`` they end a segment and
+    the filter re-aligns after them.
 
     Attributes:
         step_s: covariance propagation, sigma-point redraw and output interval, s.
@@ -177,8 +179,8 @@ class StepParams:
         max_rk4_step_s: longest single RK4 step, s.
         imu_gap_s: an IMU interval longer than this is a gap, s.
         imu_gap_max_s: a gap longer than this splits the run into segments, s.
-        gap_accel_sigma_mps2: unknown acceleration during a gap, 1-sigma, m/s^2.
-        gap_gyro_sigma_radps: unknown angular rate during a gap, 1-sigma, rad/s.
+        gap_accel_psd_m2ps3: white acceleration noise density during a gap, m^2/s^3.
+        gap_gyro_psd_rad2ps: white angular-rate noise density during a gap, rad^2/s.
     """
 
     step_s: float = 0.1
@@ -186,12 +188,12 @@ class StepParams:
     max_rk4_step_s: float = 0.02
     imu_gap_s: float = 0.05
     imu_gap_max_s: float = 5.0
-    gap_accel_sigma_mps2: float = 2.0
-    gap_gyro_sigma_radps: float = 0.2
+    gap_accel_psd_m2ps3: float = 4.0
+    gap_gyro_psd_rad2ps: float = 0.05
 
     def __post_init__(self) -> None:
         _positive(self, "step_s", "max_rk4_step_s", "imu_gap_s", "imu_gap_max_s")
-        _positive(self, "gap_accel_sigma_mps2", "gap_gyro_sigma_radps", allow_zero=True)
+        _positive(self, "gap_accel_psd_m2ps3", "gap_gyro_psd_rad2ps", allow_zero=True)
         if not 1 <= self.substeps <= 100:
             raise FieldError("substeps", "must be within 1..100")
         if self.imu_gap_max_s < self.imu_gap_s:

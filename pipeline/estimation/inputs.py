@@ -135,7 +135,12 @@ def clean_imu(t: I64, data: F64, step: StepParams) -> ImuData:
 
 
 def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
-    """Receiver fixes -> ``fix`` rows with floored accuracies; NaN blocks skipped (F11)."""
+    """Receiver fixes -> ``fix`` rows with floored accuracies; NaN blocks skipped (F11).
+
+    Position needs a fix type of at least 2-D (a 2-D fix is fused horizontally); velocity
+    needs north and east, and includes down where the receiver provides it (null = not
+    provided, a 2-D velocity block; NaN = invalid, the block is skipped).
+    """
     n = table.num_rows
     t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)
     fix = np.zeros((n, me.FIX_COLS))
@@ -166,14 +171,17 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
         events.append(Event(int(t[k]), "skip_invalid", "gnss_pos"))
     vel = np.column_stack([_col(table, c) for c in ("vel_n_mps", "vel_e_mps", "vel_d_mps")])
     fix[:, me.FX_VN : me.FX_VN + 3] = vel
-    provided = ~(
-        _is_null(table, "vel_n_mps") | _is_null(table, "vel_e_mps") | _is_null(table, "vel_d_mps")
-    )
-    vel_finite = np.isfinite(vel).all(axis=1)
-    fix[:, me.FX_VEL_OK] = (provided & vel_finite & has_fix & gnss.use_velocity).astype(float)
-    for k in np.flatnonzero(provided & ~vel_finite & has_fix):
+    given_h = ~(_is_null(table, "vel_n_mps") | _is_null(table, "vel_e_mps"))
+    given_d = ~_is_null(table, "vel_d_mps")
+    finite_h = np.isfinite(vel[:, 0]) & np.isfinite(vel[:, 1])
+    finite_d = np.isfinite(vel[:, 2])
+    use = has_fix & gnss.use_velocity
+    # north and east are required; down is used where the receiver gives it (3-D block)
+    vdim = np.where(given_h & finite_h, np.where(given_d & finite_d, 3, 2), 0)
+    fix[:, me.FX_VEL_DIM] = np.where(use & (~given_d | finite_d), vdim, 0)
+    for k in np.flatnonzero(use & ((given_h & ~finite_h) | (given_d & ~finite_d))):
         events.append(Event(int(t[k]), "skip_invalid", "gnss_vel"))
-    usable = (fix[:, me.FX_POS_DIM] > 0) | (fix[:, me.FX_VEL_OK] > 0)
+    usable = (fix[:, me.FX_POS_DIM] > 0) | (fix[:, me.FX_VEL_DIM] > 0)
     fix[~np.isfinite(fix)] = 0.0  # unusable fields never reach a kernel as NaN
     return FixData(t, fix, usable, tuple(events))
 

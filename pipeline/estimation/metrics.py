@@ -140,6 +140,7 @@ def compute_metrics(result: RunResult, truth: pa.Table | None) -> dict[str, Any]
         "status": result.status,
         "failure": result.failure,
         "runtime_s": result.runtime_s,
+        "compile_s": result.compile_s,
         "duration_s": result.duration_s,
         "realtime_factor": result.duration_s / result.runtime_s if result.runtime_s else None,
         "epochs": int(result.t_ns.size),

@@ -185,8 +185,7 @@ def propagate_into(
     ``work`` is scratch space of shape (5, 10).
     """
     h = dt / substeps
-    y = work[0]
-    k1, k2, k3, k4 = work[1], work[2], work[3], work[4]
+    y, kk, pt, acc = work[0], work[1], work[2], work[3]
     for j in range(NAV_DIM):
         y[j] = x[j]
     df = (f1[0] - f0[0], f1[1] - f0[1], f1[2] - f0[2])
@@ -194,49 +193,37 @@ def propagate_into(
     lr = x[I_LAT]
     sr, cr = math.sin(lr), math.cos(lr)
     for k in range(substeps):
-        a0 = k / substeps
-        am = (k + 0.5) / substeps
-        a1 = (k + 1.0) / substeps
-        _derivative_into(
-            y,
-            f0[0] + a0 * df[0],
-            f0[1] + a0 * df[1],
-            f0[2] + a0 * df[2],
-            w0[0] + a0 * dw[0],
-            w0[1] + a0 * dw[1],
-            w0[2] + a0 * dw[2],
-            k1,
-            lr,
-            sr,
-            cr,
-        )
         for j in range(NAV_DIM):
-            k4[j] = y[j] + 0.5 * h * k1[j]
-        fmx, fmy, fmz = f0[0] + am * df[0], f0[1] + am * df[1], f0[2] + am * df[2]
-        wmx, wmy, wmz = w0[0] + am * dw[0], w0[1] + am * dw[1], w0[2] + am * dw[2]
-        _derivative_into(k4, fmx, fmy, fmz, wmx, wmy, wmz, k2, lr, sr, cr)
+            acc[j] = 0.0
+        # the four RK4 stages in one loop: one inlined copy of the derivative, not four
+        for st in range(4):
+            if st == 0:
+                a = k / substeps
+                for j in range(NAV_DIM):
+                    pt[j] = y[j]
+            else:
+                a = (k + 0.5) / substeps if st < 3 else (k + 1.0) / substeps
+                c = 0.5 * h if st < 3 else h
+                for j in range(NAV_DIM):
+                    pt[j] = y[j] + c * kk[j]
+            _derivative_into(
+                pt,
+                f0[0] + a * df[0],
+                f0[1] + a * df[1],
+                f0[2] + a * df[2],
+                w0[0] + a * dw[0],
+                w0[1] + a * dw[1],
+                w0[2] + a * dw[2],
+                kk,
+                lr,
+                sr,
+                cr,
+            )
+            wgt = 2.0 if 0 < st < 3 else 1.0
+            for j in range(NAV_DIM):
+                acc[j] += wgt * kk[j]
         for j in range(NAV_DIM):
-            k4[j] = y[j] + 0.5 * h * k2[j]
-        _derivative_into(k4, fmx, fmy, fmz, wmx, wmy, wmz, k3, lr, sr, cr)
-        for j in range(NAV_DIM):
-            k4[j] = y[j] + h * k3[j]
-        for j in range(NAV_DIM):
-            k1[j] = k1[j] + 2.0 * k2[j] + 2.0 * k3[j]  # k2 is reused for the 4th slope
-        _derivative_into(
-            k4,
-            f0[0] + a1 * df[0],
-            f0[1] + a1 * df[1],
-            f0[2] + a1 * df[2],
-            w0[0] + a1 * dw[0],
-            w0[1] + a1 * dw[1],
-            w0[2] + a1 * dw[2],
-            k2,
-            lr,
-            sr,
-            cr,
-        )
-        for j in range(NAV_DIM):
-            y[j] = y[j] + (h / 6.0) * (k1[j] + k2[j])
+            y[j] = y[j] + (h / 6.0) * acc[j]
         n = math.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
         s = 1.0 / n if y[6] >= 0.0 else -1.0 / n
         for j in range(I_QW, I_QW + 4):

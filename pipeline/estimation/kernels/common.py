@@ -43,11 +43,19 @@ STATUS_TEXT = {
 }
 
 N_STREAMS = 4
+
+# Explicit signatures for the helpers called from many places: a call from jitted code
+# otherwise compiles a new specialization for every literal constant or array layout it sees.
+_F2 = nb.float64[:, :]
+_F2C = nb.float64[:, ::1]
+_F1C = nb.float64[::1]
+_I2C = nb.int64[:, ::1]
+_I1C = nb.int64[::1]
 INN_I_COLS = 5  # t_ns, stream, sv, dim, accepted
 INN_F_COLS = 8  # nis, gate, innovation[3], innovation sigma[3]
 
 
-@nb.njit(cache=True)
+@nb.njit(nb.boolean(_F2, nb.int64, _F2), cache=True, error_model="numpy")
 def cholesky(A: F64, n: int, L: F64) -> bool:
     """Lower Cholesky factor of ``A[:n, :n]`` into ``L``; False if not positive definite."""
     for j in range(n):
@@ -68,7 +76,7 @@ def cholesky(A: F64, n: int, L: F64) -> bool:
     return True
 
 
-@nb.njit(cache=True)
+@nb.njit(nb.void(_F2, nb.int64, _F2, nb.int64), cache=True, error_model="numpy")
 def cho_solve(L: F64, n: int, B: F64, k: int) -> None:
     """Solve ``(L L^T) X = B[:n, :k]`` in place (``L`` from ``cholesky``)."""
     for c in range(k):
@@ -84,7 +92,7 @@ def cho_solve(L: F64, n: int, B: F64, k: int) -> None:
             B[i, c] = s / L[i, i]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def symmetrize(P: F64, n: int) -> None:
     """P <- (P + P^T) / 2 on ``P[:n, :n]``."""
     for i in range(n):
@@ -94,45 +102,87 @@ def symmetrize(P: F64, n: int) -> None:
             P[j, i] = a
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def ensure_pd(P: F64, n: int, L: F64) -> tuple[bool, bool, float]:
     """Keep ``P[:n, :n]`` symmetric positive definite; ``L`` receives its Cholesky factor.
 
-    A ``P`` that fails the Cholesky test is repaired by clipping its eigenvalues to ``1e-12``
-    times the largest (at least 1e-30).
+    A ``P`` that fails the Cholesky test is repaired by adding a diagonal jitter, starting at
+    1e-12 of its largest variance (at least 1e-30) and growing tenfold until the factorization
+    succeeds (the minimal-change repair; no eigendecomposition is needed).
 
     Returns:
-        (ok, repaired, smallest eigenvalue before the repair): ``ok`` is False when no repair
-        is possible (non-finite entries); the caller logs a repair event.
+        (ok, repaired, total jitter added to each variance): ``ok`` is False when no repair is
+        possible (non-finite entries); the caller logs a repair event.
     """
     symmetrize(P, n)
     if cholesky(P, n, L):
         return True, False, 0.0
+    big = 0.0
     for i in range(n):
         for j in range(n):
             if not math.isfinite(P[i, j]):
                 return False, False, math.nan
-    lam, vec = np.linalg.eigh(P[:n, :n].copy())
-    floor = max(1e-12 * lam[-1], 1e-30)
-    lam_min = lam[0]
+        big = max(big, abs(P[i, i]))
+    step = max(1e-12 * big, 1e-30)
+    total = 0.0
+    for _ in range(60):
+        for i in range(n):
+            P[i, i] += step
+        total += step
+        if cholesky(P, n, L):
+            return True, True, total
+        step *= 10.0
+    return False, True, total
+
+
+@nb.njit(cache=True, error_model="numpy")
+def propagate_cov(P: F64, Phi: F64, Qd: F64, n: int, tmp: F64) -> None:
+    """``P <- Phi P Phi^T + Qd`` in place (``tmp``: scratch (n, n))."""
+    for r in range(n):
+        for c in range(n):
+            a = 0.0
+            for k in range(n):
+                a += Phi[r, k] * P[k, c]
+            tmp[r, c] = a
+    for r in range(n):
+        for c in range(r, n):
+            a = Qd[r, c]
+            for k in range(n):
+                a += tmp[r, k] * Phi[c, k]
+            P[r, c] = a
+            P[c, r] = a
+
+
+@nb.njit(cache=True, error_model="numpy")
+def innovation_cov(H: F64, P: F64, r: F64, m: int, n: int, PHt: F64, S: F64) -> None:
+    """``PHt = P H^T`` (n, m) and ``S = H P H^T + diag(r)`` (m, m) for the first ``m`` rows."""
     for i in range(n):
-        lam[i] = max(lam[i], floor)
-    P[:n, :n] = (vec * lam) @ vec.T
-    symmetrize(P, n)
-    return cholesky(P, n, L), True, lam_min
+        for k in range(m):
+            a = 0.0
+            for j in range(n):
+                a += P[i, j] * H[k, j]
+            PHt[i, k] = a
+    for k in range(m):
+        for q in range(k, m):
+            a = 0.0
+            for j in range(n):
+                a += H[k, j] * PHt[j, q]
+            S[k, q] = a
+            S[q, k] = a
+        S[k, k] += r[k]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def keep_pd(P: F64, n: int, L: F64, t_ns: int, ev_i: I64, ev_f: F64, counts: I64) -> bool:
-    """``ensure_pd`` with a ``cov_repair`` event when a repair was needed; False if
-    impossible."""
+    """``ensure_pd`` with a ``cov_repair`` event (value: the jitter added) when a repair was
+    needed; False if impossible."""
     ok, repaired, lam = ensure_pd(P, n, L)
     if repaired:
         record_event(ev_i, ev_f, counts, t_ns, EV_REPAIR, -1, -1, lam)
     return ok
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def accepted_rows(blocks: I64, nb_: int, accepted: I64, out: I64) -> int:
     """Row indices of the accepted blocks into ``out``; returns their number."""
     ma = 0
@@ -144,7 +194,7 @@ def accepted_rows(blocks: I64, nb_: int, accepted: I64, out: I64) -> int:
     return ma
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def fail(t_ns: int, status: int, ev_i: I64, ev_f: F64, counts: I64) -> int:
     """Record a divergence (event and time) and return its status code."""
     record_event(ev_i, ev_f, counts, t_ns, EV_DIVERGED, -1, -1, float(status))
@@ -152,7 +202,7 @@ def fail(t_ns: int, status: int, ev_i: I64, ev_f: F64, counts: I64) -> int:
     return status
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def gate_blocks(
     nu: F64, S: F64, blocks: I64, nb_: int, gate: F64, nis: F64, accepted: I64, work: F64
 ) -> None:
@@ -190,11 +240,11 @@ def gate_blocks(
         accepted[b] = 1 if e <= gate[d] else 0
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def streams_to_reset(
     t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64, timeout_s: float
 ) -> I64:
-    """Streams whose blocks have all been rejected for longer than the timeout (F2).
+    """Streams whose blocks have all been rejected for the timeout or longer (F2).
 
     ``reject_since[stream]`` holds the time (ns) of the first rejection of the current run of
     rejections, -1 if the stream's last block was accepted. The NHC stream is never reset.
@@ -213,12 +263,12 @@ def streams_to_reset(
     for s in range(N_STREAMS):
         if s == S_NHC or not seen[s] or ok[s] or reject_since[s] < 0:
             continue
-        if (t_ns - reject_since[s]) * 1e-9 > timeout_s:
+        if (t_ns - reject_since[s]) * 1e-9 >= timeout_s:
             out[s] = 1
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def update_reject_since(t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64) -> None:
     """Advance the per-stream rejection clocks after an epoch's final gating decisions."""
     seen = np.zeros(N_STREAMS, np.int64)
@@ -237,7 +287,7 @@ def update_reject_since(t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_
             reject_since[s] = t_ns
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def inflate_for_stream(
     P: F64, n: int, stream: int, nu: F64, blocks: I64, nb_: int, scale: F64, cfg: F64
 ) -> float:
@@ -265,7 +315,9 @@ def inflate_for_stream(
     return big
 
 
-@nb.njit(cache=True)
+@nb.njit(
+    nb.void(_F2C, nb.int64, nb.int64, nb.int64, nb.float64, _F1C), cache=True, error_model="numpy"
+)
 def _reset_block(P: F64, n: int, first: int, count: int, sigma: float, scale: F64) -> None:
     for i in range(first, first + count):
         for j in range(n):
@@ -275,7 +327,11 @@ def _reset_block(P: F64, n: int, first: int, count: int, sigma: float, scale: F6
         P[i, i] = max(P[i, i], (sigma * scale[i]) ** 2)
 
 
-@nb.njit(cache=True)
+@nb.njit(
+    nb.void(_I2C, _F1C, _I1C, nb.int64, nb.int64, nb.int64, nb.int64, nb.float64),
+    cache=True,
+    error_model="numpy",
+)
 def record_event(
     ev_i: I64, ev_f: F64, counts: I64, t_ns: int, kind: int, stream: int, sv: int, value: float
 ) -> None:
@@ -287,7 +343,7 @@ def record_event(
     counts[CNT_EV] = k + 1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def record_innovations(
     t_ns: int,
     nu: F64,
@@ -320,7 +376,7 @@ def record_innovations(
             record_event(ev_i, ev_f, counts, t_ns, EV_REJECT, blocks[b, 2], blocks[b, 3], nis[b])
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def check_state(X: F64, P: F64, n: int, scale: F64, cfg: F64) -> int:
     """The NaN barrier and divergence limits; returns a ``STATUS_*`` code."""
     for j in range(X.shape[0]):
@@ -338,7 +394,7 @@ def check_state(X: F64, P: F64, n: int, scale: F64, cfg: F64) -> int:
     return STATUS_OK
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def record_output(
     t_ns: int, X: F64, P_err: F64, n: int, out_t: I64, out_x: F64, out_P: F64, counts: I64
 ) -> None:
@@ -346,6 +402,9 @@ def record_output(
     k = counts[CNT_OUT]
     if k < out_t.shape[0]:
         out_t[k] = t_ns
-        out_x[k, :] = X
-        out_P[k, :n, :n] = P_err[:n, :n]
+        for j in range(X.shape[0]):
+            out_x[k, j] = X[j]
+        for r in range(n):
+            for c in range(n):
+                out_P[k, r, c] = P_err[r, c]
     counts[CNT_OUT] = k + 1

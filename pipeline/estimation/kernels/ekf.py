@@ -35,12 +35,13 @@ from pipeline.estimation.kernels.common import (
     fail,
     gate_blocks,
     inflate_for_stream,
+    innovation_cov,
     keep_pd,
+    propagate_cov,
     record_event,
     record_innovations,
     record_output,
     streams_to_reset,
-    symmetrize,
     update_reject_since,
 )
 from pipeline.estimation.models.ins import ACC_DIM, inject, propagate_span
@@ -56,7 +57,7 @@ from pipeline.estimation.models.measurement import (
 from pipeline.nav.earth import F64, I64
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def ekf_prepare(
     t_ns: int,
     X: F64,
@@ -107,11 +108,9 @@ def ekf_prepare(
     accepted = np.empty(nb_, np.int64)
     gwork = np.empty((3, 6))
     ones = np.ones(n)
-    Hm = H[:m, :n].copy()
+    PHt = np.empty((n, m))
     for attempt in range(2):
-        S[:m, :m] = Hm @ np.ascontiguousarray(P[:n, :n]) @ Hm.T
-        for k in range(m):
-            S[k, k] += r[k]
+        innovation_cov(H, P, r, m, n, PHt, S)
         gate_blocks(nu, S, blocks, nb_, gate, nis, accepted, gwork)
         if attempt == 1:
             break
@@ -129,7 +128,7 @@ def ekf_prepare(
     return accepted_rows(blocks, nb_, accepted, acc_rows)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def joseph_update(
     P: F64, n: int, H: F64, S: F64, r: F64, nu: F64, acc_rows: I64, ma: int
 ) -> tuple[F64, bool]:
@@ -140,32 +139,55 @@ def joseph_update(
     """
     Ha = np.empty((ma, n))
     Sa = np.empty((ma, ma))
-    nua = np.empty(ma)
     for i in range(ma):
-        Ha[i, :] = H[acc_rows[i], :n]
-        nua[i] = nu[acc_rows[i]]
+        for j in range(n):
+            Ha[i, j] = H[acc_rows[i], j]
         for j in range(ma):
             Sa[i, j] = S[acc_rows[i], acc_rows[j]]
     L = np.empty((ma, ma))
+    dx = np.zeros(n)
     if not cholesky(Sa, ma, L):
-        return np.zeros(n), False
-    Pn = np.ascontiguousarray(P[:n, :n])
-    Kt = Ha @ Pn  # (ma, n) = (P H^T)^T
+        return dx, False
+    Kt = np.empty((ma, n))  # (P H^T)^T, then S^-1 (P H^T)^T = K^T
+    for i in range(ma):
+        for j in range(n):
+            a = 0.0
+            for k in range(n):
+                a += Ha[i, k] * P[k, j]
+            Kt[i, j] = a
     cho_solve(L, ma, Kt, n)
-    K = Kt.T.copy()
-    dx = K @ nua
-    IKH = -K @ Ha
     for j in range(n):
-        IKH[j, j] += 1.0
-    KR = K.copy()
-    for j in range(ma):
-        KR[:, j] *= r[acc_rows[j]]
-    P[:n, :n] = IKH @ Pn @ IKH.T + KR @ K.T
-    symmetrize(P, n)
+        a = 0.0
+        for i in range(ma):
+            a += Kt[i, j] * nu[acc_rows[i]]
+        dx[j] = a
+    A = np.empty((n, n))  # I - K H
+    for i in range(n):
+        for j in range(n):
+            a = 1.0 if i == j else 0.0
+            for k in range(ma):
+                a -= Kt[k, i] * Ha[k, j]
+            A[i, j] = a
+    AP = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            a = 0.0
+            for k in range(n):
+                a += A[i, k] * P[k, j]
+            AP[i, j] = a
+    for i in range(n):
+        for j in range(i, n):
+            a = 0.0
+            for k in range(n):
+                a += AP[i, k] * A[j, k]
+            for k in range(ma):
+                a += Kt[k, i] * r[acc_rows[k]] * Kt[k, j]
+            P[i, j] = a
+            P[j, i] = a
     return dx, True
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def run_ekf(
     x0: F64,
     P0: F64,
@@ -217,6 +239,7 @@ def run_ekf(
     L = np.empty((n, n))
     Phi = np.empty((n, n))
     Qd = np.empty((n, n))
+    tmp = np.empty((n, n))
     work = np.zeros((9, 10))
     acc = np.zeros(ACC_DIM)
     u = u0.copy()
@@ -254,10 +277,11 @@ def run_ekf(
             acc,
             True,
         )
-        u[:] = u_end
+        for j in range(6):
+            u[j] = u_end[j]
         t_cur = t
         transition(X, acc, noise, n, Phi, Qd)
-        P[:, :] = Phi @ P @ Phi.T + Qd
+        propagate_cov(P, Phi, Qd, n, tmp)
         m, nb_ = epoch_layout(stop, fix, obs, obs_start, nhc_on, rows, blocks)
         if m > 0:
             ma = ekf_prepare(

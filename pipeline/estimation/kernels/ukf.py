@@ -55,7 +55,6 @@ from pipeline.estimation.kernels.common import (
     record_innovations,
     record_output,
     streams_to_reset,
-    symmetrize,
     update_reject_since,
 )
 from pipeline.estimation.kernels.unscented import (
@@ -81,7 +80,7 @@ from pipeline.estimation.models.measurement import ST_OUT, ST_T, epoch_h, epoch_
 from pipeline.nav.earth import F64, I64
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _clock_only(L: F64, c: int) -> bool:
     """Column ``c`` of the Cholesky factor moves no navigation or bias state."""
     for r in range(E_CB):  # noqa: SIM110 (numba: no all() over a generator)
@@ -90,7 +89,7 @@ def _clock_only(L: F64, c: int) -> bool:
     return True
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def ukf_predict(
     s: F64,
     P: F64,
@@ -154,7 +153,8 @@ def ukf_predict(
         )
     transition(sigX[0], acc, noise, n, Phi, Qd)
     coords_scale(sigX[0], n, sc)
-    q_ref[:] = sigX[0, X_Q : X_Q + 4]
+    for j in range(4):
+        q_ref[j] = sigX[0, X_Q + j]
     for j in range(ns):
         from_full(sigX[j], q_ref, n, sig[j])
     unscented_mean_cov(sig, wm, wc, n, s, P)
@@ -164,7 +164,7 @@ def ukf_predict(
     return i_next
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def ukf_update(
     t_ns: int,
     s: F64,
@@ -243,7 +243,7 @@ def ukf_update(
     return True
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _reset_streams(
     t_ns: int,
     P: F64,
@@ -268,35 +268,43 @@ def _reset_streams(
     return bool(reset.sum() > 0)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _apply_gain(s: F64, P: F64, n: int, Pxz: F64, S: F64, nu: F64, a: I64, ma: int) -> None:
     """``s += K nu``, ``P -= K S K^T`` with ``K = Pxz S^-1`` over the accepted rows ``a``."""
     Sa = np.empty((ma, ma))
-    Pa = np.empty((ma, n))  # Pxz^T of the accepted rows
-    nua = np.empty(ma)
+    Kt = np.empty((ma, n))  # Pxz^T of the accepted rows, then Sa^-1 Pxz^T = K^T
     for i in range(ma):
-        nua[i] = nu[a[i]]
-        Pa[i, :] = Pxz[:, a[i]]
+        for j in range(n):
+            Kt[i, j] = Pxz[j, a[i]]
         for j in range(ma):
             Sa[i, j] = S[a[i], a[j]]
     La = np.empty((ma, ma))
     if not cholesky(Sa, ma, La):
         return
-    Kt = Pa.copy()
-    cho_solve(La, ma, Kt, n)  # Kt = Sa^-1 Pxz^T = K^T
-    s[:n] += Kt.T @ nua
-    P[:n, :n] -= Pa.T @ Kt  # K S K^T = Pxz S^-1 Pxz^T
-    symmetrize(P, n)
+    cho_solve(La, ma, Kt, n)
+    for j in range(n):
+        d = 0.0
+        for i in range(ma):
+            d += Kt[i, j] * nu[a[i]]
+        s[j] += d
+    for r in range(n):  # P -= K S K^T = Pxz Sa^-1 Pxz^T
+        for c in range(r, n):
+            d = 0.0
+            for i in range(ma):
+                d += Pxz[r, a[i]] * Kt[i, c]
+            P[r, c] -= d
+            if c != r:
+                P[c, r] = P[r, c]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _error_cov(P: F64, sc: F64, n: int, out: F64) -> None:
     for r in range(n):
         for c in range(n):
             out[r, c] = P[r, c] / (sc[r] * sc[c])
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def run_ukf(
     x0: F64,
     P0: F64,
@@ -395,7 +403,8 @@ def run_ukf(
         ok = i_next >= 0
         if ok:
             i = i_next
-            u[:] = u_end
+            for j in range(6):
+                u[j] = u_end[j]
             t_cur = t
             ok = keep_pd(P, n, L, t, ev_i, ev_f, counts)
         m, nb_ = epoch_layout(stop, fix, obs, obs_start, nhc_on, rows, blocks)

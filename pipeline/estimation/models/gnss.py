@@ -28,7 +28,6 @@ from __future__ import annotations
 import math
 
 import numba as nb
-import numpy as np
 
 from pipeline.estimation.models.ins import (
     E_ATT,
@@ -45,173 +44,203 @@ from pipeline.estimation.models.ins import (
     X_LON,
     X_Q,
     X_VEL,
+    dcm_into,
 )
-from pipeline.nav.earth import F64, OMEGA_IE, dcm_ecef_to_ned, geodetic_to_ecef, radii
-from pipeline.nav.rotations import quat_to_dcm
+from pipeline.nav.earth import E2, F64, OMEGA_IE, A, radii
+
+# Layout of the antenna context filled by ``antenna``: everything the rows of one state need.
+AN_LLH = 0  # 0..2: antenna latitude, longitude (rad), height (m)
+AN_CL = 3  # 3..5: lever arm in NED, C_b^n l_b (m)
+AN_U = 6  # 6..8: lever-arm velocity in NED, u = C_b^n (w_eb^b x l_b) (m/s)
+AN_VN = 9  # 9..11: antenna velocity in NED (m/s)
+AN_RE = 12  # 12..14: antenna ECEF position (m)
+AN_VE = 15  # 15..17: antenna ECEF velocity (m/s)
+AN_CEN = 18  # 18..26: C_e^n at the antenna, row-major
+AN_C = 27  # 27..35: C_b^n, row-major
+AN_DIM = 36
 
 
-@nb.njit(cache=True)
-def ned_offset(lat: float, lon: float, h: float, ref: F64) -> F64:
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def sk(a0: float, a1: float, a2: float, r: int, c: int) -> float:
+    """Entry (r, c) of the cross-product matrix [a x]."""
+    if r == c:
+        return 0.0
+    if r == 0:
+        return -a2 if c == 1 else a1
+    if r == 1:
+        return a2 if c == 0 else -a0
+    return -a1 if c == 0 else a0
+
+
+@nb.njit(cache=True, error_model="numpy")
+def ned_offset(lat: float, lon: float, h: float, ref: F64) -> tuple[float, float, float]:
     """NED offset (m) of the point (lat, lon, h) from ``ref`` = (lat, lon, h), with the radii of
     ``ref`` (exact for the small offsets of a filter update)."""
     rm, rn = radii(ref[0])
     dlon = lon - ref[1]
     dlon -= 2.0 * math.pi * round(dlon / (2.0 * math.pi))
-    return np.array(
-        [(lat - ref[0]) * (rm + ref[2]), dlon * (rn + ref[2]) * math.cos(ref[0]), -(h - ref[2])]
-    )
-
-
-@nb.njit(cache=True)
-def antenna_geodetic(X: F64, lever_b: F64) -> tuple[float, float, float, F64]:
-    """Antenna latitude, longitude (rad), height (m) and the NED lever arm ``C_b^n l_b``."""
-    C = quat_to_dcm(X[X_Q : X_Q + 4])
-    cl = C @ lever_b
-    lat, h = X[X_LAT], X[X_H]
-    rm, rn = radii(lat)
     return (
-        lat + cl[0] / (rm + h),
-        X[X_LON] + cl[1] / ((rn + h) * math.cos(lat)),
-        h - cl[2],
-        cl,
+        (lat - ref[0]) * (rm + ref[2]),
+        dlon * (rn + ref[2]) * math.cos(ref[0]),
+        -(h - ref[2]),
     )
 
 
-@nb.njit(cache=True)
-def antenna_velocity(X: F64, lever_b: F64, w_ib_b: F64) -> tuple[F64, F64]:
-    """Antenna velocity w.r.t. the earth in NED and the lever-arm term ``u = C (w_eb x l)``.
+@nb.njit(cache=True, error_model="numpy")
+def antenna(X: F64, lever_b: F64, w_ib_b: F64, C: F64, out: F64) -> None:
+    """The antenna context of state ``X`` (``AN_*`` layout) into ``out`` (``AN_DIM``,).
 
     Args:
-        X: full state.
-        lever_b: lever arm, body FRD, m.
-        w_ib_b: measured angular rate (bias not yet removed), rad/s.
+        X: full state; lever_b: lever arm, body FRD, m; w_ib_b: measured angular rate (bias
+            not yet removed), rad/s; C: scratch (3, 3).
     """
-    C = quat_to_dcm(X[X_Q : X_Q + 4])
-    lat = X[X_LAT]
-    w_ie_n = np.array([OMEGA_IE * math.cos(lat), 0.0, -OMEGA_IE * math.sin(lat)])
-    w_eb = w_ib_b - X[X_BG : X_BG + 3] - C.T @ w_ie_n
-    u = C @ np.cross(w_eb, lever_b)
-    return X[X_VEL : X_VEL + 3] + u, u
-
-
-@nb.njit(cache=True)
-def _skew(v: F64) -> F64:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-@nb.njit(cache=True)
-def position_h(X: F64, lever_b: F64, ref: F64) -> F64:
-    """Predicted antenna position as a NED offset from ``ref`` (m), shape (3,)."""
-    lat_a, lon_a, h_a, _ = antenna_geodetic(X, lever_b)
-    return ned_offset(lat_a, lon_a, h_a, ref)
-
-
-@nb.njit(cache=True)
-def position_jac(X: F64, lever_b: F64, n: int) -> F64:
-    """Jacobian of ``position_h`` w.r.t. the error state, shape (3, n)."""
-    C = quat_to_dcm(X[X_Q : X_Q + 4])
-    sk = _skew(C @ lever_b)
-    H = np.zeros((3, n))
+    dcm_into(X[X_Q : X_Q + 4], C)
+    lat, h = X[X_LAT], X[X_H]
+    sl, cl = math.sin(lat), math.cos(lat)
+    w_ie = (OMEGA_IE * cl, 0.0, -OMEGA_IE * sl)
+    # w_eb = w_ib - b_g - C^T w_ie; lever-arm position and velocity in NED
+    wx = w_ib_b[0] - X[X_BG] - (C[0, 0] * w_ie[0] + C[2, 0] * w_ie[2])
+    wy = w_ib_b[1] - X[X_BG + 1] - (C[0, 1] * w_ie[0] + C[2, 1] * w_ie[2])
+    wz = w_ib_b[2] - X[X_BG + 2] - (C[0, 2] * w_ie[0] + C[2, 2] * w_ie[2])
+    wxl = (
+        wy * lever_b[2] - wz * lever_b[1],
+        wz * lever_b[0] - wx * lever_b[2],
+        wx * lever_b[1] - wy * lever_b[0],
+    )
     for r in range(3):
-        H[r, E_POS + r] = 1.0
+        out[AN_CL + r] = C[r, 0] * lever_b[0] + C[r, 1] * lever_b[1] + C[r, 2] * lever_b[2]
+        out[AN_U + r] = C[r, 0] * wxl[0] + C[r, 1] * wxl[1] + C[r, 2] * wxl[2]
+        out[AN_VN + r] = X[X_VEL + r] + out[AN_U + r]
         for c in range(3):
-            H[r, E_ATT + c] = -sk[r, c]
-    return H
+            out[AN_C + 3 * r + c] = C[r, c]
+    rm, rn = radii(lat)
+    lat_a = lat + out[AN_CL] / (rm + h)
+    lon_a = X[X_LON] + out[AN_CL + 1] / ((rn + h) * cl)
+    h_a = h - out[AN_CL + 2]
+    out[AN_LLH], out[AN_LLH + 1], out[AN_LLH + 2] = lat_a, lon_a, h_a
+    sa, ca = math.sin(lat_a), math.cos(lat_a)
+    so, co = math.sin(lon_a), math.cos(lon_a)
+    rna = A / math.sqrt(1.0 - E2 * sa * sa)
+    out[AN_RE] = (rna + h_a) * ca * co
+    out[AN_RE + 1] = (rna + h_a) * ca * so
+    out[AN_RE + 2] = (rna * (1.0 - E2) + h_a) * sa
+    cen = out[AN_CEN : AN_CEN + 9]
+    cen[0], cen[1], cen[2] = -sa * co, -sa * so, ca
+    cen[3], cen[4], cen[5] = -so, co, 0.0
+    cen[6], cen[7], cen[8] = -ca * co, -ca * so, -sa
+    for j in range(3):  # v_e = C_e^n^T v_n
+        out[AN_VE + j] = (
+            cen[j] * out[AN_VN] + cen[3 + j] * out[AN_VN + 1] + cen[6 + j] * out[AN_VN + 2]
+        )
 
 
-@nb.njit(cache=True)
-def velocity_h(X: F64, lever_b: F64, w_ib_b: F64) -> F64:
-    """Predicted antenna velocity in NED (m/s), shape (3,)."""
-    v, _ = antenna_velocity(X, lever_b, w_ib_b)
-    return v
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _los(ant: F64, sat: F64) -> tuple[float, float, float, float]:
+    """Range to the satellite and the ECEF unit vector from the antenna to it."""
+    dx = sat[0] - ant[AN_RE]
+    dy = sat[1] - ant[AN_RE + 1]
+    dz = sat[2] - ant[AN_RE + 2]
+    rng = math.sqrt(dx * dx + dy * dy + dz * dz)
+    return rng, dx / rng, dy / rng, dz / rng
 
 
-@nb.njit(cache=True)
-def velocity_jac(X: F64, lever_b: F64, w_ib_b: F64, n: int) -> F64:
-    """Jacobian of ``velocity_h`` w.r.t. the error state, shape (3, n)."""
-    C = quat_to_dcm(X[X_Q : X_Q + 4])
-    _, u = antenna_velocity(X, lever_b, w_ib_b)
-    su = _skew(u)
-    cl = C @ _skew(lever_b)
-    H = np.zeros((3, n))
-    for r in range(3):
-        H[r, E_VEL + r] = 1.0
-        for c in range(3):
-            H[r, E_ATT + c] = -su[r, c]
-            H[r, E_BG + c] = cl[r, c]
-    return H
-
-
-@nb.njit(cache=True)
-def antenna_ecef(X: F64, lever_b: F64, w_ib_b: F64) -> tuple[F64, F64, F64]:
-    """Antenna ECEF position (m), ECEF velocity (m/s) and ``C_e^n`` at the antenna."""
-    lat_a, lon_a, h_a, _ = antenna_geodetic(X, lever_b)
-    v_n, _ = antenna_velocity(X, lever_b, w_ib_b)
-    c_en = dcm_ecef_to_ned(lat_a, lon_a)
-    return geodetic_to_ecef(lat_a, lon_a, h_a), c_en.T @ v_n, c_en
-
-
-@nb.njit(cache=True)
-def pseudorange_h(r_ant: F64, X: F64, sat: F64) -> float:
+@nb.njit(cache=True, error_model="numpy")
+def pseudorange_h(ant: F64, X: F64, sat: F64) -> float:
     """Predicted pseudorange ``|r_sat - r_ant| + cb`` (m) for satellite ``sat[0:3]`` (ECEF)."""
-    dx, dy, dz = sat[0] - r_ant[0], sat[1] - r_ant[1], sat[2] - r_ant[2]
-    return float(math.sqrt(dx * dx + dy * dy + dz * dz) + X[X_CB])
+    rng, _, _, _ = _los(ant, sat)
+    return float(rng + X[X_CB])
 
 
-@nb.njit(cache=True)
-def pseudorange_rate_h(r_ant: F64, v_ant: F64, X: F64, sat: F64) -> float:
+@nb.njit(cache=True, error_model="numpy")
+def pseudorange_rate_h(ant: F64, X: F64, sat: F64) -> float:
     """Predicted pseudorange rate ``e . (v_sat - v_ant) + cd`` (m/s); ``sat[3:6]`` is the
     satellite ECEF velocity."""
-    d = sat[0:3] - r_ant
-    rng = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    rate = d[0] * (sat[3] - v_ant[0]) + d[1] * (sat[4] - v_ant[1]) + d[2] * (sat[5] - v_ant[2])
-    return float(rate / rng + X[X_CD])
+    _, ex, ey, ez = _los(ant, sat)
+    rate = (
+        ex * (sat[3] - ant[AN_VE]) + ey * (sat[4] - ant[AN_VE + 1]) + ez * (sat[5] - ant[AN_VE + 2])
+    )
+    return float(rate + X[X_CD])
 
 
-@nb.njit(cache=True)
-def pseudorange_jac(
-    X: F64, lever_b: F64, r_ant: F64, c_en: F64, sat: F64, n: int, H_row: F64
-) -> None:
-    """Jacobian row of ``pseudorange_h`` w.r.t. the error state, written into ``H_row`` (n,)."""
-    d = sat[0:3] - r_ant
-    e_n = c_en @ (d / math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))
-    C = quat_to_dcm(X[X_Q : X_Q + 4])
-    att = e_n @ _skew(C @ lever_b)
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _los_ned(ant: F64, ex: float, ey: float, ez: float) -> tuple[float, float, float]:
+    """An ECEF vector resolved in NED (``C_e^n`` of the antenna)."""
+    c = ant[AN_CEN : AN_CEN + 9]
+    return (
+        c[0] * ex + c[1] * ey + c[2] * ez,
+        c[3] * ex + c[4] * ey + c[5] * ez,
+        c[6] * ex + c[7] * ey + c[8] * ez,
+    )
+
+
+@nb.njit(cache=True, error_model="numpy")
+def position_jac(ant: F64, axis: int, n: int, H_row: F64) -> None:
+    """Jacobian row of the antenna position (NED ``axis``): ``[I, 0, -[(C l) x], 0, 0]``."""
     for c in range(n):
         H_row[c] = 0.0
+    H_row[E_POS + axis] = 1.0
+    cl0, cl1, cl2 = ant[AN_CL], ant[AN_CL + 1], ant[AN_CL + 2]
     for c in range(3):
-        H_row[E_POS + c] = -e_n[c]
-        H_row[E_ATT + c] = att[c]
+        H_row[E_ATT + c] = -sk(cl0, cl1, cl2, axis, c)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def velocity_jac(ant: F64, lever_b: F64, axis: int, n: int, H_row: F64) -> None:
+    """Jacobian row of the antenna NED velocity: ``H_v = I``, ``H_phi = -[u x]``,
+    ``H_bg = C [l x]``."""
+    for c in range(n):
+        H_row[c] = 0.0
+    H_row[E_VEL + axis] = 1.0
+    u0, u1, u2 = ant[AN_U], ant[AN_U + 1], ant[AN_U + 2]
+    for c in range(3):
+        H_row[E_ATT + c] = -sk(u0, u1, u2, axis, c)
+        a = 0.0
+        for k in range(3):
+            a += ant[AN_C + 3 * axis + k] * sk(lever_b[0], lever_b[1], lever_b[2], k, c)
+        H_row[E_BG + c] = a
+
+
+@nb.njit(cache=True, error_model="numpy")
+def pseudorange_jac(ant: F64, sat: F64, n: int, H_row: F64) -> None:
+    """Jacobian row of ``pseudorange_h``: ``H_r = -e^T``, ``H_phi = e^T [(C l) x]``,
+    ``H_cb = 1`` (``e`` in NED)."""
+    _, ex, ey, ez = _los(ant, sat)
+    e = _los_ned(ant, ex, ey, ez)
+    for c in range(n):
+        H_row[c] = 0.0
+    cl0, cl1, cl2 = ant[AN_CL], ant[AN_CL + 1], ant[AN_CL + 2]
+    for c in range(3):
+        H_row[E_POS + c] = -e[c]
+        H_row[E_ATT + c] = (
+            e[0] * sk(cl0, cl1, cl2, 0, c)
+            + e[1] * sk(cl0, cl1, cl2, 1, c)
+            + e[2] * sk(cl0, cl1, cl2, 2, c)
+        )
     H_row[E_CB] = 1.0
 
 
-@nb.njit(cache=True)
-def pseudorange_rate_jac(
-    X: F64,
-    lever_b: F64,
-    w_ib_b: F64,
-    r_ant: F64,
-    v_ant: F64,
-    c_en: F64,
-    sat: F64,
-    n: int,
-    H_row: F64,
-) -> None:
-    """Jacobian row of ``pseudorange_rate_h`` w.r.t. the error state, into ``H_row`` (n,)."""
-    d = sat[0:3] - r_ant
-    rng = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    e_n = c_en @ (d / rng)
-    dv_n = c_en @ (sat[3:6] - v_ant)
-    los_turn = (dv_n - e_n * (e_n @ dv_n)) / rng
-    C = quat_to_dcm(X[X_Q : X_Q + 4])
-    _, u = antenna_velocity(X, lever_b, w_ib_b)
-    att = e_n @ _skew(u)
-    bg = -(e_n @ (C @ _skew(lever_b)))
+@nb.njit(cache=True, error_model="numpy")
+def pseudorange_rate_jac(ant: F64, lever_b: F64, sat: F64, n: int, H_row: F64) -> None:
+    """Jacobian row of ``pseudorange_rate_h``: ``H_v = -e^T``, ``H_phi = e^T [u x]``,
+    ``H_bg = -e^T C [l x]``, ``H_r = -(dv - e (e . dv))^T / range``, ``H_cd = 1``."""
+    rng, ex, ey, ez = _los(ant, sat)
+    e = _los_ned(ant, ex, ey, ez)
+    dv = _los_ned(ant, sat[3] - ant[AN_VE], sat[4] - ant[AN_VE + 1], sat[5] - ant[AN_VE + 2])
+    edv = e[0] * dv[0] + e[1] * dv[1] + e[2] * dv[2]
     for c in range(n):
         H_row[c] = 0.0
+    u0, u1, u2 = ant[AN_U], ant[AN_U + 1], ant[AN_U + 2]
     for c in range(3):
-        H_row[E_POS + c] = -los_turn[c]
-        H_row[E_VEL + c] = -e_n[c]
-        H_row[E_ATT + c] = att[c]
-        H_row[E_BG + c] = bg[c]
+        H_row[E_POS + c] = -(dv[c] - e[c] * edv) / rng
+        H_row[E_VEL + c] = -e[c]
+        att = 0.0
+        bg = 0.0
+        for r in range(3):
+            att += e[r] * sk(u0, u1, u2, r, c)
+            ecl = 0.0
+            for k in range(3):
+                ecl += ant[AN_C + 3 * r + k] * sk(lever_b[0], lever_b[1], lever_b[2], k, c)
+            bg -= e[r] * ecl
+        H_row[E_ATT + c] = att
+        H_row[E_BG + c] = bg
     H_row[E_CD] = 1.0

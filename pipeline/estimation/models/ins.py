@@ -39,7 +39,6 @@ import numpy as np
 
 from pipeline.nav.earth import F64, I64, radii
 from pipeline.nav.mechanization import NAV_DIM, propagate_into
-from pipeline.nav.rotations import quat_mul, quat_normalize, quat_to_rotvec, rotvec_to_quat
 
 FULL_DIM = 18
 X_LAT, X_LON, X_H, X_VEL, X_Q, X_BA, X_BG, X_CB, X_CD = 0, 1, 2, 3, 6, 10, 13, 16, 17
@@ -54,7 +53,56 @@ ACC_GAP = 13  # total duration of IMU gaps inside the span, s
 ACC_DIM = 14
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _exp_mul(a0: float, a1: float, a2: float, q: F64) -> tuple[float, float, float, float]:
+    """``Exp(a) * q`` (rotation vector ``a`` applied on the left), unit, scalar part >= 0."""
+    angle = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    if angle < 1e-8:  # Taylor of cos(x/2) and sin(x/2)/x, as rotations.rotvec_to_quat
+        pw, k = 1.0 - angle * angle / 8.0, 0.5 - angle * angle / 48.0
+    else:
+        pw, k = math.cos(0.5 * angle), math.sin(0.5 * angle) / angle
+    px, py, pz = a0 * k, a1 * k, a2 * k
+    w = pw * q[0] - px * q[1] - py * q[2] - pz * q[3]
+    x = pw * q[1] + px * q[0] + py * q[3] - pz * q[2]
+    y = pw * q[2] - px * q[3] + py * q[0] + pz * q[1]
+    z = pw * q[3] + px * q[2] - py * q[1] + pz * q[0]
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    s = 1.0 / n if w >= 0.0 else -1.0 / n
+    return w * s, x * s, y * s, z * s
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _log_div(q: F64, r: F64) -> tuple[float, float, float]:
+    """Rotation vector of ``q * r^-1`` (angle in [0, pi])."""
+    w = q[0] * r[0] + q[1] * r[1] + q[2] * r[2] + q[3] * r[3]
+    x = -q[0] * r[1] + q[1] * r[0] - q[2] * r[3] + q[3] * r[2]
+    y = -q[0] * r[2] + q[1] * r[3] + q[2] * r[0] - q[3] * r[1]
+    z = -q[0] * r[3] - q[1] * r[2] + q[2] * r[1] + q[3] * r[0]
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    sv = math.sqrt(x * x + y * y + z * z)
+    if sv < 1e-12:
+        return 2.0 * x, 2.0 * y, 2.0 * z
+    k = 2.0 * math.atan2(sv, w) / sv
+    return x * k, y * k, z * k
+
+
+@nb.njit(cache=True, error_model="numpy")
+def dcm_into(q: F64, C: F64) -> None:
+    """C_b^n of the unit quaternion ``q`` (as ``rotations.quat_to_dcm``) into ``C`` (3, 3)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    C[0, 0] = w * w + x * x - y * y - z * z
+    C[0, 1] = 2.0 * (x * y - w * z)
+    C[0, 2] = 2.0 * (x * z + w * y)
+    C[1, 0] = 2.0 * (x * y + w * z)
+    C[1, 1] = w * w - x * x + y * y - z * z
+    C[1, 2] = 2.0 * (y * z - w * x)
+    C[2, 0] = 2.0 * (x * z - w * y)
+    C[2, 1] = 2.0 * (y * z + w * x)
+    C[2, 2] = w * w - x * x - y * y + z * z
+
+
+@nb.njit(cache=True, error_model="numpy")
 def inject(X: F64, dx: F64, n: int) -> None:
     """Apply an error-state correction in place: ``X <- X [+] dx`` (see the module docstring).
 
@@ -72,14 +120,14 @@ def inject(X: F64, dx: F64, n: int) -> None:
         X[X_VEL + j] += dx[E_VEL + j]
         X[X_BA + j] += dx[E_BA + j]
         X[X_BG + j] += dx[E_BG + j]
-    dq = rotvec_to_quat(dx[E_ATT : E_ATT + 3])
-    X[X_Q : X_Q + 4] = quat_normalize(quat_mul(dq, X[X_Q : X_Q + 4]))
+    w, x, y, z = _exp_mul(dx[E_ATT], dx[E_ATT + 1], dx[E_ATT + 2], X[X_Q : X_Q + 4])
+    X[X_Q], X[X_Q + 1], X[X_Q + 2], X[X_Q + 3] = w, x, y, z
     if n > N_LOOSE:
         X[X_CB] += dx[E_CB]
         X[X_CD] += dx[E_CD]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def difference(Xa: F64, Xb: F64, n: int) -> F64:
     """The error state ``dx`` with ``inject(Xb, dx) == Xa`` (exact inverse of ``inject``).
 
@@ -99,50 +147,15 @@ def difference(Xa: F64, Xb: F64, n: int) -> F64:
         dx[E_VEL + j] = Xa[X_VEL + j] - Xb[X_VEL + j]
         dx[E_BA + j] = Xa[X_BA + j] - Xb[X_BA + j]
         dx[E_BG + j] = Xa[X_BG + j] - Xb[X_BG + j]
-    qb = Xb[X_Q : X_Q + 4]
-    qb_inv = np.array([qb[0], -qb[1], -qb[2], -qb[3]])
-    dx[E_ATT : E_ATT + 3] = quat_to_rotvec(quat_mul(Xa[X_Q : X_Q + 4], qb_inv))
+    a0, a1, a2 = _log_div(Xa[X_Q : X_Q + 4], Xb[X_Q : X_Q + 4])
+    dx[E_ATT], dx[E_ATT + 1], dx[E_ATT + 2] = a0, a1, a2
     if n > N_LOOSE:
         dx[E_CB] = Xa[X_CB] - Xb[X_CB]
         dx[E_CD] = Xa[X_CD] - Xb[X_CD]
     return dx
 
 
-@nb.njit(cache=True, inline="always")
-def _exp_mul(a0: float, a1: float, a2: float, q: F64) -> tuple[float, float, float, float]:
-    """``Exp(a) * q`` (rotation vector ``a`` applied on the left), unit, scalar part >= 0."""
-    angle = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-    if angle < 1e-8:  # Taylor of cos(x/2) and sin(x/2)/x, as rotations.rotvec_to_quat
-        pw, k = 1.0 - angle * angle / 8.0, 0.5 - angle * angle / 48.0
-    else:
-        pw, k = math.cos(0.5 * angle), math.sin(0.5 * angle) / angle
-    px, py, pz = a0 * k, a1 * k, a2 * k
-    w = pw * q[0] - px * q[1] - py * q[2] - pz * q[3]
-    x = pw * q[1] + px * q[0] + py * q[3] - pz * q[2]
-    y = pw * q[2] - px * q[3] + py * q[0] + pz * q[1]
-    z = pw * q[3] + px * q[2] - py * q[1] + pz * q[0]
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    s = 1.0 / n if w >= 0.0 else -1.0 / n
-    return w * s, x * s, y * s, z * s
-
-
-@nb.njit(cache=True, inline="always")
-def _log_div(q: F64, r: F64) -> tuple[float, float, float]:
-    """Rotation vector of ``q * r^-1`` (angle in [0, pi])."""
-    w = q[0] * r[0] + q[1] * r[1] + q[2] * r[2] + q[3] * r[3]
-    x = -q[0] * r[1] + q[1] * r[0] - q[2] * r[3] + q[3] * r[2]
-    y = -q[0] * r[2] + q[1] * r[3] + q[2] * r[0] - q[3] * r[1]
-    z = -q[0] * r[3] - q[1] * r[2] + q[2] * r[1] + q[3] * r[0]
-    if w < 0.0:
-        w, x, y, z = -w, -x, -y, -z
-    sv = math.sqrt(x * x + y * y + z * z)
-    if sv < 1e-12:
-        return 2.0 * x, 2.0 * y, 2.0 * z
-    k = 2.0 * math.atan2(sv, w) / sv
-    return x * k, y * k, z * k
-
-
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def to_full(s: F64, q_ref: F64, n: int, X: F64) -> None:
     """UKF coordinates ``s`` (n,) and reference quaternion -> full state ``X`` (18,), in place.
 
@@ -163,7 +176,7 @@ def to_full(s: F64, q_ref: F64, n: int, X: F64) -> None:
         X[X_CD] = 0.0
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def from_full(X: F64, q_ref: F64, n: int, s: F64) -> None:
     """Full state ``X`` -> UKF coordinates ``s`` relative to ``q_ref``, in place."""
     for j in range(3):
@@ -178,7 +191,7 @@ def from_full(X: F64, q_ref: F64, n: int, s: F64) -> None:
         s[E_CD] = X[X_CD]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def coords_scale(X: F64, n: int, out: F64) -> None:
     """Diagonal of the map from error coordinates to UKF coordinates at ``X``, shape (n,).
 
@@ -193,89 +206,6 @@ def coords_scale(X: F64, n: int, out: F64) -> None:
     out[0] = 1.0 / (rm + h)
     out[1] = 1.0 / ((rn + h) * math.cos(X[X_LAT]))
     out[2] = -1.0
-
-
-@nb.njit(cache=True, error_model="numpy")
-def propagate_span(
-    X: F64,
-    imu_t: I64,
-    imu: F64,
-    i: int,
-    t_start: int,
-    u_start: F64,
-    t_end: int,
-    substeps: int,
-    max_step_s: float,
-    gap_s: float,
-    u_end: F64,
-    work: F64,
-    acc: F64,
-    accumulate: bool,
-) -> int:
-    """Integrate the full state ``X`` in place from ``t_start`` to ``t_end`` (paper 001 eq. 1-3).
-
-    The clock bias integrates the drift (``cb += cd T``). The IMU input is ``u_start`` (6:
-    specific force, angular rate; interpolated at ``t_start``), then every sample
-    ``i, i+1, ...`` with ``t_start < imu_t <= t_end``, then the input interpolated at
-    ``t_end`` (held if no later sample exists); between inputs it is
-    linear. Each interval is integrated by ``propagate_into`` with ``substeps`` RK4 steps, more
-    if an interval exceeds ``max_step_s``; the state's own biases correct the input.
-
-    Args:
-        X: full state (18,), propagated in place.
-        imu_t: sample times, int64 ns, strictly increasing, (N,).
-        imu: samples ``[f_x, f_y, f_z, w_x, w_y, w_z]`` in body FRD, (N, 6).
-        i: index of the first sample later than ``t_start``.
-        t_start, t_end: span limits, int64 ns, ``t_end >= t_start``.
-        u_start: input at ``t_start``, (6,).
-        substeps: RK4 steps per interval.
-        max_step_s: longest RK4 step, s.
-        gap_s: intervals longer than this count as IMU gaps (accumulated only).
-        u_end: out, the input at ``t_end``, (6,).
-        work: scratch, (9, 10).
-        acc: out when ``accumulate`` (``ACC_DIM``,): integrals of the nav-frame specific
-            force and of ``C_b^n``, span and gap durations, for ``transition``.
-        accumulate: fill ``acc`` (done for the EKF nominal and the UKF central sigma point).
-
-    Returns:
-        The index of the first sample later than ``t_end``.
-    """
-    n_imu = imu_t.shape[0]
-    nav = X[:NAV_DIM]
-    rk = work[:5]
-    f0, w0, f1, w1 = work[5, :3], work[6, :3], work[7, :3], work[8, :3]
-    if accumulate:
-        for j in range(ACC_DIM):
-            acc[j] = 0.0
-    for j in range(6):
-        u_end[j] = u_start[j]
-    t_cur = t_start
-    while t_cur < t_end:
-        advance = i < n_imu and imu_t[i] <= t_end
-        t_next = imu_t[i] if advance else t_end
-        _target_input(imu_t, imu, i, t_cur, t_end, advance, u_end, f1, w1)
-        for j in range(3):
-            f0[j] = u_end[j] - X[X_BA + j]
-            w0[j] = u_end[3 + j] - X[X_BG + j]
-            u_end[j] = f1[j]
-            u_end[3 + j] = w1[j]
-            f1[j] -= X[X_BA + j]
-            w1[j] -= X[X_BG + j]
-        dt = (t_next - t_cur) * 1e-9
-        ns = substeps
-        if dt > max_step_s * substeps:
-            ns = math.ceil(dt / max_step_s)
-        if accumulate:
-            _accumulate(nav, f0, f1, dt, acc)
-            acc[ACC_T] += dt
-            if dt > gap_s:
-                acc[ACC_GAP] += dt
-        propagate_into(nav, f0, w0, f1, w1, dt, ns, nav, rk)
-        t_cur = t_next
-        if advance:
-            i += 1
-    X[X_CB] += X[X_CD] * ((t_end - t_start) * 1e-9)
-    return i
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
@@ -334,3 +264,106 @@ def _accumulate(nav: F64, f0: F64, f1: F64, dt: float, acc: F64) -> None:
     acc[ACC_C + 6] += dt * c20
     acc[ACC_C + 7] += dt * c21
     acc[ACC_C + 8] += dt * c22
+
+
+@nb.njit(
+    nb.int64(
+        nb.float64[::1],
+        nb.int64[::1],
+        nb.float64[:, ::1],
+        nb.int64,
+        nb.int64,
+        nb.float64[::1],
+        nb.int64,
+        nb.int64,
+        nb.float64,
+        nb.float64,
+        nb.float64[::1],
+        nb.float64[:, ::1],
+        nb.float64[::1],
+        nb.boolean,
+    ),
+    cache=True,
+    error_model="numpy",
+)  # one signature: the EKF (literal True) and the UKF (a runtime flag) share one compile
+def propagate_span(
+    X: F64,
+    imu_t: I64,
+    imu: F64,
+    i: int,
+    t_start: int,
+    u_start: F64,
+    t_end: int,
+    substeps: int,
+    max_step_s: float,
+    gap_s: float,
+    u_end: F64,
+    work: F64,
+    acc: F64,
+    accumulate: bool,
+) -> int:
+    """Integrate the full state ``X`` in place from ``t_start`` to ``t_end`` (paper 001 eq. 1-3).
+
+    The clock bias integrates the drift (``cb += cd T``). The IMU input is ``u_start`` (6:
+    specific force, angular rate; interpolated at ``t_start``), then every sample
+    ``i, i+1, ...`` with ``t_start < imu_t <= t_end``, then the input interpolated at
+    ``t_end`` (held if no later sample exists); between inputs it is
+    linear. Each interval is integrated by ``propagate_into`` with ``substeps`` RK4 steps, more
+    if an interval exceeds ``max_step_s``; the state's own biases correct the input.
+
+    Args:
+        X: full state (18,), propagated in place.
+        imu_t: sample times, int64 ns, strictly increasing, (N,).
+        imu: samples ``[f_x, f_y, f_z, w_x, w_y, w_z]`` in body FRD, (N, 6).
+        i: index of the first sample later than ``t_start``.
+        t_start, t_end: span limits, int64 ns, ``t_end >= t_start``.
+        u_start: input at ``t_start``, (6,).
+        substeps: RK4 steps per interval.
+        max_step_s: longest RK4 step, s.
+        gap_s: sample intervals longer than this are IMU gaps (their time is accumulated).
+        u_end: out, the input at ``t_end``, (6,).
+        work: scratch, (9, 10).
+        acc: out when ``accumulate`` (``ACC_DIM``,): integrals of the nav-frame specific
+            force and of ``C_b^n``, span and gap durations, for ``transition``.
+        accumulate: fill ``acc`` (done for the EKF nominal and the UKF central sigma point).
+
+    Returns:
+        The index of the first sample later than ``t_end``.
+    """
+    n_imu = imu_t.shape[0]
+    nav = X[:NAV_DIM]
+    rk = work[:5]
+    f0, w0, f1, w1 = work[5, :3], work[6, :3], work[7, :3], work[8, :3]
+    if accumulate:
+        for j in range(ACC_DIM):
+            acc[j] = 0.0
+    for j in range(6):
+        u_end[j] = u_start[j]
+    t_cur = t_start
+    while t_cur < t_end:
+        advance = i < n_imu and imu_t[i] <= t_end
+        t_next = imu_t[i] if advance else t_end
+        _target_input(imu_t, imu, i, t_cur, t_end, advance, u_end, f1, w1)
+        for j in range(3):
+            f0[j] = u_end[j] - X[X_BA + j]
+            w0[j] = u_end[3 + j] - X[X_BG + j]
+            u_end[j] = f1[j]
+            u_end[3 + j] = w1[j]
+            f1[j] -= X[X_BA + j]
+            w1[j] -= X[X_BG + j]
+        dt = (t_next - t_cur) * 1e-9
+        ns = substeps
+        if dt > max_step_s * substeps:
+            ns = math.ceil(dt / max_step_s)
+        if accumulate:
+            _accumulate(nav, f0, f1, dt, acc)
+            acc[ACC_T] += dt
+            # a piece of a gap between two samples, however the stops cut that gap
+            if 0 < i < n_imu and (imu_t[i] - imu_t[i - 1]) * 1e-9 > gap_s:
+                acc[ACC_GAP] += dt
+        propagate_into(nav, f0, w0, f1, w1, dt, ns, nav, rk)
+        t_cur = t_next
+        if advance:
+            i += 1
+    X[X_CB] += X[X_CD] * ((t_end - t_start) * 1e-9)
+    return i

@@ -32,9 +32,9 @@ from pipeline.estimation.models.ins import (
     X_LAT,
     X_Q,
     X_VEL,
+    dcm_into,
 )
 from pipeline.nav.earth import E2, F64, OMEGA_IE, A, gravity
-from pipeline.nav.rotations import quat_to_dcm
 
 # Indices of the noise vector handed to ``transition`` (see ``noise_vector``).
 NZ_ACC, NZ_GYR, NZ_BA, NZ_BG, NZ_CB, NZ_CD, NZ_GAP_ACC, NZ_GAP_GYR = range(8)
@@ -48,13 +48,13 @@ def noise_vector(
     gyro_bias_rw_radps2_rthz: float,
     clock_bias_psd_m2ps: float,
     clock_drift_psd_m2ps3: float,
-    gap_accel_sigma_mps2: float,
-    gap_gyro_sigma_radps: float,
+    gap_accel_psd_m2ps3: float,
+    gap_gyro_psd_rad2ps: float,
 ) -> F64:
     """Pack the continuous noise model into the vector ``transition`` reads.
 
-    White-noise densities are squared into power spectral densities; the gap sigmas are kept
-    as 1-sigma values (they scale with the gap duration, see ``transition``).
+    White-noise densities (per root hertz) are squared into power spectral densities; the
+    clock and gap entries are already densities.
     """
     return np.array(
         [
@@ -64,24 +64,23 @@ def noise_vector(
             gyro_bias_rw_radps2_rthz**2,
             clock_bias_psd_m2ps,
             clock_drift_psd_m2ps3,
-            gap_accel_sigma_mps2,
-            gap_gyro_sigma_radps,
+            gap_accel_psd_m2ps3,
+            gap_gyro_psd_rad2ps,
         ]
     )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _dgravity_dh(lat: float, h: float) -> float:
     """d g / d h of ``earth.gravity`` (normal gravity decreases with height), 1/s^2."""
-    eps = 1.0
-    return (gravity(lat, h + eps) - gravity(lat, h - eps)) / (2.0 * eps)
+    return (gravity(lat, h + 1.0) - gravity(lat, h - 1.0)) / 2.0
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def error_jacobian(X: F64, f_n: F64, C: F64, n: int, F: F64) -> None:
     """Continuous error dynamics ``d(dx)/dt = F dx`` at the full state ``X`` (eq. 4-6).
 
-    With the conventions of the module docstring (``dx`` = truth minus estimate):
+    With the conventions of ``models.ins`` (``dx`` = truth minus estimate):
 
     - position:  d(dr)/dt   = dv + F_rr dr (transport of the NED offsets),
     - velocity:  d(dv)/dt   = -[f^n x] phi - C_b^n dba - (2 w_ie + w_en) x dv
@@ -89,11 +88,15 @@ def error_jacobian(X: F64, f_n: F64, C: F64, n: int, F: F64) -> None:
     - attitude:  d(phi)/dt  = -w_in x phi - C_b^n dbg - dw_in,
     - biases random walks, clock: d(dcb)/dt = dcd.
 
+    ``dw_ie`` and ``dw_en`` are the changes of the earth and transport rates with the position
+    and velocity errors (``m_ie``, ``m_en``, ``m_ev`` below). Written out element by element:
+    small-matrix numpy code costs numba seconds of compilation.
+
     Args:
         X: full state, (18,).
         f_n: specific force resolved in NED (bias-corrected), m/s^2, (3,).
         C: the body-to-NED rotation coupling the biases, (3, 3) (``transition`` passes the
-            span mean of ``C_b^n``; use ``quat_to_dcm`` of the state for the instant).
+            span mean of ``C_b^n``; ``ins.dcm_into`` of the state for the instant).
         n: error-state dimension, 15 or 17.
         F: out, (n, n), overwritten.
     """
@@ -105,22 +108,24 @@ def error_jacobian(X: F64, f_n: F64, C: F64, n: int, F: F64) -> None:
     rn = A / math.sqrt(w2)
     rm = rn * (1.0 - E2) / w2
     rmh, rnh = rm + h, rn + h
-    w_ie = np.array([OMEGA_IE * cl, 0.0, -OMEGA_IE * sl])
-    w_en = np.array([ve / rnh, -vn / rmh, -ve * tl / rnh])
-    v = np.array([vn, ve, vd])
-    # partial derivatives of w_ie and w_en w.r.t. dr (NED m) and dv
-    m_ie_r = np.zeros((3, 3))
-    m_ie_r[0, 0] = -OMEGA_IE * sl / rmh
-    m_ie_r[2, 0] = -OMEGA_IE * cl / rmh
-    m_en_r = np.zeros((3, 3))
-    m_en_r[0, 2] = ve / (rnh * rnh)
-    m_en_r[1, 2] = -vn / (rmh * rmh)
-    m_en_r[2, 0] = -ve / (cl * cl * rnh * rmh)
-    m_en_r[2, 2] = -ve * tl / (rnh * rnh)
-    m_en_v = np.zeros((3, 3))
-    m_en_v[0, 1] = 1.0 / rnh
-    m_en_v[1, 0] = -1.0 / rmh
-    m_en_v[2, 1] = -tl / rnh
+    # earth rate, transport rate and their sum w_in; Coriolis rate 2 w_ie + w_en
+    ie = (OMEGA_IE * cl, 0.0, -OMEGA_IE * sl)
+    en = (ve / rnh, -vn / rmh, -ve * tl / rnh)
+    win = (ie[0] + en[0], ie[1] + en[1], ie[2] + en[2])
+    cor = (2.0 * ie[0] + en[0], 2.0 * ie[1] + en[1], 2.0 * ie[2] + en[2])
+    # m_ie = d w_ie / d dr, m_en = d w_en / d dr, m_ev = d w_en / d dv (row-major 3x3)
+    m_ie = np.zeros((3, 3))
+    m_ie[0, 0] = -OMEGA_IE * sl / rmh
+    m_ie[2, 0] = -OMEGA_IE * cl / rmh
+    m_en = np.zeros((3, 3))
+    m_en[0, 2] = ve / (rnh * rnh)
+    m_en[1, 2] = -vn / (rmh * rmh)
+    m_en[2, 0] = -ve / (cl * cl * rnh * rmh)
+    m_en[2, 2] = -ve * tl / (rnh * rnh)
+    m_ev = np.zeros((3, 3))
+    m_ev[0, 1] = 1.0 / rnh
+    m_ev[1, 0] = -1.0 / rmh
+    m_ev[2, 1] = -tl / rnh
     for r in range(n):
         for c in range(n):
             F[r, c] = 0.0
@@ -132,23 +137,25 @@ def error_jacobian(X: F64, f_n: F64, C: F64, n: int, F: F64) -> None:
     F[1, 2] = ve / rnh
     for j in range(3):
         F[E_POS + j, E_VEL + j] = 1.0
-    # velocity rows
-    vx = _skew(v)
-    cor = 2.0 * w_ie + w_en
-    m_vr = vx @ (2.0 * m_ie_r + m_en_r)
-    m_vv = -_skew(cor) + vx @ m_en_v
-    fx = _skew(f_n)
-    w_in = w_ie + w_en
-    m_ax = _skew(w_in)
+    # velocity rows: -(2 dw_ie + dw_en) x v = [v x] (2 m_ie dr + m_en dr + m_ev dv)
+    vx = np.zeros((3, 3))
+    vx[0, 1], vx[0, 2], vx[1, 0] = -vd, ve, vd
+    vx[1, 2], vx[2, 0], vx[2, 1] = -vn, -ve, vn
+    fx = (f_n[0], f_n[1], f_n[2])
     for r in range(3):
         for c in range(3):
-            F[E_VEL + r, E_POS + c] = m_vr[r, c]
-            F[E_VEL + r, E_VEL + c] = m_vv[r, c]
-            F[E_VEL + r, E_ATT + c] = -fx[r, c]
+            a_r = 0.0
+            a_v = 0.0
+            for k in range(3):
+                a_r += vx[r, k] * (2.0 * m_ie[k, c] + m_en[k, c])
+                a_v += vx[r, k] * m_ev[k, c]
+            F[E_VEL + r, E_POS + c] = a_r
+            F[E_VEL + r, E_VEL + c] = a_v - _cross_entry(cor, r, c)
+            F[E_VEL + r, E_ATT + c] = -_cross_entry(fx, r, c)
             F[E_VEL + r, E_BA + c] = -C[r, c]
-            F[E_ATT + r, E_POS + c] = -(m_ie_r[r, c] + m_en_r[r, c])
-            F[E_ATT + r, E_VEL + c] = -m_en_v[r, c]
-            F[E_ATT + r, E_ATT + c] = -m_ax[r, c]
+            F[E_ATT + r, E_POS + c] = -(m_ie[r, c] + m_en[r, c])
+            F[E_ATT + r, E_VEL + c] = -m_ev[r, c]
+            F[E_ATT + r, E_ATT + c] = -_cross_entry(win, r, c)
             F[E_ATT + r, E_BG + c] = -C[r, c]
     # gravity: g grows downwards as the height drops (dh = -dr_d)
     F[E_VEL + 2, E_POS + 2] += -_dgravity_dh(lat, h)
@@ -156,12 +163,19 @@ def error_jacobian(X: F64, f_n: F64, C: F64, n: int, F: F64) -> None:
         F[E_CB, E_CD] = 1.0
 
 
-@nb.njit(cache=True)
-def _skew(v: F64) -> F64:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _cross_entry(a: tuple[float, float, float], r: int, c: int) -> float:
+    """Entry (r, c) of the cross-product matrix [a x]."""
+    if r == c:
+        return 0.0
+    if r == 0:
+        return -a[2] if c == 1 else a[1]
+    if r == 1:
+        return a[2] if c == 0 else -a[0]
+    return -a[1] if c == 0 else a[0]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def transition(X: F64, acc: F64, noise: F64, n: int, Phi: F64, Qd: F64) -> None:
     """Error-state transition and process noise over one span (the EKF's predict model).
 
@@ -170,9 +184,11 @@ def transition(X: F64, acc: F64, noise: F64, n: int, Phi: F64, Qd: F64) -> None:
     is the exact integral of the bias couplings while the body turns);
     ``Qd = (Phi D Phi^T + D) T / 2`` (trapezoid) with ``D`` the diagonal continuous noise
     (accel and gyro white noise, bias random walks, clock).
-    IMU gaps inside the span add the effect of an unknown acceleration and rotation rate
-    (``noise[NZ_GAP_*]``) over the gap duration: velocity ``(s_a T_g)^2``, position
-    ``(s_a T_g^2 / 2)^2`` (correlated), attitude ``(s_w T_g)^2``.
+    Time spent inside IMU gaps (``T_g``, bridged by interpolating the samples on both sides)
+    adds white acceleration and rotation-rate noise of densities ``noise[NZ_GAP_ACC]``,
+    ``noise[NZ_GAP_GYR]`` for the vehicle's unknown manoeuvres: velocity ``q_a T_g``, position
+    ``q_a T_g^3 / 3`` (correlated ``q_a T_g^2 / 2``), attitude ``q_w T_g``. Being white, it
+    adds up the same however the stops cut the gap.
 
     Args:
         X: full state at the end of the span, (18,).
@@ -183,19 +199,25 @@ def transition(X: F64, acc: F64, noise: F64, n: int, Phi: F64, Qd: F64) -> None:
     """
     T = acc[ACC_T]
     f_n = np.zeros(3)
+    C = np.empty((3, 3))
     if T > 0.0:
         for j in range(3):
             f_n[j] = acc[ACC_FN + j] / T
-        C = acc[ACC_C : ACC_C + 9].copy().reshape((3, 3)) / T
+        for r in range(3):
+            for c in range(3):
+                C[r, c] = acc[ACC_C + 3 * r + c] / T
     else:
         f_n[2] = -gravity(X[X_LAT], X[X_H])
-        C = quat_to_dcm(X[X_Q : X_Q + 4])
+        dcm_into(X[X_Q : X_Q + 4], C)
     F = np.empty((n, n))
     error_jacobian(X, f_n, C, n, F)
-    At = F * T
-    Phi[:, :] = At + 0.5 * (At @ At)
-    for j in range(n):
-        Phi[j, j] += 1.0
+    for r in range(n):  # Phi = I + F T + (F T)^2 / 2
+        for c in range(n):
+            a = 0.0
+            for k in range(n):
+                a += F[r, k] * F[k, c]
+            Phi[r, c] = F[r, c] * T + 0.5 * a * T * T
+        Phi[r, r] += 1.0
     d = np.zeros(n)
     for j in range(3):
         d[E_VEL + j] = noise[NZ_ACC]
@@ -205,16 +227,20 @@ def transition(X: F64, acc: F64, noise: F64, n: int, Phi: F64, Qd: F64) -> None:
     if n > N_LOOSE:
         d[E_CB] = noise[NZ_CB]
         d[E_CD] = noise[NZ_CD]
-    Pd = Phi * d  # Phi @ diag(d)
-    Qd[:, :] = (Pd @ Phi.T) * (0.5 * T)
-    for j in range(n):
-        Qd[j, j] += 0.5 * T * d[j]
+    for r in range(n):  # Qd = (Phi D Phi^T + D) T / 2
+        for c in range(r, n):
+            a = 0.0
+            for k in range(n):
+                a += Phi[r, k] * d[k] * Phi[c, k]
+            Qd[r, c] = 0.5 * T * a
+            Qd[c, r] = Qd[r, c]
+        Qd[r, r] += 0.5 * T * d[r]
     tg = acc[ACC_GAP]
     if tg > 0.0:
-        sa, sw = noise[NZ_GAP_ACC], noise[NZ_GAP_GYR]
+        qa, qw = noise[NZ_GAP_ACC], noise[NZ_GAP_GYR]
         for j in range(3):
-            Qd[E_VEL + j, E_VEL + j] += (sa * tg) ** 2
-            Qd[E_POS + j, E_POS + j] += (0.5 * sa * tg * tg) ** 2
-            Qd[E_POS + j, E_VEL + j] += 0.5 * sa * sa * tg**3
-            Qd[E_VEL + j, E_POS + j] += 0.5 * sa * sa * tg**3
-            Qd[E_ATT + j, E_ATT + j] += (sw * tg) ** 2
+            Qd[E_VEL + j, E_VEL + j] += qa * tg
+            Qd[E_POS + j, E_POS + j] += qa * tg**3 / 3.0
+            Qd[E_POS + j, E_VEL + j] += qa * tg**2 / 2.0
+            Qd[E_VEL + j, E_POS + j] += qa * tg**2 / 2.0
+            Qd[E_ATT + j, E_ATT + j] += qw * tg

@@ -4,13 +4,14 @@ An epoch (one stop of the replay loop) may carry a GNSS fix (loose coupling), th
 of one ``gnss_obs`` epoch (tight coupling) and the NHC pair; all its rows are fused in one
 joint update (paper 001: "if both NHC and GPS observables are used at the same time ...").
 Rows are grouped into *blocks*, the units of gating: a fix's position (3 rows, 2 for a 2-D
-fix), its velocity (3), one satellite's pseudorange and rate (1-2), the NHC pair (2).
+fix), its velocity (3, or 2 when the receiver gives speed and course only), one satellite's
+pseudorange and rate (1-2), the NHC pair (2).
 
 Array layouts shared with ``pipeline.estimation.inputs`` (which fills them) and the kernels:
 
 - ``fix`` (M, ``FIX_COLS``): latitude, longitude (rad), altitude (m), NED velocity (m/s),
-  horizontal, vertical and speed 1-sigma, position dimension (0 = unusable, 2, 3) and a
-  velocity flag (1 = usable).
+  horizontal, vertical and speed 1-sigma, position dimension (0 = unusable, 2 = horizontal,
+  3) and velocity dimension (0 = unusable, 2 = north and east only, 3).
 - ``obs`` (K, ``OBS_COLS``): satellite ECEF position and velocity, corrected pseudorange (m)
   and pseudorange rate (m/s), their 1-sigma, the satellite code (``sv_code``) and flags.
 - ``obs_start`` (E + 1,): rows of obs epoch ``e`` are ``obs_start[e]:obs_start[e + 1]``.
@@ -26,22 +27,23 @@ import numba as nb
 import numpy as np
 
 from pipeline.estimation.models.gnss import (
-    antenna_ecef,
+    AN_DIM,
+    AN_LLH,
+    AN_VN,
+    antenna,
     ned_offset,
-    position_h,
     position_jac,
     pseudorange_h,
     pseudorange_jac,
     pseudorange_rate_h,
     pseudorange_rate_jac,
-    velocity_h,
     velocity_jac,
 )
 from pipeline.estimation.models.nhc import body_velocity, nhc_jac
 from pipeline.nav.earth import F64, I64
 
 FX_LAT, FX_LON, FX_ALT, FX_VN, FX_VE, FX_VD = 0, 1, 2, 3, 4, 5
-FX_SIG_H, FX_SIG_V, FX_SIG_VEL, FX_POS_DIM, FX_VEL_OK = 6, 7, 8, 9, 10
+FX_SIG_H, FX_SIG_V, FX_SIG_VEL, FX_POS_DIM, FX_VEL_DIM = 6, 7, 8, 9, 10
 FIX_COLS = 11
 
 OB_SAT = 0  # 0..5: ECEF x, y, z (m), vx, vy, vz (m/s)
@@ -70,7 +72,7 @@ def sv_name(code: int) -> str:
     return f"{chr(code // 1000)}{code % 1000:02d}"
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def epoch_layout(
     stop: I64, fix: F64, obs: F64, obs_start: I64, nhc_on: bool, rows: I64, blocks: I64
 ) -> tuple[int, int]:
@@ -86,10 +88,11 @@ def epoch_layout(
             for a in range(pdim):
                 rows[m, 0], rows[m, 1] = K_POS + a, fi
                 m += 1
-        if fix[fi, FX_VEL_OK] > 0.0:
-            blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, 3, S_VEL, -1
+        vdim = int(fix[fi, FX_VEL_DIM])
+        if vdim > 0:
+            blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, vdim, S_VEL, -1
             nb_ += 1
-            for a in range(3):
+            for a in range(vdim):
                 rows[m, 0], rows[m, 1] = K_VEL + a, fi
                 m += 1
     oi = stop[ST_OBS]
@@ -115,7 +118,7 @@ def epoch_layout(
     return m, nb_
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def epoch_z(
     rows: I64, m: int, fix: F64, obs: F64, ref: F64, nhc_sigma: F64, z: F64, r: F64
 ) -> None:
@@ -125,7 +128,7 @@ def epoch_z(
         kind, src = rows[k, 0], rows[k, 1]
         if kind < K_VEL:
             off = ned_offset(fix[src, FX_LAT], fix[src, FX_LON], fix[src, FX_ALT], ref)
-            z[k] = off[kind - K_POS]
+            z[k] = off[0] if kind == K_POS else off[1] if kind == K_POS + 1 else off[2]
             sig = fix[src, FX_SIG_V] if kind == K_POS + 2 else fix[src, FX_SIG_H]
             r[k] = sig * sig
         elif kind < K_PR:
@@ -142,68 +145,44 @@ def epoch_z(
             r[k] = nhc_sigma[kind - K_NHC] ** 2
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def epoch_h(
     X: F64, rows: I64, m: int, obs: F64, ref: F64, w_ib_b: F64, lever_b: F64, out: F64
 ) -> None:
     """Predicted values of the rows for the full state ``X`` (``out[:m]``)."""
-    pos = np.zeros(3)
-    vel = np.zeros(3)
-    v_b = np.zeros(3)
-    r_ant = np.zeros(3)
-    v_ant = np.zeros(3)
-    have_pos = have_vel = have_ecef = have_body = False
+    ant = np.empty(AN_DIM)
+    antenna(X, lever_b, w_ib_b, np.empty((3, 3)), ant)
+    pos = ned_offset(ant[AN_LLH], ant[AN_LLH + 1], ant[AN_LLH + 2], ref)
     for k in range(m):
         kind, src = rows[k, 0], rows[k, 1]
         if kind < K_VEL:
-            if not have_pos:
-                pos = position_h(X, lever_b, ref)
-                have_pos = True
-            out[k] = pos[kind - K_POS]
+            out[k] = pos[0] if kind == K_POS else pos[1] if kind == K_POS + 1 else pos[2]
         elif kind < K_PR:
-            if not have_vel:
-                vel = velocity_h(X, lever_b, w_ib_b)
-                have_vel = True
-            out[k] = vel[kind - K_VEL]
-        elif kind <= K_PRR:
-            if not have_ecef:
-                r_ant, v_ant, _ = antenna_ecef(X, lever_b, w_ib_b)
-                have_ecef = True
-            sat = obs[src, OB_SAT : OB_SAT + 6]
-            if kind == K_PR:
-                out[k] = pseudorange_h(r_ant, X, sat)
-            else:
-                out[k] = pseudorange_rate_h(r_ant, v_ant, X, sat)
+            out[k] = ant[AN_VN + kind - K_VEL]
+        elif kind == K_PR:
+            out[k] = pseudorange_h(ant, X, obs[src, OB_SAT : OB_SAT + 6])
+        elif kind == K_PRR:
+            out[k] = pseudorange_rate_h(ant, X, obs[src, OB_SAT : OB_SAT + 6])
         else:
-            if not have_body:
-                v_b = body_velocity(X)
-                have_body = True
-            out[k] = v_b[1 + kind - K_NHC]
+            out[k] = body_velocity(X, ant, 1 + kind - K_NHC)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def epoch_jac(
     X: F64, rows: I64, m: int, obs: F64, w_ib_b: F64, lever_b: F64, n: int, H: F64
 ) -> None:
     """Jacobian rows w.r.t. the error state (``H[:m, :n]``)."""
-    r_ant = np.zeros(3)
-    v_ant = np.zeros(3)
-    c_en = np.zeros((3, 3))
-    have_ecef = False
+    ant = np.empty(AN_DIM)
+    antenna(X, lever_b, w_ib_b, np.empty((3, 3)), ant)
     for k in range(m):
         kind, src = rows[k, 0], rows[k, 1]
         if kind < K_VEL:
-            H[k, :n] = position_jac(X, lever_b, n)[kind - K_POS]
+            position_jac(ant, kind - K_POS, n, H[k])
         elif kind < K_PR:
-            H[k, :n] = velocity_jac(X, lever_b, w_ib_b, n)[kind - K_VEL]
-        elif kind <= K_PRR:
-            if not have_ecef:
-                r_ant, v_ant, c_en = antenna_ecef(X, lever_b, w_ib_b)
-                have_ecef = True
-            sat = obs[src, OB_SAT : OB_SAT + 6]
-            if kind == K_PR:
-                pseudorange_jac(X, lever_b, r_ant, c_en, sat, n, H[k])
-            else:
-                pseudorange_rate_jac(X, lever_b, w_ib_b, r_ant, v_ant, c_en, sat, n, H[k])
+            velocity_jac(ant, lever_b, kind - K_VEL, n, H[k])
+        elif kind == K_PR:
+            pseudorange_jac(ant, obs[src, OB_SAT : OB_SAT + 6], n, H[k])
+        elif kind == K_PRR:
+            pseudorange_rate_jac(ant, lever_b, obs[src, OB_SAT : OB_SAT + 6], n, H[k])
         else:
-            H[k, :n] = nhc_jac(X, n)[kind - K_NHC]
+            nhc_jac(X, ant, 1 + kind - K_NHC, n, H[k])

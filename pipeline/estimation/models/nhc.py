@@ -13,29 +13,32 @@ With ``C_true = Exp(phi) C`` the body velocity perturbs as
 from __future__ import annotations
 
 import numba as nb
-import numpy as np
 
-from pipeline.estimation.models.ins import E_ATT, E_VEL, X_Q, X_VEL
+from pipeline.estimation.models.gnss import AN_C, sk
+from pipeline.estimation.models.ins import E_ATT, E_VEL, X_VEL
 from pipeline.nav.earth import F64
-from pipeline.nav.rotations import quat_to_dcm
 
 
-@nb.njit(cache=True)
-def body_velocity(X: F64) -> F64:
-    """Velocity of the IMU in body FRD, m/s, shape (3,)."""
-    return quat_to_dcm(X[X_Q : X_Q + 4]).T @ X[X_VEL : X_VEL + 3]
+@nb.njit(cache=True, error_model="numpy")
+def body_velocity(X: F64, ant: F64, axis: int) -> float:
+    """Component ``axis`` of the IMU velocity in body FRD, m/s (``ant``: antenna context of
+    ``X``, for its ``C_b^n``)."""
+    return float(
+        ant[AN_C + axis] * X[X_VEL]
+        + ant[AN_C + 3 + axis] * X[X_VEL + 1]
+        + ant[AN_C + 6 + axis] * X[X_VEL + 2]
+    )
 
 
-@nb.njit(cache=True)
-def nhc_jac(X: F64, n: int) -> F64:
-    """Jacobian of ``body_velocity(X)[1:3]`` w.r.t. the error state, shape (2, n)."""
-    ct = quat_to_dcm(X[X_Q : X_Q + 4]).T
-    v = X[X_VEL : X_VEL + 3]
-    vx = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-    att = ct @ vx
-    H = np.zeros((2, n))
-    for r in range(2):
-        for c in range(3):
-            H[r, E_VEL + c] = ct[1 + r, c]
-            H[r, E_ATT + c] = att[1 + r, c]
-    return H
+@nb.njit(cache=True, error_model="numpy")
+def nhc_jac(X: F64, ant: F64, axis: int, n: int, H_row: F64) -> None:
+    """Jacobian row of ``body_velocity(X, ant, axis)``: ``C^T`` and ``C^T [v x]`` rows."""
+    v0, v1, v2 = X[X_VEL], X[X_VEL + 1], X[X_VEL + 2]
+    for c in range(n):
+        H_row[c] = 0.0
+    for c in range(3):
+        H_row[E_VEL + c] = ant[AN_C + 3 * c + axis]
+        a = 0.0
+        for k in range(3):
+            a += ant[AN_C + 3 * k + axis] * sk(v0, v1, v2, k, c)
+        H_row[E_ATT + c] = a

@@ -139,7 +139,7 @@ def epoch(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, np.nd
         obs[k, me.OB_PR_OK] = obs[k, me.OB_PRR_OK] = 1.0
         obs[k, me.OB_SV] = me.sv_code(f"G{k + 1:02d}")
     fix = np.zeros((1, me.FIX_COLS))
-    fix[0, me.FX_POS_DIM], fix[0, me.FX_VEL_OK] = 3, 1
+    fix[0, me.FX_POS_DIM], fix[0, me.FX_VEL_DIM] = 3, 3
     rows = np.zeros((40, 2), np.int64)
     blocks = np.zeros((40, 4), np.int64)
     stop = np.array([0, 0, 0, 1, 1])

@@ -1,0 +1,1 @@
+"""Compiled (numba, ``cache=True``) replay loops and the numerics both backends share."""
