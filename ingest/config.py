@@ -142,6 +142,23 @@ class VehicleConfig:
 
 
 @dataclass(frozen=True)
+class MavlinkConfig:
+    """The ``mavlink`` section: how MAVLink tlogs are decoded.
+
+    Attributes:
+        dialect: pymavlink dialect module whose definitions (field layout, scalings,
+            ``crc_extra``) decode the packets: ``ardupilotmega`` (default, includes
+            ``common``), ``common``, ``development``, ...
+    """
+
+    dialect: str = "ardupilotmega"
+
+    def __post_init__(self) -> None:
+        if not self.dialect.isidentifier():
+            raise FieldError("dialect", f"{self.dialect!r} is not a pymavlink dialect name")
+
+
+@dataclass(frozen=True)
 class CsvSource:
     """One CSV/text file mapped onto a canonical table.
 
@@ -201,6 +218,7 @@ class DatasetConfig:
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     truth: StreamConfig = field(default_factory=StreamConfig)
     estimator: StreamConfig = field(default_factory=StreamConfig)
+    mavlink: MavlinkConfig = field(default_factory=MavlinkConfig)
     csv: tuple[CsvSource, ...] = ()
 
     def __post_init__(self) -> None:

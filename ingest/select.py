@@ -7,9 +7,11 @@ For each table:
    message, a ULog topic, ``csv:<table>``); it must exist in the logs and be decodable.
    ``truth`` and ``estimator`` share a schema, so a truth-like stream may fill either.
 2. Otherwise the candidates are the streams whose reader says they feed the table. With
-   ``<table>.instance`` the n-th candidate (by stream key) is taken; else the candidate with
-   the most messages (ties: the key containing ``truth`` for the truth table, then the first
-   key alphabetically). The alternatives are reported.
+   ``<table>.instance``: when the reader declares sensor instances (``StreamInfo.instance``:
+   autopilot logs), the candidate of that instance with the most messages; otherwise the
+   n-th candidate by stream key. Without it, the candidate with the most messages (ties:
+   the key containing ``truth`` for the truth table, then the first key alphabetically).
+   The alternatives are reported.
 3. The same key in several files of one drive (a split bag) is one stream, read file after
    file in order of first timestamp.
 4. ``gnss`` may also get a velocity companion (streams with role ``velocity``, or
@@ -163,6 +165,16 @@ def _with_velocity(
     return TablePlan(plan.table, plan.key, plan.sources, plan.reason, plan.alternatives, companion)
 
 
+def _instances(inventories: Sequence[Inventory], table: TableName) -> dict[str, int]:
+    """Stream key -> sensor instance, for the table's candidates that declare one."""
+    return {
+        s.key: s.instance
+        for inv in inventories
+        for s in inv.streams
+        if s.table == table and not s.role and s.instance is not None
+    }
+
+
 def _auto(
     inventories: Sequence[Inventory], table: TableName, instance: int | None
 ) -> TablePlan | None:
@@ -170,7 +182,20 @@ def _auto(
     if not counts:
         return None
     keys = sorted(counts)
-    if instance is not None:
+    declared = _instances(inventories, table)
+    if instance is not None and declared:
+        # Readers that know sensor instances (autopilot logs) declare them: instance n is the
+        # n-th sensor, whichever messages carry it (RAW_IMU and SCALED_IMU are both IMU 0).
+        chosen = [k for k in keys if declared.get(k) == instance]
+        if not chosen:
+            have = ", ".join(f"{k} ({declared.get(k)})" for k in keys)
+            raise ConfigError(
+                f"{table.value}.instance {instance} requested, the logs have {table.value} "
+                f"streams of instances: {have}"
+            )
+        key = min(chosen, key=lambda k: (-counts[k], k))
+        reason = f"dataset.yaml {table.value}.instance {instance} (sensor instance)"
+    elif instance is not None:
         if not 0 <= instance < len(keys):
             raise ConfigError(
                 f"{table.value}.instance {instance} requested, the logs have {len(keys)} "

@@ -14,12 +14,14 @@ from pathlib import Path
 
 import pytest
 
+from .mavlogs import write_dataflash_drive, write_tlog_drive
 from .roslogs import write_imu_mcap_fast
 
 
-def _peak_rss_mb(log: Path, out: Path) -> float:
+def _peak_rss_mb(log: Path, out: Path, setup: str = "") -> float:
     script = textwrap.dedent(
         f"""
+        {setup}
         import re
         from pathlib import Path
         from ingest.api import IngestOptions, ingest
@@ -44,5 +46,21 @@ def test_peak_memory_does_not_grow_with_the_log(tmp_path: Path) -> None:
     large = write_imu_mcap_fast(tmp_path / "large.mcap", 200_000)
     rss_small = _peak_rss_mb(small, tmp_path / "s")
     rss_large = _peak_rss_mb(large, tmp_path / "l")
+    assert rss_large < 512
+    assert rss_large - rss_small < 15, (rss_small, rss_large)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["tlog", "bin"])
+def test_autopilot_log_memory_does_not_grow_with_the_log(kind: str, tmp_path: Path) -> None:
+    # Survey and read passes both stream the file in blocks of BLOCK_BYTES (8 MB; 128 kB
+    # here, so that both logs span many blocks): a log four times longer costs no more memory.
+    write = write_tlog_drive if kind == "tlog" else write_dataflash_drive
+    small = write(tmp_path / f"small.{kind}", 20.0)
+    large = write(tmp_path / f"large.{kind}", 80.0)
+    module = "tlogscan" if kind == "tlog" else "dfscan"
+    setup = f"import ingest.readers.{module} as m; m.BLOCK_BYTES = 1 << 17"
+    rss_small = _peak_rss_mb(small, tmp_path / "s", setup)
+    rss_large = _peak_rss_mb(large, tmp_path / "l", setup)
     assert rss_large < 512
     assert rss_large - rss_small < 15, (rss_small, rss_large)
