@@ -17,6 +17,8 @@ import yaml
 from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
 from pipeline.estimation.config import FiltersParams
+from pipeline.outages.config import OutagesParams
+from pipeline.scenarios.config import ScenariosParams
 from pipeline.synth.car import CarSpeedRampParams
 from pipeline.synth.fwekf import FwekfReferenceParams
 from pipeline.synth.seoul_params import SeoulCampusParams
@@ -81,7 +83,9 @@ class ReportParams:
 @dataclass(frozen=True)
 class Params:
     """The whole of ``params.yaml``; ``filters`` holds one section per filter
-    (``pipeline.estimation.config``)."""
+    (``pipeline.estimation.config``), ``scenarios`` the named scenarios
+    (``pipeline.scenarios.config``) and ``outages`` the outage experiments
+    (``pipeline.outages.config``)."""
 
     datasets: tuple[str, ...]
     synth: SynthParams
@@ -89,8 +93,13 @@ class Params:
     run: RunParams
     report: ReportParams
     filters: FiltersParams
+    scenarios: ScenariosParams
+    outages: OutagesParams
 
     def __post_init__(self) -> None:
+        for i, name in enumerate(self.run.scenarios):
+            if name not in self.scenarios.named:
+                raise FieldError(f"run.scenarios[{i}]", f"{name!r} is not in scenarios.named")
         for i, ds in enumerate(self.datasets):
             if not _ID_RE.match(ds):
                 raise FieldError(
