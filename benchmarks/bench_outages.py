@@ -1,6 +1,7 @@
 """Outage Monte Carlo: 256 outage scenarios of a 10-minute drive with tc_ukf, vs full replays.
 
-One 10-minute seoul_campus-type drive (100 Hz IMU, 1 Hz GNSS, 8 satellites). Each scenario is
+One 10-minute seoul_campus drive (the synthesizer of params.yaml: 100 Hz IMU, 1 Hz GNSS,
+7-8 satellites, 10 s at rest first). Each scenario is
 a complete 60 s GNSS outage at a start drawn uniformly over the drive (32 seeds x 8 starts).
 Ours: ``outages.montecarlo.run_montecarlo``, every window replayed from the nominal run's
 state at its start over the window and a 30 s tail, on ``--outages-workers`` processes (the
@@ -23,8 +24,7 @@ from pipeline.outages.montecarlo import Case, draw_starts, run_montecarlo
 from pipeline.scenarios.apply import apply_scenario
 from pipeline.scenarios.config import ScenarioSpec, WindowsSpec
 from pipeline.scenarios.windows import NS
-from tests.pipeline.estimation.drive import DriveSpec, simulate
-from tests.pipeline.scenarios.drives import params
+from tests.pipeline.scenarios.drives import drive, params
 
 LENGTH_S, TAIL_S, PER_SEED = 60.0, 30.0, 8
 
@@ -46,7 +46,7 @@ def run(options: argparse.Namespace) -> None:
     name = "tc_ukf"
     p = params()
     section = p.filters.get(name)
-    tables, sensors = simulate(DriveSpec(duration_s=600.0), seed=21)
+    tables, sensors = drive(600.0, seed=21)
     t = tables["imu"].column("t_ns").to_numpy()
     t0, t_end = int(t[0]), int(t[-1])
     seeds = list(range(1, -(-options.outages_scenarios // PER_SEED) + 1))

@@ -18,8 +18,11 @@ so a stream split over several files (a split bag) continues across them.
 
     package_version, options {strict, reorder_window_s, gap_factor}
     time_base {base, leap_seconds, decisions[], checks[],      cross-file overlap checks
-               alignment[] {streams, signal, lag_s, correlation, overlap_s, speed_ratio}}
+               alignment[] {streams, signal, lag_s, correlation, overlap_s, speed_ratio},
                                                   speed-signal lags (ingest.alignment)
+               gnss_check {against, files, status, lag_s, median_m_at_lag,
+                           median_m_at_zero, epochs, motion_m}}
+                                  gnss_obs positions vs the fixes (ingest.gnsscheck)
     files[]   {name, format, variant, streams[] (the inventory), inventory_notes[],
                completeness[] ("complete", "truncated", "corrupt_chunks_skipped", ...),
                defects[] {kind, reason, offset, messages_lost, messages_recovered,
@@ -51,6 +54,7 @@ from ingest.alignment import check_tables
 from ingest.atomic import atomic_directory, atomic_write_json
 from ingest.config import DatasetConfig
 from ingest.detect import Detected, Format, detect
+from ingest.errors import IngestError
 from ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
 from ingest.readers import open_reader
 from ingest.readers.base import DamageLog, Inventory, LogReader, ReadContext, Selection
@@ -110,12 +114,15 @@ def _open_logs(
     options: IngestOptions,
 ) -> list[_Log]:
     opened: list[_Log] = []
+    found = []
     for path in logs:
         detected = detect(path)
         if options.format is not None and detected.format != options.format:
             detected = Detected(Path(path), options.format, (Path(path),))
-        damage = DamageLog(Path(path), strict=options.strict)
-        ctx = ReadContext(damage, config=config, config_dir=config_dir)
+        found.append(detected)
+    for detected in found:
+        damage = DamageLog(detected.path, strict=options.strict)
+        ctx = ReadContext(damage, config=config, config_dir=config_dir, siblings=tuple(found))
         reader = open_reader(detected, ctx)
         opened.append(_Log(detected, damage, reader, reader.inventory()))
     return opened
@@ -183,6 +190,13 @@ def _ingest(
 ) -> IngestResult:
     inventories = [o.inventory for o in opened]
     plans = select_streams(inventories, config)
+    if not plans:
+        why = [f"{s.key}: {s.detail}" for inv in inventories for s in inv.streams if s.detail]
+        raise IngestError(
+            "no stream in the logs can fill a canonical table",
+            path=opened[0].detected.path,
+            hint="; ".join(why[:5]) or "see `navreplay ingest --list`",
+        )
     used = [q for p in plans.values() for q in (p, p.companion) if q is not None]
     bases = [(q.key, s.stream.time_base) for q in used for s in q.sources]
     utc_starts = [
@@ -240,6 +254,7 @@ def _ingest(
                 warnings.append(f"table {t} ({plans[TableName(t)].key}) is empty")
                 log.warning("table %s (%s) is empty", t, plans[TableName(t)].key)
         checks = _cross_file_checks(sinks, names, warnings)
+        gnss_check = _gnss_check(tmp, sinks, names, warnings, options)
         aligned = check_tables(tmp, [t for t, n in rows.items() if n > 1])
         checks += [a.text() for a in aligned]
         for a in aligned:
@@ -249,6 +264,8 @@ def _ingest(
         report = _report(opened, plans, sinks, recon, options, warnings, names)
         report["time_base"]["checks"] = checks
         report["time_base"]["alignment"] = [a.to_json() for a in aligned]
+        if gnss_check is not None:
+            report["time_base"]["gnss_check"] = gnss_check
         meta = DatasetMeta(
             dataset=config.id,
             time_base=recon.base.value,
@@ -316,6 +333,43 @@ def _cross_file_checks(
             warnings.append(text)
             log.warning("%s", text)
     return checks
+
+
+def _gnss_check(
+    tmp: Path,
+    sinks: dict[TableName, TableSink],
+    names: list[str],
+    warnings: list[str],
+    options: IngestOptions,
+) -> dict[str, Any] | None:
+    """Fixes (else the truth) against positions solved from the observations
+    (``ingest.gnsscheck``), when the dataset has both; a time offset between them is a
+    warning, or an error under strict."""
+    obs_sink = sinks.get(TableName.GNSS_OBS)
+    fix_sink = sinks.get(TableName.GNSS) or sinks.get(TableName.TRUTH)
+    if obs_sink is None or fix_sink is None or not obs_sink.audit.rows or not fix_sink.audit.rows:
+        return None
+    import pyarrow.parquet as pq
+
+    from ingest import gnsscheck
+
+    result = gnsscheck.check(pq.read_table(obs_sink.path), pq.read_table(fix_sink.path))
+    obs_files = ", ".join(sorted({names[s.file_index] for s in obs_sink.plan.sources}))
+    fix_files = ", ".join(sorted({names[s.file_index] for s in fix_sink.plan.sources}))
+    against = fix_sink.table.value
+    out = {"against": against, "files": {"gnss_obs": obs_files, against: fix_files}}
+    out |= result.to_json()
+    if result.status in ("offset", "positions_disagree"):
+        text = result.message(obs_files, fix_files)
+        if options.strict:
+            raise IngestError(
+                text,
+                hint="check each file's time base (time_base in dataset.yaml, the recorder "
+                "clock); --strict refuses streams that disagree",
+            )
+        warnings.append(text)
+        log.warning("%s", text)
+    return out
 
 
 def _file_indices(plan: TablePlan) -> set[int]:

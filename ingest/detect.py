@@ -26,6 +26,8 @@ GnssLogger     text whose ``#`` header defines ``Raw,...TimeNanos``
 NMEA           text lines starting ``$GP``/``$GN``/...
 libRSF         whitespace text whose lines start with a libRSF measurement type and a time
                (``pseudorange3 0.2 ...``, ``odom3``, ``point3``): the smartLoc dataset
+GSDC           CSV of the Google Smartphone Decimeter Challenge, by its header: 2021
+               ``*_derived.csv`` and ground truth, 2022 ``device_gnss.csv`` and ground truth
 CSV            other UTF-8 text with a consistent delimiter
 =============  ===============================================================================
 
@@ -89,6 +91,7 @@ class Format(StrEnum):
     NMEA = "nmea"
     LIBRSF = "librsf"
     COMMA2K19 = "comma2k19"
+    GSDC = "gsdc"
     CSV = "csv"
 
 
@@ -238,11 +241,37 @@ def _detect_text(path: Path, text: str) -> Detected | None:
         return Detected(path, Format.GNSSLOGGER, one)
     if lines and sum(bool(_NMEA_RE.match(ln.encode())) for ln in lines) >= max(1, len(lines) // 2):
         return Detected(path, Format.NMEA, one)
+    return _detect_delimited(path, lines)
+
+
+def _detect_delimited(path: Path, lines: list[str]) -> Detected | None:
+    """A GSDC CSV (by its header), libRSF text, another delimited text, or None."""
+    gsdc = _gsdc_variant(lines[0]) if lines else None
+    if gsdc is not None:
+        return Detected(path, Format.GSDC, (path,), variant=gsdc)
     data_lines = [ln for ln in lines if not ln.lstrip().startswith("#")]
     if data_lines and all(ln.isprintable() or "\t" in ln for ln in data_lines):
         # The last line of the head may be cut short.
         librsf = all(_LIBRSF_RE.match(ln) for ln in lines[:-1] or lines)
-        return Detected(path, Format.LIBRSF if librsf else Format.CSV, one)
+        return Detected(path, Format.LIBRSF if librsf else Format.CSV, (path,))
+    return None
+
+
+_GSDC_HEADERS = (
+    ("collectionName,phoneName,millisSinceGpsEpoch,constellationType,svid,", "derived2021"),
+    ("collectionName,phoneName,millisSinceGpsEpoch,latDeg,lngDeg,", "truth2021"),
+    ("MessageType,Provider,LatitudeDegrees,LongitudeDegrees,", "truth2022"),
+)
+
+
+def _gsdc_variant(header: str) -> str | None:
+    """The kind of GSDC CSV whose header line is ``header``, or None."""
+    for start, variant in _GSDC_HEADERS:
+        if header.startswith(start):
+            return variant
+    names = set(header.split(","))
+    if header.startswith("MessageType,") and {"SvPositionXEcefMeters", "TimeNanos"} <= names:
+        return "device_gnss2022"
     return None
 
 

@@ -43,6 +43,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "one-off post-mission analysis of a log: ingest + filters + report",
     ),
     "synth": ("pipeline.stages.synth", "generate a synthesized dataset with exact truth"),
+    "experiment": ("pipeline.stages.experiment", "run a paper experiment (tables + figures)"),
     "report": ("pipeline.stages.report", "render the HTML report of one dataset"),
     "summarize": ("pipeline.stages.summarize", "rank filters across datasets"),
     "bench": ("pipeline.stages.bench", "run the speed benchmarks against reference backends"),

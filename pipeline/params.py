@@ -62,9 +62,12 @@ class IngestParams:
 
 @dataclass(frozen=True)
 class RunParams:
-    """``run``: which filters and scenarios the pipeline runs, and on which backend."""
+    """``run``: the run matrix of dvc.yaml (datasets x filters, each under every scenario of
+    ``scenarios``; the Monte Carlo and outage experiments cover the same datasets) and the
+    backend."""
 
     backend: Literal["numba", "filterpy"]
+    datasets: tuple[str, ...]
     filters: tuple[str, ...]
     scenarios: tuple[str, ...]
 
@@ -97,6 +100,9 @@ class Params:
     outages: OutagesParams
 
     def __post_init__(self) -> None:
+        for i, ds in enumerate(self.run.datasets):
+            if ds not in self.datasets:
+                raise FieldError(f"run.datasets[{i}]", f"{ds!r} is not in datasets")
         for i, name in enumerate(self.run.scenarios):
             if name not in self.scenarios.named:
                 raise FieldError(f"run.scenarios[{i}]", f"{name!r} is not in scenarios.named")

@@ -158,12 +158,15 @@ class ReadContext:
         batch_rows: a hint for the number of rows per ``Batch``.
         config: the dataset descriptor, if one was given (CSV column mappings, instances).
         config_dir: the descriptor's folder (its relative paths resolve against it).
+        siblings: every log of this ingest, the reader's own included, in the order given
+            (a RINEX observation or Android raw file finds its navigation files here).
     """
 
     damage: DamageLog
     batch_rows: int = 65_536
     config: DatasetConfig | None = None
     config_dir: Path | None = None
+    siblings: tuple[Detected, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ moves along its body x axis):
   acceleration seen in the GNSS velocity: ``f^b = C_n^b (a^n - g^n)`` solved for pitch and
   roll at the known heading (static levelling when the vehicle is at rest);
 - position and velocity: the GNSS antenna moved back by the lever arm; without fixes, a
-  single-point solution (``spp``) from the pseudoranges and rates;
+  single-point solution (``pipeline.nav.spp``) from the pseudoranges and rates;
 - gyro bias: the mean angular rate over the last static window before the start (at least
   ``init.static_window_s``) minus the earth rate; zero without a static window;
 - clock (tight coupling): medians of the pseudorange and rate residuals at the start.
@@ -34,6 +34,7 @@ from pipeline.estimation.inputs import FixData, ImuData, ObsData
 from pipeline.estimation.models import ins
 from pipeline.estimation.models import measurement as me
 from pipeline.estimation.models.gnss import AN_DIM, AN_RE, AN_VE, antenna
+from pipeline.nav import spp
 from pipeline.nav.earth import F64, OMEGA_IE, ecef_to_geodetic, gravity, radii
 
 log = logging.getLogger(__name__)
@@ -86,34 +87,31 @@ class _Track:
     clock: np.ndarray  # (K, 2) clock bias, drift from SPP (NaN from fixes)
 
 
-def spp(rows: F64) -> tuple[F64, float, F64, float] | None:
-    """Single-point position and velocity from one epoch's ``obs`` rows (least squares).
+def _spp(rows: F64) -> tuple[F64, float, F64, float] | None:
+    """Single-point position and velocity of one epoch's ``obs`` rows (``pipeline.nav.spp``).
 
     Returns:
         (ECEF position m, clock bias m, ECEF velocity m/s, clock drift m/s), or None with
-        fewer than four usable pseudoranges. The velocity is NaN with fewer than four rates.
+        fewer than four usable pseudoranges; the velocity is NaN with fewer than four rates.
     """
     pr = rows[rows[:, me.OB_PR_OK] > 0]
     if pr.shape[0] < 4:
         return None
-    sat = pr[:, me.OB_SAT : me.OB_SAT + 3]
-    x = np.zeros(4)
-    for _ in range(12):
-        d = sat - x[:3]
-        rng = np.linalg.norm(d, axis=1)
-        G = np.column_stack([-d / rng[:, None], np.ones(len(rng))])
-        dx, *_ = np.linalg.lstsq(G, pr[:, me.OB_PR] - (rng + x[3]), rcond=None)
-        x += dx
-        if np.linalg.norm(dx) < 1e-4:
-            break
-    v = np.full(4, math.nan)
+    sat = np.ascontiguousarray(pr[:, me.OB_SAT : me.OB_SAT + 3])
+    w = 1.0 / np.square(pr[:, me.OB_SIG_PR])
+    x, _, _, ok = spp.solve_position(sat, pr[:, me.OB_PR].copy(), w, np.zeros(4), 20, 1e-4)
+    if not ok:
+        return None
     rr = rows[rows[:, me.OB_PRR_OK] > 0]
+    v = np.full(4, math.nan)
     if rr.shape[0] >= 4:
-        d = rr[:, me.OB_SAT : me.OB_SAT + 3] - x[:3]
-        e = d / np.linalg.norm(d, axis=1)[:, None]
-        G = np.column_stack([-e, np.ones(len(e))])
-        z = rr[:, me.OB_PRR] - np.sum(e * rr[:, me.OB_SAT + 3 : me.OB_SAT + 6], axis=1)
-        v, *_ = np.linalg.lstsq(G, z, rcond=None)
+        v, _ = spp.solve_velocity(
+            np.ascontiguousarray(rr[:, me.OB_SAT : me.OB_SAT + 3]),
+            np.ascontiguousarray(rr[:, me.OB_SAT + 3 : me.OB_SAT + 6]),
+            rr[:, me.OB_PRR].copy(),
+            1.0 / np.square(rr[:, me.OB_SIG_PRR]),
+            x[:3].copy(),
+        )
     return x[:3], float(x[3]), v[:3], float(v[3])
 
 
@@ -146,7 +144,7 @@ def _track_from_fixes(fixes: FixData) -> _Track | None:
 def _track_from_obs(obs: ObsData) -> _Track | None:
     ts, llh, vel, clock = [], [], [], []
     for e in range(obs.epoch_t_ns.size):
-        sol = spp(obs.obs[obs.start[e] : obs.start[e + 1]])
+        sol = _spp(obs.obs[obs.start[e] : obs.start[e + 1]])
         if sol is None:
             continue
         r, cb, v, cd = sol

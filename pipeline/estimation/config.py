@@ -18,6 +18,8 @@ from typing import Literal
 
 from ingest.config import ImuNoise
 from ingest.typed import FieldError
+from pipeline.estimation.fuzzy import FuzzyParams
+from pipeline.estimation.vehicle_config import VehicleFilterParams
 
 Estimator = Literal["ekf", "ukf"]
 Coupling = Literal["loose", "tight"]
@@ -75,9 +77,17 @@ class GnssNoiseParams:
     Attributes:
         pos_sigma_floor_m: floor on the receiver's h_acc / v_acc, m.
         pos_sigma_default_m: position 1-sigma when the receiver reports none, m.
+        pos_error_corr_time_s: correlation time of the fixes' position errors (multipath,
+            atmosphere), s. A first-order Gauss-Markov error sampled every dt carries about
+            the information of one independent fix per 2 tau, so the fix variance is inflated
+            by ``1 + 2 tau / dt`` (0: white errors, no inflation). Reported accuracies are
+            per-fix sigmas and say nothing about correlation; without this a loosely coupled
+            filter averages correlated errors as if they were white and becomes overconfident.
         vel_sigma_floor_mps: floor on the receiver's speed accuracy, m/s.
         vel_sigma_default_mps: velocity 1-sigma when the receiver reports none, m/s.
         use_velocity: fuse the receiver velocity where present (loose coupling).
+        use_fix_latency: apply each fix at its own epoch, ``t_ns - latency_s``, where the
+            table has a ``latency_s`` column (arrival minus the receiver's epoch).
         pseudorange_sigma_floor_m: floor on the pseudorange 1-sigma, m.
         pseudorange_sigma_default_m: pseudorange 1-sigma when the table has none, m.
         pseudorange_rate_sigma_floor_mps: floor on the pseudorange-rate 1-sigma, m/s.
@@ -87,9 +97,11 @@ class GnssNoiseParams:
 
     pos_sigma_floor_m: float = 0.5
     pos_sigma_default_m: float = 3.0
+    pos_error_corr_time_s: float = 0.0
     vel_sigma_floor_mps: float = 0.05
     vel_sigma_default_mps: float = 0.2
     use_velocity: bool = True
+    use_fix_latency: bool = True
     pseudorange_sigma_floor_m: float = 0.5
     pseudorange_sigma_default_m: float = 3.0
     pseudorange_rate_sigma_floor_mps: float = 0.02
@@ -97,6 +109,7 @@ class GnssNoiseParams:
     elevation_mask_deg: float = 10.0
 
     def __post_init__(self) -> None:
+        _positive(self, "pos_error_corr_time_s", allow_zero=True)
         _positive(
             self,
             "pos_sigma_floor_m",
@@ -116,13 +129,16 @@ class GnssNoiseParams:
 class ClockParams:
     """Receiver clock model (tight coupling): bias and drift as random walks (paper 001).
 
+    The defaults are a typical TCXO (Allan coefficients h0 = 2e-19, h-2 = 2e-20:
+    ``c^2 h0 / 2`` and ``2 pi^2 c^2 h-2``).
+
     Attributes:
         bias_psd_m2ps: white-noise density driving the clock bias, m^2/s.
         drift_psd_m2ps3: white-noise density driving the clock drift, m^2/s^3.
     """
 
-    bias_psd_m2ps: float = 0.1
-    drift_psd_m2ps3: float = 0.01
+    bias_psd_m2ps: float = 0.01
+    drift_psd_m2ps3: float = 0.04
 
     def __post_init__(self) -> None:
         _positive(self, "bias_psd_m2ps", "drift_psd_m2ps3", allow_zero=True)
@@ -278,6 +294,7 @@ class InsFilterParams:
         divergence: the NaN barrier.
         nhc: the non-holonomic constraint (required by and only by ``*_nhc`` filters).
         ukf: the unscented transform (required by and only by UKF filters).
+        fuzzy: the fuzzy fading factor (required by and only by ``fwekf``, paper 004).
     """
 
     imu_noise: ImuNoise
@@ -289,15 +306,17 @@ class InsFilterParams:
     divergence: DivergenceParams
     nhc: NhcParams | None = None
     ukf: UkfParams | None = None
+    fuzzy: FuzzyParams | None = None
 
 
 @dataclass(frozen=True)
 class FilterKind:
-    """What a filter name means: estimator, coupling and NHC."""
+    """What a filter name means: estimator, coupling, NHC and fuzzy fading (paper 004)."""
 
     estimator: Estimator
     coupling: Coupling
     nhc: bool
+    fading: bool = False
 
 
 FILTER_KINDS: dict[str, FilterKind] = {
@@ -307,12 +326,13 @@ FILTER_KINDS: dict[str, FilterKind] = {
     "lc_ekf_nhc": FilterKind("ekf", "loose", nhc=True),
     "tc_ekf_nhc": FilterKind("ekf", "tight", nhc=True),
     "tc_ukf_nhc": FilterKind("ukf", "tight", nhc=True),
+    "fwekf": FilterKind("ekf", "loose", nhc=False, fading=True),
 }
 
 
 @dataclass(frozen=True)
 class FiltersParams:
-    """The ``filters`` section: one sub-section per INS/GNSS filter of architecture section 3."""
+    """The ``filters`` section: one sub-section per filter of architecture section 3."""
 
     lc_ekf: InsFilterParams
     tc_ekf: InsFilterParams
@@ -320,6 +340,11 @@ class FiltersParams:
     lc_ekf_nhc: InsFilterParams
     tc_ekf_nhc: InsFilterParams
     tc_ukf_nhc: InsFilterParams
+    fwekf: InsFilterParams
+    vehicle_kinematic: VehicleFilterParams
+    vehicle_dynamic: VehicleFilterParams
+    vehicle_switched: VehicleFilterParams
+    vehicle_imm: VehicleFilterParams
 
     def __post_init__(self) -> None:
         for name, kind in FILTER_KINDS.items():
@@ -332,6 +357,8 @@ class FiltersParams:
                 raise FieldError(f"{name}.ukf", "missing: a UKF needs a ukf section")
             if kind.estimator != "ukf" and section.ukf is not None:
                 raise FieldError(f"{name}.ukf", "only UKF filters take a ukf section")
+            if kind.fading != (section.fuzzy is not None):
+                raise FieldError(f"{name}.fuzzy", "fwekf needs a fuzzy section; no other filter")
 
     def get(self, name: str) -> InsFilterParams:
         """The section of filter ``name`` (a key of ``FILTER_KINDS``)."""
@@ -339,4 +366,13 @@ class FiltersParams:
             known = ", ".join(FILTER_KINDS)
             raise KeyError(f"unknown filter {name!r} (known: {known})")
         section: InsFilterParams = getattr(self, name)
+        return section
+
+    def vehicle(self, name: str) -> VehicleFilterParams:
+        """The section of vehicle filter ``name`` (``vehicle_config.VEHICLE_FILTERS``)."""
+        from pipeline.estimation.vehicle_config import VEHICLE_FILTERS
+
+        if name not in VEHICLE_FILTERS:
+            raise KeyError(f"unknown vehicle filter {name!r} (known: {', '.join(VEHICLE_FILTERS)})")
+        section: VehicleFilterParams = getattr(self, name)
         return section

@@ -137,12 +137,22 @@ def clean_imu(t: I64, data: F64, step: StepParams) -> ImuData:
 def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
     """Receiver fixes -> ``fix`` rows with floored accuracies; NaN blocks skipped (F11).
 
+    Position sigmas are inflated for time-correlated errors (``pos_error_corr_time_s``).
+    A fix is applied at its own epoch: with a ``latency_s`` column (arrival minus the
+    receiver's epoch, as the comma2k19 reader writes it), at ``t_ns - latency_s``.
     Position needs a fix type of at least 2-D (a 2-D fix is fused horizontally); velocity
     needs north and east, and includes down where the receiver provides it (null = not
     provided, a 2-D velocity block; NaN = invalid, the block is skipped).
     """
     n = table.num_rows
     t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)
+    latency = _col(table, "latency_s", 0.0)
+    if gnss.use_fix_latency and np.isfinite(latency).all() and np.any(latency != 0.0):
+        # the fix describes its own epoch, not its arrival (bad-inputs F10)
+        t = t - np.round(latency * 1e9).astype(np.int64)
+        order = np.argsort(t, kind="stable")
+        if np.any(order != np.arange(n)):
+            table, t = table.take(pa.array(order)), t[order]
     fix = np.zeros((n, me.FIX_COLS))
     lat, lon, alt = _col(table, "lat_deg"), _col(table, "lon_deg"), _col(table, "alt_m")
     fix[:, me.FX_LAT], fix[:, me.FX_LON], fix[:, me.FX_ALT] = np.radians(lat), np.radians(lon), alt
@@ -157,6 +167,12 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
         np.where(np.isfinite(v_acc), v_acc, 1.5 * gnss.pos_sigma_default_m),
         gnss.pos_sigma_floor_m,
     )
+    tau = gnss.pos_error_corr_time_s
+    if tau > 0.0 and n > 1:  # time-correlated errors: fewer independent fixes than fixes
+        dt = float(np.median(np.diff(t))) * 1e-9
+        inflate = math.sqrt(1.0 + 2.0 * tau / dt)
+        fix[:, me.FX_SIG_H] *= inflate
+        fix[:, me.FX_SIG_V] *= inflate
     s_acc = _col(table, "speed_acc_mps")
     fix[:, me.FX_SIG_VEL] = np.maximum(
         np.where(np.isfinite(s_acc), s_acc, gnss.vel_sigma_default_mps), gnss.vel_sigma_floor_mps

@@ -114,6 +114,8 @@ def estimate_columns(result: RunResult) -> dict[str, np.ndarray]:
         cols[f"vel_{axis}_sigma_mps"] = np.sqrt(var[:, ins.E_VEL + j])
     for j, name in enumerate(("roll", "pitch", "yaw")):
         cols[f"{name}_sigma_rad"] = np.sqrt(cov_e[:, j, j])
+    if "alpha" in result.extra:
+        cols["fading_alpha"] = result.extra["alpha"]  # fwekf: the fuzzy fading factor
     extra = BIAS_COLUMNS + (CLOCK_COLUMNS if n > ins.N_LOOSE else ())
     for col, xi, ei, sig in extra:
         cols[col] = x[:, xi]

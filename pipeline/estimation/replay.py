@@ -63,6 +63,7 @@ class FilterSetup:
     gate: F64
     wm: F64
     wc: F64
+    fuzzy: F64 | None = None
 
 
 @dataclass
@@ -142,7 +143,8 @@ def make_setup(name: str, params: InsFilterParams, sensors: SensorMeta | None) -
         [nhc.sigma_lateral_mps, nhc.sigma_vertical_mps] if nhc is not None else [1.0, 1.0]
     )
     gate = np.array([math.inf] + [float(chi2.ppf(g.probability, d)) for d in (1, 2, 3)])
-    return FilterSetup(name, n, kind.estimator, cfg, noise, lever, nhc_sigma, gate, wm, wc)
+    fz = params.fuzzy.vector() if kind.fading and params.fuzzy is not None else None
+    return FilterSetup(name, n, kind.estimator, cfg, noise, lever, nhc_sigma, gate, wm, wc, fz)
 
 
 def _table(tables: Mapping[str, pa.Table], name: str, filt: str) -> pa.Table:
@@ -155,6 +157,14 @@ KernelFn = Callable[..., int]
 
 
 def _backend(setup: FilterSetup, backend: Backend) -> KernelFn:
+    if setup.fuzzy is not None:
+        if backend == "numba":
+            from pipeline.estimation.kernels.fwekf import run_fwekf
+
+            return run_fwekf
+        from pipeline.estimation.reference_fwekf import run_fwekf_filterpy
+
+        return run_fwekf_filterpy
     if backend == "numba":
         from pipeline.estimation.kernels.ekf import run_ekf
         from pipeline.estimation.kernels.ukf import run_ukf
@@ -207,6 +217,7 @@ def run_filter(
     events += list(obs.events) if obs is not None and kind.coupling == "tight" else []
     kernel = _backend(setup, backend)
     parts: list[tuple[I64, F64, F64, I64, F64]] = []
+    alphas: list[F64] = []
     alignments: list[Alignment] = []
     status, failure = "ok", None
     duration = 0.0
@@ -220,11 +231,12 @@ def run_filter(
             events.append(inp.Event(int(imu_data.t_ns[seg[0]]), "no_alignment", "imu"))
             continue
         alignments.append(al)
-        out, code, t_fail, seg_events, seg_compile_s = _run_segment(
+        out, code, t_fail, seg_events, seg_compile_s, alpha = _run_segment(
             kernel, setup, params, kind.coupling, kind.nhc, imu_data, seg, fixes, obs, al
         )
         compile_s += seg_compile_s
         parts.append(out)
+        alphas.append(alpha)
         events += seg_events
         duration += (out[0][-1] - al.t_ns) * 1e-9 if out[0].size else 0.0
         if code != cm.STATUS_OK:
@@ -254,6 +266,7 @@ def run_filter(
         runtime_s=time.perf_counter() - t_wall - compile_s,
         compile_s=compile_s,
         duration_s=duration,
+        extra={"alpha": np.concatenate(alphas)} if setup.fuzzy is not None and alphas else {},
     )
 
 
@@ -278,7 +291,7 @@ def _run_segment(
     fixes: inp.FixData | None,
     obs: inp.ObsData | None,
     al: Alignment,
-) -> tuple[tuple[I64, F64, F64, I64, F64], int, int, list[inp.Event], float]:
+) -> tuple[tuple[I64, F64, F64, I64, F64], int, int, list[inp.Event], float, F64]:
     lo, hi = seg
     imu_t = imu.t_ns[lo:hi]
     imu_d = imu.data[lo:hi]
@@ -327,7 +340,15 @@ def _run_segment(
         setup.gate,
     )
     tail = (m_max, out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts)
-    args = (*common, setup.wm, setup.wc, *tail) if setup.estimator == "ukf" else (*common, *tail)
+    out_alpha = np.ones(n_out)  # fwekf: the fading factor at each output row
+    if setup.fuzzy is not None:
+        from pipeline.estimation.fuzzy import RULES
+
+        args: tuple[object, ...] = (*common, setup.fuzzy, RULES, out_alpha, *tail)
+    elif setup.estimator == "ukf":
+        args = (*common, setup.wm, setup.wc, *tail)
+    else:
+        args = (*common, *tail)
     compile_s = 0.0
     if hasattr(kernel, "compile"):  # a numba dispatcher: compile or load it outside the timing
         t0 = time.perf_counter()
@@ -351,4 +372,4 @@ def _run_segment(
     ]
     k_out, k_inn = min(k_out, n_out), min(k_inn, n_inn)
     out = (out_t[:k_out], out_x[:k_out], out_P[:k_out], inn_i[:k_inn], inn_f[:k_inn])
-    return out, int(code), int(counts[cm.CNT_T_FAIL]), seg_events, compile_s
+    return out, int(code), int(counts[cm.CNT_T_FAIL]), seg_events, compile_s, out_alpha[:k_out]

@@ -20,7 +20,6 @@ class OutagesParams:
     The windows are replayed independently from the nominal run's state at their start.
 
     Attributes:
-        datasets: datasets the INS filters' runs and these experiments cover.
         filters: filters of the Monte Carlo (those of ``pairs`` at least).
         pairs: (baseline, candidate) filter pairs of the reduction table.
         sats: satellite counts kept inside the partial-outage windows.
@@ -36,7 +35,6 @@ class OutagesParams:
         workers: processes that replay the windows (1: in this process).
     """
 
-    datasets: tuple[str, ...]
     filters: tuple[str, ...]
     pairs: tuple[tuple[str, str], ...]
     sats: tuple[int, ...] = (0, 1, 2, 3, 4)

@@ -3,12 +3,16 @@
 The antenna sits at the lever arm ``l_b`` (body FRD) from the IMU: its position is
 ``r + C_b^n l_b`` and its velocity ``v^n + C_b^n (w_eb^b x l_b)`` (paper 001, eq. 7-8).
 
-Observables of satellite i at receive time t (GPS), following ``gnss_obs`` conventions:
+Observables of satellite i at epoch t, following ``gnss_obs`` conventions. The epoch is the
+receiver's clock reading, as in a RINEX file (RINEX 3.04 section 5.7): the receiver clock runs
+``b(t) / c`` ahead of GPS time, so the signals of epoch t arrived at GPS time ``t_r = t - b / c``
+(83 us at the start of the default drive), and the pseudoranges carry the same ``b``:
 
-- pseudorange ``rho = |R(w_e tau) r_i(t - tau) - r_ant(t)| + b(t) - sat_clock_m + noise``, the
-  transmit time found by light-time iteration and the satellite expressed in the receive-time
-  ECEF frame (``ingest.gnss.transmit_state``); ``sat_clock_m`` is c times the broadcast clock
-  offset with the relativistic term, less TGD;
+- pseudorange ``rho = |R(w_e tau) r_i(t_r - tau) - r_ant(t_r)| + b(t) - sat_clock_m + noise``,
+  the transmit time found by light-time iteration and the satellite expressed in the
+  receive-time ECEF frame (``ingest.gnss.transmit_state``); ``r_ant(t_r)`` is the antenna at
+  the epoch moved back along its velocity by ``b / c``; ``sat_clock_m`` is c times the
+  broadcast clock offset with the relativistic term, less TGD;
 - pseudorange rate: the exact time derivative of the noise-free geometric range (central
   difference over +-1 ms of the whole light-time solution) ``+ d(t) - sat_clock_drift_mps +
   noise``; the usual model ``e . (sat_v - v_ant)`` matches it to about 1 cm/s (the light-time
@@ -129,14 +133,17 @@ def observables(
     idx = select(eph, pp, tt)
     draws = rng.normal(0.0, 1.0, (4, n_ep * n_sv))
     ok = idx >= 0
-    st = transmit_state(eph, np.where(ok, idx, 0), tt, rx)
+    late_s = np.repeat(-clock_bias_m / C_MPS, n_sv)  # t_r - t: the receiver clock is ahead
+    rx = rx + late_s[:, None] * rv
+    st = transmit_state(eph, np.where(ok, idx, 0), tt, rx, rx_offset_s=late_s)
     el, az = elevation_azimuth(rx, st.sat.pos_m)
     ok &= el >= math.radians(params.elevation_mask_deg)
     keep = np.flatnonzero(ok)
     i, t, rx, rv, draws = idx[keep], tt[keep], rx[keep], rv[keep], draws[:, keep]
+    late_s = late_s[keep]
     sat, rng_m = SatState(*(f[keep] for f in st.sat)), st.range_m[keep]
-    up = transmit_state(eph, i, t, rx + RATE_STEP_S * rv, rx_offset_s=RATE_STEP_S).range_m
-    dn = transmit_state(eph, i, t, rx - RATE_STEP_S * rv, rx_offset_s=-RATE_STEP_S).range_m
+    up = transmit_state(eph, i, t, rx + RATE_STEP_S * rv, rx_offset_s=late_s + RATE_STEP_S).range_m
+    dn = transmit_state(eph, i, t, rx - RATE_STEP_S * rv, rx_offset_s=late_s - RATE_STEP_S).range_m
     range_rate = (up - dn) / (2.0 * RATE_STEP_S)
     epoch = np.repeat(np.arange(n_ep), n_sv)[keep]
     sat_clock_m = C_MPS * (sat.clock_s - sat.tgd_s)

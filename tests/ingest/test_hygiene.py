@@ -202,3 +202,29 @@ def test_decimated_jittery_stream_reports_its_actual_rate_and_jitter() -> None:
     assert rep["rate_hz"] == pytest.approx(12.5, rel=0.02)  # 100 Hz base series / 8
     assert 0.5 < rep["jitter_ms"] < 3.0
     assert rep["gaps"]["count"] == 0
+
+
+def test_a_secondary_key_keeps_every_satellite_of_an_epoch_and_sorts_by_it() -> None:
+    # gnss_obs: many rows share t_ns; only a repeated (t_ns, sv) is a duplicate.
+    rng = np.random.default_rng(4)
+    n_ep, svs = 50, np.array(["G01", "G07", "G12", "R03"])
+    t = np.repeat(10**18 + np.arange(n_ep, dtype=np.int64) * DT, svs.size)
+    sv = np.tile(svs, n_ep)
+    order = np.concatenate([rng.permutation(np.arange(k, k + 4)) for k in range(0, t.size, 4)])
+    t, sv = t[order], sv[order]  # satellites of an epoch in any order
+    v = np.arange(t.size, dtype=np.float64)
+    t = np.concatenate([t, t[[9, 30]]])  # two rows repeated: one exactly, one with a new value
+    sv = np.concatenate([sv, sv[[9, 30]]])
+    v = np.concatenate([v, [v[9], -1.0]])
+    cleaner = StreamCleaner("obs", W_NS, strict=False, secondary="sv")
+    parts = [
+        cleaner.push(Rows({"t_ns": t[a:b], "sv": sv[a:b], "v": v[a:b]}, np.arange(a, b)), P)
+        for a, b in ((0, 77), (77, t.size))
+    ]
+    rows = Rows.concat([*parts, cleaner.finish(P)])
+    assert len(rows) == n_ep * svs.size
+    keys = list(zip(rows.t.tolist(), rows.columns["sv"].tolist(), strict=True))
+    assert keys == sorted(set(keys))
+    assert cleaner.counts.duplicates_exact == 1
+    assert cleaner.counts.duplicates_conflicting == 1
+    assert cleaner.counts.reordered == 2  # the repeats arrived late; shuffled sats are not

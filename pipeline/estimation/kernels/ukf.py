@@ -23,7 +23,7 @@ Per stop (every ``step_s`` and every update epoch):
 Between stops the sigma points are not redrawn: the process noise enters once per span
 (``step_s``, default 0.1 s) instead of at every IMU sample. This is what filterpy's
 ``UnscentedKalmanFilter`` does when its ``fx`` integrates a whole span, which the reference
-backend uses; the accuracy cost is measured in ``benchmarks/estimation.py``.
+backend uses; the accuracy cost is measured in ``benchmarks/bench_estimation.py``.
 """
 
 from __future__ import annotations

@@ -14,8 +14,8 @@ def test_each_filter_cell_depends_on_its_own_filter_params_only() -> None:
     with Repo(str(REPO)) as repo:
         stages = {s.name: s for s in repo.index.stages}
     p = params()
-    cells = [(d, f) for d in p.outages.datasets for f in p.run.filters]
-    cells_mc = [(d, f) for d in p.outages.datasets for f in p.outages.filters]
+    cells = [(d, f) for d in p.run.datasets for f in p.run.filters]
+    cells_mc = [(d, f) for d in p.run.datasets for f in p.outages.filters]
     for prefix, grid in (("run", cells), ("montecarlo", cells_mc)):
         for dataset, name in grid:
             stage = stages[f"{prefix}@{dataset}-{name}"]
@@ -24,6 +24,6 @@ def test_each_filter_cell_depends_on_its_own_filter_params_only() -> None:
             assert "outages" not in keys  # only the keys that change a filter's windows
             (out,) = stage.outs
             assert str(out.def_path).endswith(f"{dataset}/{prefix.replace('run', 'runs')}/{name}")
-    for dataset in p.outages.datasets:
+    for dataset in p.run.datasets:
         outs = [str(o.def_path) for o in stages[f"outages@{dataset}"].outs]
         assert f"datasets/{dataset}/experiments/sat_reduction.csv" in outs

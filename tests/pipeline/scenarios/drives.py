@@ -1,24 +1,21 @@
-"""seoul_campus-type drives for the scenario and outage tests, with a full sky.
+"""seoul_campus drives for the scenario and outage tests (the synthesizer of params.yaml).
 
-``tests.pipeline.estimation.drive.simulate`` gives every canonical table but no satellite
-azimuth; the selection policies need it, so ``drive`` adds ``elevation_deg`` and
-``azimuth_deg`` computed from the satellite positions and the true receiver position.
+``drive`` runs ``pipeline.synth.seoul_campus.simulate`` with the repository's settings,
+shortened to ``duration_s`` and with 10 s at rest first (alignment); its ``gnss_obs`` carries
+the elevation and azimuth the selection policies need.
 """
 
 from __future__ import annotations
 
-import math
+from dataclasses import replace
 from functools import lru_cache
 from pathlib import Path
 
-import numpy as np
 import pyarrow as pa
 
 from ingest.meta import SensorMeta
-from pipeline.nav import earth
 from pipeline.params import Params, load_params
-from pipeline.scenarios.faults import column, with_values
-from tests.pipeline.estimation.drive import DriveSpec, simulate
+from pipeline.synth.seoul_campus import simulate
 
 REPO = Path(__file__).resolve().parents[3]
 Tables = dict[str, pa.Table]
@@ -30,28 +27,9 @@ def params() -> Params:
     return load_params(REPO / "params.yaml")
 
 
-def with_sky(tables: Tables) -> Tables:
-    """``gnss_obs`` with elevation and azimuth from the satellite and true receiver positions."""
-    obs, truth = tables["gnss_obs"], tables["truth"]
-    t_obs = obs.column("t_ns").to_numpy()
-    t_tr = truth.column("t_ns").to_numpy()
-    k = np.searchsorted(t_tr, t_obs)
-    lat = np.radians(truth.column("lat_deg").to_numpy()[k])
-    lon = np.radians(truth.column("lon_deg").to_numpy()[k])
-    h = truth.column("alt_m").to_numpy()[k]
-    sat = np.column_stack([column(obs, f"sat_{a}_m") for a in "xyz"])
-    el, az = np.empty(obs.num_rows), np.empty(obs.num_rows)
-    for i in range(obs.num_rows):
-        d = sat[i] - earth.geodetic_to_ecef(lat[i], lon[i], h[i])
-        n, e, dn = earth.dcm_ecef_to_ned(lat[i], lon[i]) @ (d / np.linalg.norm(d))
-        el[i] = math.degrees(math.asin(-dn))
-        az[i] = math.degrees(math.atan2(e, n)) % 360.0
-    out = with_values(obs, "elevation_deg", el, keep_nulls=False)
-    return dict(tables, gnss_obs=with_values(out, "azimuth_deg", az, keep_nulls=False))
-
-
 @lru_cache(maxsize=4)
 def drive(duration_s: float = 60.0, seed: int = 7) -> tuple[Tables, SensorMeta]:
-    """A seoul_campus-type drive (static start, turns both ways, 8 satellites), with sky."""
-    tables, sensors = simulate(DriveSpec(duration_s=duration_s), seed=seed)
-    return with_sky(tables), sensors
+    """A seoul_campus drive (cw lap) of ``duration_s``: 10 s at rest, then driving."""
+    sp = replace(params().synth.seoul_campus, duration_s=duration_s, stationary_s=10.0)
+    result = simulate(sp, seed=seed, variant="cw")
+    return dict(result.tables), result.sensors

@@ -1,9 +1,10 @@
 """Each fault scenario's behaviour against the catalogue's pass criteria (bad-inputs.md).
 
-The drives are seoul_campus-type with white GNSS noise, on which every filter is consistent
-in the nominal run (tests/pipeline/estimation/test_consistency.py); the faults are injected by
-the scenario engine and judged by ``scenarios.criteria``, the same code that writes
-``fault_checks`` into metrics.json.
+The drives are the seoul_campus synthesizer's (10 s at rest, then driving; fix errors
+correlated over 30 s as params.yaml sets them); every fault comes after the filters have
+converged on the move (heading and biases), as the catalogue's criteria assume. The faults are
+injected by the scenario engine and judged by ``scenarios.criteria``, the same code that
+writes ``fault_checks`` into metrics.json.
 """
 
 from __future__ import annotations
@@ -21,10 +22,10 @@ from tests.pipeline.scenarios.drives import drive, params
 CASES = {
     "F1": (60.0, 30.0),
     "F2": (90.0, 25.0),
-    "F4": (420.0, 60.0),  # the catalogue's 300 s outage
+    "F4": (480.0, 120.0),  # the catalogue's 300 s outage
     "F5": (150.0, 60.0),
     "F7": (90.0, 20.0),
-    "F9": (60.0, 30.0),
+    "F9": (90.0, 60.0),
     "F11": (60.0, 30.0),
     "F12": (60.0, 30.0),
 }
@@ -77,17 +78,18 @@ def test_f2_step_is_followed_after_exactly_one_reset_by_tight_coupling(name: str
 
 @pytest.mark.parametrize("name", FILTERS)
 def test_f7_rejects_the_outliers_larger_than_the_gate(name: str) -> None:
-    """Loose coupling rejects the catalogue's fraction (3-D 20 m errors on 1.5 m fixes are
-    all gross). On 2 m pseudoranges about a third of N(0, 20 m) errors are smaller than the
-    99.99 % gate (~9 m) and are rightly accepted: tight coupling rejects the outliers beyond
-    the gate, which is fewer than the catalogue's injected fraction."""
+    """Every filter rejects the outliers whose error alone exceeds its gate, within 20 %, and
+    stays within 3 sigma. That is fewer than the catalogue's injected fraction: on 0.8-2 m
+    pseudoranges about a third of N(0, 20 m) errors are smaller than the 99.99 % gate, and
+    loose coupling inflates the fix variance for 30 s error correlation (1 + 2 tau / dt: a
+    1.5 m fix becomes ~12 m), inside which most 20 m outliers are consistent with the fix.
+    No filter rejects more than the injected fraction."""
     out = {c.criterion: c for c in checks("F7", name)}
     gate = out["rejected fraction vs outliers beyond the gate"]
     assert gate.passed, gate
     assert out["position inside 3 sigma"].passed
     raw = out["rejected fraction in the burst"]
-    if FILTER_KINDS[name].coupling == "loose":
-        assert raw.passed, raw
-    else:
-        assert raw.value is not None
-        assert 0.5 * 0.1 < raw.value < 0.1
+    assert raw.value is not None
+    assert raw.value <= 1.2 * 0.1
+    if FILTER_KINDS[name].coupling == "tight":
+        assert raw.value > 0.5 * 0.1

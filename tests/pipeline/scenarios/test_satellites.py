@@ -89,7 +89,11 @@ def test_refixed_fixes_follow_the_kept_satellites() -> None:
     tables, _ = drive()
     t0 = int(tables["imu"].column("t_ns")[0].as_py())
     truth = tables["truth"]
-    for k in (4, 8):
+    visible = int(
+        np.min(np.unique(tables["gnss_obs"].column("t_ns").to_numpy(), return_counts=True)[1])
+    )
+    assert visible > 4
+    for k in (4, visible):
         spec = ScenarioSpec(
             windows=WindowsSpec("explicit", 30.0, starts_s=(20.0,)),
             satellites=SatellitesSpec(keep=k),
@@ -102,8 +106,8 @@ def test_refixed_fixes_follow_the_kept_satellites() -> None:
         ti = np.searchsorted(truth.column("t_ns").to_numpy(), t[inside])
         dlat = (column(out, "lat_deg")[inside] - truth.column("lat_deg").to_numpy()[ti]) * 111e3
         h_acc = column(out, "h_acc_m")[inside]
-        assert np.sqrt(np.mean(dlat**2)) < 4.0 * np.mean(h_acc)  # noise of 2 m pseudoranges
-        assert 1.0 < np.mean(h_acc) < 20.0
+        assert np.sqrt(np.mean(dlat**2)) < 4.0 * np.mean(h_acc)  # pseudorange noise
+        assert 0.3 < np.mean(h_acc) < 20.0
         if k == 4:
             h4 = np.mean(h_acc)
         else:

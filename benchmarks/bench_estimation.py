@@ -1,0 +1,222 @@
+"""Estimation speed: the compiled replay against filterpy driving the same model, per hour.
+
+Data: one hour of the seoul_campus drive (params.yaml's synthesizer, 100 Hz IMU, 1 Hz GNSS,
+elevation mask 5 deg: 8.1 satellites per epoch on average; the filters use the same mask).
+Every filter runs the whole hour on the compiled backend (``numba``, default params: 0.1 s
+covariance / sigma-point step, 1 RK4 substep; the paper's 10 substeps as a separate row),
+timed after a warm-up that compiles or loads the kernels. The references run the same model
+on a slice of the hour, scaled to one hour (stated in the table): filterpy's
+ExtendedKalmanFilter / UnscentedKalmanFilter calling the compiled model functions, and the
+same with every model function interpreted (``NUMBA_DISABLE_JIT=1``, in a subprocess): the
+pure-Python reference a filterpy user would write. Cold start: ``navreplay run`` in a
+subprocess with an empty numba cache, then again with the cache it left. Finally the
+accuracy cost of the speed choices on the 900 s seoul_campus drive.
+
+Targets (issue 5): tc_ukf <= 5 s, lc_ekf and tc_ekf <= 1.5 s per hour; >= 300x filterpy for
+the UKF; a cold first run compiles in <= 20 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from benchmarks._table import print_table
+
+FILTERS = ("lc_ekf", "tc_ekf", "tc_ukf", "tc_ukf_10")
+TARGET_S = {"lc_ekf": 1.5, "tc_ekf": 1.5, "tc_ukf": 5.0, "tc_ukf_10": None}
+MASK_DEG = 5.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--estimation-hours", type=float, default=1.0, help="data length, h")
+    parser.add_argument(
+        "--estimation-filterpy-s",
+        type=float,
+        default=120.0,
+        help="slice timed with filterpy + compiled model, s (default 120)",
+    )
+    parser.add_argument(
+        "--estimation-python-s",
+        type=float,
+        default=10.0,
+        help="slice timed with filterpy + interpreted model, s (default 10)",
+    )
+    parser.add_argument(
+        "--estimation-no-cold", action="store_true", help="skip the cold-compile measurement"
+    )
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def _children_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _params(name: str) -> Any:
+    from pipeline.params import load_params
+
+    base = "tc_ukf" if name == "tc_ukf_10" else name
+    p = load_params(Path("params.yaml")).filters.get(base)
+    p = replace(p, gnss=replace(p.gnss, elevation_mask_deg=MASK_DEG))
+    if name == "tc_ukf_10":
+        p = replace(p, step=replace(p.step, substeps=10))
+    return p
+
+
+def _data(hours: float) -> tuple[dict[str, Any], Any]:
+    from pipeline.params import load_params
+    from pipeline.synth.seoul_campus import simulate
+
+    synth = load_params(Path("params.yaml")).synth
+    sp = synth.seoul_campus
+    sp = replace(sp, duration_s=3600.0 * hours, gnss=replace(sp.gnss, elevation_mask_deg=MASK_DEG))
+    result = simulate(sp, seed=synth.seed, variant="cw")
+    return dict(result.tables), result.sensors
+
+
+def _slice(tables: dict[str, Any], seconds: float, skip_s: float = 60.0) -> dict[str, Any]:
+    """The first ``skip_s + seconds`` of every table (the drive starts after 60 s at rest)."""
+    import pyarrow as pa
+
+    t0 = int(tables["imu"].column("t_ns")[0].as_py())
+    end = t0 + int((skip_s + seconds) * 1e9)
+    return {k: t.filter(pa.array(t.column("t_ns").to_numpy() <= end)) for k, t in tables.items()}
+
+
+def _write_tables(tables: dict[str, Any], sensors: Any, out: Path) -> Path:
+    from ingest.meta import DatasetMeta, write_meta
+    from ingest.tables import Provenance, write_table
+
+    out.mkdir(parents=True, exist_ok=True)
+    for name, table in tables.items():
+        write_table(out / f"{name}.parquet", name, table, Provenance.create(name))
+    rows = {k: t.num_rows for k, t in tables.items()}
+    write_meta(out, DatasetMeta("bench", "gps", (), rows, sensors=sensors))
+    return out
+
+
+def _run(tables: dict[str, Any], sensors: Any, name: str, backend: str) -> tuple[float, float, Any]:
+    """(wall s, cpu s, result) of one run; the kernel's compile/load time is excluded."""
+    from pipeline.estimation.replay import run_filter
+
+    base = "tc_ukf" if name == "tc_ukf_10" else name
+    cpu = _cpu()
+    res = run_filter(tables, sensors, base, _params(name), backend=backend)  # type: ignore[arg-type]
+    cpu = _cpu() - cpu - res.compile_s  # loading is single-threaded: wall ~ cpu
+    return res.runtime_s, cpu, res
+
+
+def _python_reference(tables_dir: Path, name: str) -> float:
+    """filterpy with every model function interpreted (fresh process, NUMBA_DISABLE_JIT=1)."""
+    code = (
+        "import json; from pathlib import Path\n"
+        "from benchmarks.bench_estimation import _params\n"
+        "from pipeline.estimation.run import run_tables\n"
+        f"r = run_tables(Path({str(tables_dir)!r}), {name!r}, _params({name!r}), 'filterpy')\n"
+        "print(json.dumps([r.result.runtime_s, r.result.duration_s]))\n"
+    )
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+    )
+    runtime_s, duration_s = json.loads(done.stdout.strip().splitlines()[-1])
+    return float(runtime_s) * 3600.0 / float(duration_s)
+
+
+def _cold(tables_dir: Path, name: str, tmp: Path) -> tuple[float, float, float]:
+    """(cold wall, cold cpu, warm wall) of ``navreplay run`` with an empty numba cache."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp / f"cache-{name}"))
+    cmd = [sys.executable, "-m", "pipeline.cli", "-q", "run", str(tables_dir), "--filter", name]
+    out: list[float] = []
+    for k in range(2):
+        cpu = _children_cpu()
+        wall = time.perf_counter()
+        subprocess.run([*cmd, "--out", str(tmp / f"run-{name}-{k}")], env=env, check=True,
+                       capture_output=True)  # fmt: skip
+        out += [time.perf_counter() - wall, _children_cpu() - cpu]
+    return out[0], out[1], out[2]
+
+
+def run(options: argparse.Namespace) -> None:
+    hours = options.estimation_hours
+    tmp = Path(tempfile.mkdtemp(prefix="navreplay-bench-est-"))
+    try:
+        t = time.perf_counter()
+        tables, sensors = _data(hours)
+        print(f"   data: {hours:g} h synthesized in {time.perf_counter() - t:.1f} s", flush=True)
+        warm = _slice(tables, 30.0)
+        for name in FILTERS:  # compile or load every kernel first
+            _run(warm, sensors, name, "numba")
+            _run(_slice(tables, 5.0), sensors, name, "filterpy")
+        rows: list[list[object]] = []
+        fp_s = options.estimation_filterpy_s
+        py_s = options.estimation_python_s
+        py_dir = _write_tables(_slice(tables, py_s), sensors, tmp / "py")
+        for name in FILTERS:
+            wall, cpu, res = _run(tables, sensors, name, "numba")
+            per_h = 3600.0 / res.duration_s
+            fw, _, fres = _run(_slice(tables, fp_s), sensors, name, "filterpy")
+            fp_h = fw * 3600.0 / fres.duration_s
+            py_h = _python_reference(py_dir, "tc_ukf" if name == "tc_ukf_10" else name)
+            if name == "tc_ukf_10":
+                py_h = float("nan")  # the interpreted 10-substep UKF would take hours
+            target = TARGET_S[name]
+            rows.append([
+                name, wall * per_h, cpu * per_h, "-" if target is None else target,
+                fp_h, fp_h / (wall * per_h), py_h, py_h / (wall * per_h),
+            ])  # fmt: skip
+        print(f"   per hour of data; filterpy timed on {fp_s:g} s, interpreted on {py_s:g} s,")
+        print("   both scaled to one hour; tc_ukf_10 = the paper's 10 RK4 substeps")
+        print_table(
+            ["filter", "numba s/h", "cpu s/h", "target", "filterpy s/h", "ratio",
+             "python s/h", "ratio"],
+            rows,
+        )  # fmt: skip
+        if not options.estimation_no_cold:
+            small = _write_tables(warm, sensors, tmp / "cold")
+            cold_rows = [[n, *_cold(small, n, tmp)] for n in ("lc_ekf", "tc_ukf")]
+            print("   navreplay run on 90 s of data with an empty numba cache, then again")
+            print_table(["filter", "cold wall s", "cold cpu s", "warm wall s"], cold_rows)
+        _accuracy_cost()
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _accuracy_cost() -> None:
+    """H RMS and NEES of the speed choices on the 900 s seoul_campus drive (cw)."""
+    from pipeline.estimation.metrics import compute_metrics
+    from pipeline.estimation.replay import run_filter
+    from pipeline.params import load_params
+    from pipeline.synth.seoul_campus import simulate
+
+    params = load_params(Path("params.yaml"))
+    result = simulate(params.synth.seoul_campus, seed=params.synth.seed, variant="cw")
+    rows = []
+    for name, step_s, sub in (
+        ("tc_ekf", 0.1, 1), ("tc_ekf", 0.01, 1), ("tc_ukf", 0.1, 1), ("tc_ukf", 0.01, 1),
+        ("tc_ukf", 0.1, 10),
+    ):  # fmt: skip
+        p = params.filters.get(name)
+        p = replace(p, step=replace(p.step, step_s=step_s, substeps=sub))
+        r = run_filter(result.tables, result.sensors, name, p)
+        m = compute_metrics(r, result.tables["truth"])
+        rows.append([name, step_s, sub, m["pos_err_h_rms_m"], m["nees_mean"],
+                     r.runtime_s * 3600.0 / r.duration_s])  # fmt: skip
+    print("   accuracy cost of the step (covariance propagation / sigma-point redraw) and")
+    print("   of the RK4 substeps, seoul_campus cw 900 s (NEES of 9 navigation states)")
+    print_table(["filter", "step s", "substeps", "H RMS m", "NEES", "s/h"], rows)

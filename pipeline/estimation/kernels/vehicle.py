@@ -1,0 +1,510 @@
+"""Replay loops of the vehicle-model filters (paper 003), compiled whole with numba.
+
+One loop serves the four filters, selected by ``cfg[VC_MODE]``:
+
+- ``MODE_KINEMATIC`` / ``MODE_DYNAMIC``: one EKF on that model (``models.vehicle``);
+- ``MODE_SWITCHED``: one EKF whose process and yaw-rate models are chosen per step by the
+  wheel speed with hysteresis (dynamic above ``VC_V_UP``, back to kinematic below
+  ``VC_V_DOWN``; the paper selects the model by the speed range);
+- ``MODE_IMM``: an interacting multiple model filter of both EKFs (Markov switching matrix,
+  mixing, model likelihoods; the same arithmetic as filterpy's ``IMMEstimator``).
+
+Array layouts (filled by ``pipeline.estimation.vehicle_replay``):
+
+- ``stops`` (S, ``VS_COLS``): time (ns), vehicle-sample index (-1 = none), fix index (-1 =
+  none), output flag. Between stops the state is predicted with the last vehicle input held
+  (zero order), in sub-steps of at most ``VC_MAX_STEP`` s.
+- ``veh`` (V, ``VH_COLS``): wheel speed, steering of the kinematic and of the dynamic model
+  (equal when the log has a steering angle; per-model virtual steering from the yaw rate
+  otherwise), measured yaw rate and its flag (1 = fuse it).
+- ``fix`` (M, ``FX_COLS``): north, east (m, local), GPS speed (m/s), course (rad), their
+  1-sigma and usable flags.
+
+Updates: every block (the north/east pair, speed, course, yaw rate) is chi-square gated on its
+prior NIS (``kernels.common.gate_blocks``) and the accepted rows are fused jointly in Joseph
+form (``kernels.ekf.joseph_update``); innovations and rejections are recorded with
+``kernels.common``. The IMM gates with the model that has the larger predicted probability and
+applies the same rows to both models.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from pipeline.estimation.kernels.common import (
+    CNT_OUT,
+    CNT_STOP,
+    EV_RESET,
+    STATUS_INDEFINITE,
+    STATUS_LIMIT,
+    STATUS_NONFINITE,
+    STATUS_OK,
+    accepted_rows,
+    cholesky,
+    fail,
+    gate_blocks,
+    keep_pd,
+    record_event,
+    record_innovations,
+    streams_to_reset,
+    symmetrize,
+    update_reject_since,
+)
+from pipeline.estimation.kernels.ekf import joseph_update
+from pipeline.estimation.models import vehicle as vm
+from pipeline.nav.earth import F64, I64
+
+MODE_KINEMATIC, MODE_DYNAMIC, MODE_SWITCHED, MODE_IMM = 0, 1, 2, 3
+MODE_NAMES = {
+    "vehicle_kinematic": MODE_KINEMATIC,
+    "vehicle_dynamic": MODE_DYNAMIC,
+    "vehicle_switched": MODE_SWITCHED,
+    "vehicle_imm": MODE_IMM,
+}
+
+VS_T, VS_VEH, VS_FIX, VS_OUT = 0, 1, 2, 3
+VS_COLS = 4
+VH_V, VH_D_KIN, VH_D_DYN, VH_YAW, VH_YAW_OK = 0, 1, 2, 3, 4
+VH_COLS = 5
+FX_N, FX_E, FX_SPEED, FX_COURSE = 0, 1, 2, 3
+FX_SIG_POS, FX_SIG_SPEED, FX_SIG_COURSE, FX_POS_OK, FX_SPEED_OK, FX_COURSE_OK = 4, 5, 6, 7, 8, 9
+FX_COLS = 10
+
+VC_MODE, VC_MAX_STEP, VC_V_UP, VC_V_DOWN, VC_SIG_VWHL, VC_SIG_DELTA, VC_SIG_YAW = (
+    0,
+    1,
+    2,
+    3,
+    4,
+    5,
+    6,
+)
+VC_P_KK, VC_P_DD, VC_MU0_DYN, VC_MAX_POS_SIGMA, VC_LIK_FLOOR, VC_TIMEOUT_S = 7, 8, 9, 10, 11, 12
+VC_DIM = 13
+
+S_POS, S_SPEED, S_COURSE, S_YAW = 0, 1, 2, 3
+STREAM_NAMES = ("gnss_pos", "gnss_speed", "gnss_course", "yaw_rate")
+M_MAX = 5
+
+
+@nb.njit(cache=True)
+def epoch_rows(stop: I64, veh: F64, fix: F64, rows: I64, blocks: I64) -> tuple[int, int, int]:
+    """Lay out the measurement rows of a stop: ``rows[k]`` = (``Z_*`` kind, source row).
+
+    Returns (rows, blocks, vehicle row of the steering used by the yaw-rate model or -1).
+    """
+    m = 0
+    nb_ = 0
+    fi = stop[VS_FIX]
+    if fi >= 0:
+        if fix[fi, FX_POS_OK] > 0.0:
+            blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, 2, S_POS, -1
+            nb_ += 1
+            rows[m, 0], rows[m, 1] = vm.Z_N, fi
+            rows[m + 1, 0], rows[m + 1, 1] = vm.Z_E, fi
+            m += 2
+        if fix[fi, FX_SPEED_OK] > 0.0:
+            blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, 1, S_SPEED, -1
+            nb_ += 1
+            rows[m, 0], rows[m, 1] = vm.Z_SPEED, fi
+            m += 1
+        if fix[fi, FX_COURSE_OK] > 0.0:
+            blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, 1, S_COURSE, -1
+            nb_ += 1
+            rows[m, 0], rows[m, 1] = vm.Z_COURSE, fi
+            m += 1
+    vi = stop[VS_VEH]
+    if vi >= 0 and veh[vi, VH_YAW_OK] > 0.0:
+        blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, 1, S_YAW, -1
+        nb_ += 1
+        rows[m, 0], rows[m, 1] = vm.Z_YAW_RATE, vi
+        m += 1
+    return m, nb_, vi
+
+
+@nb.njit(cache=True)
+def epoch_values(
+    model: int,
+    x: F64,
+    rows: I64,
+    m: int,
+    veh: F64,
+    fix: F64,
+    u: F64,
+    vp: F64,
+    cfg: F64,
+    z: F64,
+    r: F64,
+    nu: F64,
+    H: F64,
+) -> None:
+    """Measured values ``z``, variances ``r``, innovations ``nu`` (course wrapped) and
+    Jacobian rows ``H`` of one model at its predicted state ``x``; ``u`` is the held input."""
+    delta = u[VH_D_KIN] if model == vm.KINEMATIC else u[VH_D_DYN]
+    for k in range(m):
+        kind, src = rows[k, 0], rows[k, 1]
+        if kind == vm.Z_N:
+            z[k], sig = fix[src, FX_N], fix[src, FX_SIG_POS]
+        elif kind == vm.Z_E:
+            z[k], sig = fix[src, FX_E], fix[src, FX_SIG_POS]
+        elif kind == vm.Z_SPEED:
+            z[k], sig = fix[src, FX_SPEED], fix[src, FX_SIG_SPEED]
+        elif kind == vm.Z_COURSE:
+            z[k], sig = fix[src, FX_COURSE], fix[src, FX_SIG_COURSE]
+        else:
+            z[k], sig = veh[src, VH_YAW], cfg[VC_SIG_YAW]
+        r[k] = sig * sig
+        nu[k] = vm.residual(kind, z[k], vm.measure(model, x, delta, kind, vp))
+        vm.measure_jac(model, x, delta, kind, vp, H[k])
+
+
+@nb.njit(cache=True)
+def innovation_cov(P: F64, H: F64, r: F64, m: int, S: F64) -> None:
+    """``S = H P H^T + R`` into ``S[:m, :m]``."""
+    Hm = np.ascontiguousarray(H[:m, :])
+    S[:m, :m] = Hm @ P @ Hm.T
+    for k in range(m):
+        S[k, k] += r[k]
+
+
+@nb.njit(cache=True)
+def predict(
+    model: int, x: F64, P: F64, u: F64, dt: float, vp: F64, sig_u: F64, q: F64, max_step: float
+) -> None:
+    """Propagate ``x, P`` over ``dt`` seconds with input ``u`` held (sub-steps <= max_step)."""
+    if dt <= 0.0:
+        return
+    n_sub = max(1, math.ceil(dt / max_step - 1e-9))
+    h = dt / n_sub
+    delta = u[VH_D_KIN] if model == vm.KINEMATIC else u[VH_D_DYN]
+    F = np.empty((vm.NX, vm.NX))
+    Q = np.empty((vm.NX, vm.NX))
+    xn = np.empty(vm.NX)
+    for _ in range(n_sub):
+        vm.step_jac(model, x, u[VH_V], delta, h, vp, F)
+        vm.process_noise(model, x, u[VH_V], delta, h, vp, sig_u, q, Q)
+        vm.step(model, x, u[VH_V], delta, h, vp, xn)
+        x[:] = xn
+        P[:, :] = F @ P @ F.T + Q
+    symmetrize(P, vm.NX)
+
+
+@nb.njit(cache=True)
+def log_likelihood(nu: F64, S: F64, acc: I64, ma: int) -> float:
+    """Gaussian log-likelihood of the accepted innovations (0 when none are accepted)."""
+    if ma == 0:
+        return 0.0
+    Sa = np.empty((ma, ma))
+    y = np.empty((ma, 1))
+    for i in range(ma):
+        y[i, 0] = nu[acc[i]]
+        for j in range(ma):
+            Sa[i, j] = S[acc[i], acc[j]]
+    L = np.empty((ma, ma))
+    if not cholesky(Sa, ma, L):
+        return -math.inf
+    s = 0.0
+    d = 0.0
+    w = np.empty(ma)
+    for i in range(ma):
+        t = y[i, 0]
+        for k in range(i):
+            t -= L[i, k] * w[k]
+        w[i] = t / L[i, i]
+        s += w[i] * w[i]
+        d += 2.0 * math.log(L[i, i])
+    return -0.5 * (s + d + ma * math.log(2.0 * math.pi))
+
+
+@nb.njit(cache=True)
+def likelihood(ll: float, floor: float) -> float:
+    """``exp(ll)``, floored so that no model's probability collapses to exactly zero."""
+    return max(math.exp(min(ll, 700.0)), floor)
+
+
+@nb.njit(cache=True)
+def imm_mixing(mu: F64, M: F64) -> tuple[F64, F64]:
+    """(cbar, omega): predicted model probabilities ``cbar = mu M`` and mixing weights
+    ``omega[i, j] = M[i, j] mu[i] / cbar[j]`` (filterpy's ``_compute_mixing_probabilities``)."""
+    k = mu.shape[0]
+    cbar = np.zeros(k)
+    for j in range(k):
+        for i in range(k):
+            cbar[j] += mu[i] * M[i, j]
+    omega = np.empty((k, k))
+    for i in range(k):
+        for j in range(k):
+            omega[i, j] = M[i, j] * mu[i] / cbar[j]
+    return cbar, omega
+
+
+@nb.njit(cache=True)
+def imm_combine(xs: F64, Ps: F64, w: F64, x: F64, P: F64) -> None:
+    """Weighted mean and covariance (with the spread of the means) of the models' estimates."""
+    k = w.shape[0]
+    x[:] = 0.0
+    for i in range(k):
+        x += w[i] * xs[i]
+    P[:, :] = 0.0
+    for i in range(k):
+        d = xs[i] - x
+        P += w[i] * (np.outer(d, d) + Ps[i])
+
+
+@nb.njit(cache=True)
+def reset_stream(P: F64, stream: int, nu: F64, blocks: I64, nb_: int) -> float:
+    """Decorrelate and inflate the states a timed-out stream observes (bad-inputs F2).
+
+    Position: north and east, and the heading (a heading error is what makes a model drift
+    away from its fixes); speed: the speed; course: heading and sideslip. Their variance
+    becomes at least the square of the stream's largest innovation. Returns that innovation.
+    """
+    big = 0.0
+    for b in range(nb_):
+        if blocks[b, 2] == stream:
+            for k in range(blocks[b, 0], blocks[b, 0] + blocks[b, 1]):
+                big = max(big, abs(nu[k]))
+    if stream == S_POS:
+        states = np.array([vm.X_N, vm.X_E, vm.X_PSI])
+        sig = np.array([big, big, 0.3])
+    elif stream == S_SPEED:
+        states = np.array([vm.X_V])
+        sig = np.array([big])
+    else:
+        states = np.array([vm.X_PSI, vm.X_BETA])
+        sig = np.array([big, big])
+    for a in range(states.size):
+        i = states[a]
+        for j in range(vm.NX):
+            if j != i:
+                P[i, j] = 0.0
+                P[j, i] = 0.0
+        P[i, i] = max(P[i, i], sig[a] * sig[a])
+    return big
+
+
+@nb.njit(cache=True)
+def gate_with_reset(
+    t: int, x: F64, P: F64, H: F64, r: F64, nu: F64, m: int, S: F64, blocks: I64, nb_: int,
+    gate: F64, cfg: F64, reject_since: I64, nis: F64, accepted: I64, gwork: F64, ev_i: I64,
+    ev_f: F64, counts: I64,
+) -> None:  # fmt: skip
+    """Gate every block; a stream rejected for longer than ``VC_TIMEOUT_S`` has its states'
+    covariance reset (``reset_stream``, event ``gate_reset``) and is gated again."""
+    for attempt in range(2):
+        innovation_cov(P, H, r, m, S)
+        gate_blocks(nu, S, blocks, nb_, gate, nis, accepted, gwork)
+        if attempt == 1:
+            break
+        reset = streams_to_reset(t, blocks, nb_, accepted, reject_since, cfg[VC_TIMEOUT_S])
+        if reset.sum() == 0:
+            break
+        for s in range(reset.size):
+            if reset[s]:
+                big = reset_stream(P, s, nu, blocks, nb_)
+                record_event(ev_i, ev_f, counts, t, EV_RESET, s, -1, big)
+    update_reject_since(t, blocks, nb_, accepted, reject_since)
+
+
+@nb.njit(cache=True)
+def check(x: F64, P: F64, cfg: F64) -> int:
+    """The NaN barrier and the divergence limit for a vehicle state."""
+    for i in range(vm.NX):
+        if not math.isfinite(x[i]):
+            return STATUS_NONFINITE
+        for j in range(vm.NX):
+            if not math.isfinite(P[i, j]):
+                return STATUS_NONFINITE
+    if math.sqrt(P[vm.X_N, vm.X_N] + P[vm.X_E, vm.X_E]) > cfg[VC_MAX_POS_SIGMA]:
+        return STATUS_LIMIT
+    return STATUS_OK
+
+
+@nb.njit(cache=True)
+def switch_model(current: int, v_whl: float, cfg: F64) -> int:
+    """Speed-based model choice with hysteresis (``VC_V_UP`` > ``VC_V_DOWN``)."""
+    if current == vm.KINEMATIC and v_whl > cfg[VC_V_UP]:
+        return vm.DYNAMIC
+    if current == vm.DYNAMIC and v_whl < cfg[VC_V_DOWN]:
+        return vm.KINEMATIC
+    return current
+
+
+@nb.njit(cache=True)
+def run_vehicle(
+    x0: F64,
+    P0: F64,
+    u0: F64,
+    t0: int,
+    stops: I64,
+    veh: F64,
+    fix: F64,
+    vp: F64,
+    q: F64,
+    cfg: F64,
+    gate: F64,
+    out_t: I64,
+    out_x: F64,
+    out_P: F64,
+    out_aux: F64,
+    inn_i: I64,
+    inn_f: F64,
+    ev_i: I64,
+    ev_f: F64,
+    counts: I64,
+) -> int:
+    """Replay a vehicle-model filter from ``x0, P0`` at ``t0`` over every stop.
+
+    Args:
+        x0: initial state (5,); P0: its covariance (5, 5); u0: vehicle input row at t0.
+        stops, veh, fix: schedule and data (module docstring).
+        vp: vehicle (``models.vehicle.VP_*``); q: model-error densities (5,).
+        cfg: settings (``VC_*``); gate: chi-square threshold by dimension.
+        out_t, out_x, out_P: outputs at flagged stops (and t0); out_aux: the probability of the
+            dynamic model (IMM) or the model in use (1 = dynamic).
+        inn_i, inn_f, ev_i, ev_f, counts: logs (``kernels.common``).
+
+    Returns:
+        a ``common.STATUS_*`` code.
+    """
+    mode = int(cfg[VC_MODE])
+    sig_u = np.array([cfg[VC_SIG_VWHL], cfg[VC_SIG_DELTA]])
+    max_step = cfg[VC_MAX_STEP]
+    nmod = 2 if mode == MODE_IMM else 1
+    xs = np.empty((nmod, vm.NX))
+    Ps = np.empty((nmod, vm.NX, vm.NX))
+    for i in range(nmod):
+        xs[i] = x0
+        Ps[i] = P0
+    M = np.array([[cfg[VC_P_KK], 1.0 - cfg[VC_P_KK]], [1.0 - cfg[VC_P_DD], cfg[VC_P_DD]]])
+    mu = np.array([1.0 - cfg[VC_MU0_DYN], cfg[VC_MU0_DYN]])
+    cbar, omega = imm_mixing(mu, M)
+    model = vm.DYNAMIC if mode == MODE_DYNAMIC else vm.KINEMATIC
+    if mode == MODE_SWITCHED:
+        model = switch_model(vm.KINEMATIC, u0[VH_V], cfg)
+    u = u0.copy()
+    x = x0.copy()
+    P = P0.copy()
+    L = np.empty((vm.NX, vm.NX))
+    rows = np.empty((M_MAX, 2), np.int64)
+    blocks = np.empty((M_MAX, 4), np.int64)
+    z, r, nu = np.empty(M_MAX), np.empty(M_MAX), np.empty(M_MAX)
+    H = np.empty((M_MAX, vm.NX))
+    S = np.empty((M_MAX, M_MAX))
+    nis = np.empty(M_MAX)
+    accepted = np.empty(M_MAX, np.int64)
+    acc = np.empty(M_MAX, np.int64)
+    gwork = np.empty((3, 6))
+    reject_since = -np.ones(4, np.int64)
+    nus = np.empty((nmod, M_MAX))
+    Hs = np.empty((nmod, M_MAX, vm.NX))
+    Ss = np.empty((nmod, M_MAX, M_MAX))
+    aux = mu[1] if mode == MODE_IMM else float(model)
+    _record(t0, x, P, aux, out_t, out_x, out_P, out_aux, counts)
+    t_cur = t0
+    for k in range(stops.shape[0]):
+        t = stops[k, VS_T]
+        dt = (t - t_cur) * 1e-9
+        t_cur = t
+        if mode == MODE_IMM:
+            xm = np.zeros((2, vm.NX))
+            Pm = np.zeros((2, vm.NX, vm.NX))
+            for j in range(2):
+                imm_combine(xs, Ps, omega[:, j], xm[j], Pm[j])
+            for j in range(2):
+                xs[j] = xm[j]
+                Ps[j] = Pm[j]
+                predict(j, xs[j], Ps[j], u, dt, vp, sig_u, q, max_step)
+        else:
+            predict(model, x, P, u, dt, vp, sig_u, q, max_step)
+        vi = stops[k, VS_VEH]
+        if vi >= 0:
+            u[:] = veh[vi]
+        if mode == MODE_SWITCHED and vi >= 0:
+            model = switch_model(model, u[VH_V], cfg)
+        m, nb_, _ = epoch_rows(stops[k], veh, fix, rows, blocks)
+        if mode == MODE_IMM:
+            lik = np.ones(2)
+            if m > 0:
+                for j in range(2):
+                    epoch_values(j, xs[j], rows, m, veh, fix, u, vp, cfg, z, r, nus[j], Hs[j])
+                    innovation_cov(Ps[j], Hs[j], r, m, Ss[j])
+                g = 0 if cbar[0] >= cbar[1] else 1
+                for attempt in range(2):
+                    gate_blocks(nus[g], Ss[g], blocks, nb_, gate, nis, accepted, gwork)
+                    if attempt == 1:
+                        break
+                    reset = streams_to_reset(
+                        t, blocks, nb_, accepted, reject_since, cfg[VC_TIMEOUT_S]
+                    )
+                    if reset.sum() == 0:
+                        break
+                    for s in range(reset.size):
+                        if reset[s]:
+                            big = 0.0
+                            for j in range(2):
+                                big = reset_stream(Ps[j], s, nus[j], blocks, nb_)
+                            record_event(ev_i, ev_f, counts, t, EV_RESET, s, -1, big)
+                    for j in range(2):
+                        innovation_cov(Ps[j], Hs[j], r, m, Ss[j])
+                update_reject_since(t, blocks, nb_, accepted, reject_since)
+                record_innovations(
+                    t, nus[g], Ss[g], blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts,
+                    ev_i, ev_f,
+                )  # fmt: skip
+                ma = accepted_rows(blocks, nb_, accepted, acc)
+                for j in range(2):
+                    if ma > 0:
+                        ll = log_likelihood(nus[j], Ss[j], acc, ma)
+                        lik[j] = likelihood(ll, cfg[VC_LIK_FLOOR])
+                        dx, ok = joseph_update(Ps[j], vm.NX, Hs[j], Ss[j], r, nus[j], acc, ma)
+                        if ok:
+                            xs[j] += dx
+            for j in range(2):
+                mu[j] = cbar[j] * lik[j]
+            mu /= mu.sum()
+            cbar, omega = imm_mixing(mu, M)
+            imm_combine(xs, Ps, mu, x, P)
+            ok_all = True
+            for j in range(2):
+                ok_all = ok_all and keep_pd(Ps[j], vm.NX, L, t, ev_i, ev_f, counts)
+            aux = mu[1]
+        else:
+            if m > 0:
+                epoch_values(model, x, rows, m, veh, fix, u, vp, cfg, z, r, nu, H)
+                gate_with_reset(t, x, P, H, r, nu, m, S, blocks, nb_, gate, cfg, reject_since,
+                                nis, accepted, gwork, ev_i, ev_f, counts)  # fmt: skip
+                record_innovations(
+                    t, nu, S, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts, ev_i, ev_f
+                )
+                ma = accepted_rows(blocks, nb_, accepted, acc)
+                if ma > 0:
+                    dx, ok = joseph_update(P, vm.NX, H, S, r, nu, acc, ma)
+                    if ok:
+                        x += dx
+            ok_all = keep_pd(P, vm.NX, L, t, ev_i, ev_f, counts)
+            aux = float(model)
+        status = check(x, P, cfg) if ok_all else STATUS_INDEFINITE
+        if status != STATUS_OK:
+            return fail(t, status, ev_i, ev_f, counts)
+        if stops[k, VS_OUT] > 0:
+            _record(t, x, P, aux, out_t, out_x, out_P, out_aux, counts)
+        counts[CNT_STOP] = k + 1
+    return STATUS_OK
+
+
+@nb.njit(cache=True)
+def _record(
+    t: int, x: F64, P: F64, aux: float, out_t: I64, out_x: F64, out_P: F64, out_aux: F64,
+    counts: I64,
+) -> None:  # fmt: skip
+    k = counts[CNT_OUT]
+    if k < out_t.shape[0]:
+        out_t[k] = t
+        out_x[k] = x
+        out_P[k] = P
+        out_aux[k] = aux
+    counts[CNT_OUT] = k + 1

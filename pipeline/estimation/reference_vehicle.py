@@ -1,0 +1,209 @@
+"""The filterpy reference backend of the vehicle-model filters.
+
+``run_vehicle_filterpy`` takes exactly the arguments of ``kernels.vehicle.run_vehicle`` and
+fills the same outputs. The model (``models.vehicle``: ``step``, ``step_jac``,
+``process_noise``, measurements) and the bookkeeping (row layout, gating, recording,
+positive-definiteness, NaN barrier: ``kernels.vehicle`` and ``kernels.common``) are the same
+code; filterpy does the estimator arithmetic:
+
+- each model is a filterpy ``ExtendedKalmanFilter`` whose ``predict_x`` runs the model's
+  ``step`` (filterpy's own ``predict`` then applies ``P = F P F^T + Q``) and whose ``update``
+  fuses the accepted rows (Joseph form, filterpy's);
+- ``vehicle_imm`` is filterpy's ``IMMEstimator`` over the two EKFs (mixing, mode
+  probabilities, combination). A stop without an accepted measurement is an IMM update with
+  unit likelihoods (mode probabilities follow the Markov chain only).
+
+The loop runs in Python one stop at a time: it is the slow reference the compiled kernel is
+checked against.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter, IMMEstimator
+
+from pipeline.estimation.kernels import common as cm
+from pipeline.estimation.kernels import vehicle as kv
+from pipeline.estimation.models import vehicle as vm
+from pipeline.nav.earth import F64, I64
+
+
+class _ModelEKF(ExtendedKalmanFilter):  # type: ignore[misc]
+    """filterpy's EKF on one vehicle model; the prediction sub-steps run the shared model."""
+
+    def __init__(self, model: int, x0: F64, P0: F64, vp: F64, q: F64, cfg: F64) -> None:
+        super().__init__(dim_x=vm.NX, dim_z=1)
+        self.model = model
+        self.x = x0.copy()
+        self.P = P0.copy()
+        self.vp, self.q, self.cfg = vp, q, cfg
+        self.sig_u = np.array([cfg[kv.VC_SIG_VWHL], cfg[kv.VC_SIG_DELTA]])
+        self.u = np.zeros(kv.VH_COLS)
+        self.dt = 0.0
+        self.pending: tuple[F64, F64, F64, F64] | None = None
+        self._lik = 1.0
+
+    @property
+    def likelihood(self) -> float:
+        return self._lik
+
+    def predict_x(self, u: Any = 0) -> None:
+        """One sub-step of the model (``F`` and ``Q`` were set for this state by ``predict``)."""
+        xn = np.empty(vm.NX)
+        vm.step(self.model, self.x, self.u[kv.VH_V], self._delta(), self._h, self.vp, xn)
+        self.x = xn
+
+    def _delta(self) -> float:
+        return float(self.u[kv.VH_D_KIN] if self.model == vm.KINEMATIC else self.u[kv.VH_D_DYN])
+
+    def predict(self, u: Any = None) -> None:
+        """Propagate over ``self.dt`` in the kernel's sub-steps (filterpy predict per step)."""
+        dt = self.dt
+        if dt <= 0.0:
+            return
+        max_step = self.cfg[kv.VC_MAX_STEP]
+        n_sub = max(1, math.ceil(dt / max_step - 1e-9))
+        self._h = dt / n_sub
+        F, Q = np.empty((vm.NX, vm.NX)), np.empty((vm.NX, vm.NX))
+        for _ in range(n_sub):
+            x = np.ascontiguousarray(self.x, dtype=float)
+            vm.step_jac(self.model, x, self.u[kv.VH_V], self._delta(), self._h, self.vp, F)
+            vm.process_noise(
+                self.model, x, self.u[kv.VH_V], self._delta(), self._h, self.vp, self.sig_u,
+                self.q, Q,
+            )  # fmt: skip
+            self.F, self.Q = F.copy(), Q.copy()
+            super().predict()
+        P = np.ascontiguousarray(self.P)
+        cm.symmetrize(P, vm.NX)
+        self.P = P
+
+    def update(self, z: Any = None, *args: Any, **kwargs: Any) -> None:
+        """Fuse the rows staged in ``pending`` (z, hx, H, R), if any (the driver has set the
+        likelihood)."""
+        if self.pending is None:
+            return
+        za, hx, Ha, Ra = self.pending
+        self.pending = None
+        super().update(za, HJacobian=lambda _x: Ha, Hx=lambda _x: hx, R=Ra)
+        self.x = np.asarray(self.x, dtype=float).reshape(vm.NX)
+
+
+def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.run_vehicle
+    x0: F64, P0: F64, u0: F64, t0: int, stops: I64, veh: F64, fix: F64, vp: F64, q: F64,
+    cfg: F64, gate: F64, out_t: I64, out_x: F64, out_P: F64, out_aux: F64, inn_i: I64,
+    inn_f: F64, ev_i: I64, ev_f: F64, counts: I64,
+) -> int:  # fmt: skip
+    """``kernels.vehicle.run_vehicle`` with filterpy's EKF / IMMEstimator doing the arithmetic."""
+    mode = int(cfg[kv.VC_MODE])
+    imm_on = mode == kv.MODE_IMM
+    if imm_on:
+        filters = [_ModelEKF(j, x0, P0, vp, q, cfg) for j in (vm.KINEMATIC, vm.DYNAMIC)]
+        M = np.array(
+            [[cfg[kv.VC_P_KK], 1.0 - cfg[kv.VC_P_KK]], [1.0 - cfg[kv.VC_P_DD], cfg[kv.VC_P_DD]]]
+        )
+        imm = IMMEstimator(filters, np.array([1.0 - cfg[kv.VC_MU0_DYN], cfg[kv.VC_MU0_DYN]]), M)
+        aux = float(imm.mu[1])
+    else:
+        model = vm.DYNAMIC if mode == kv.MODE_DYNAMIC else vm.KINEMATIC
+        if mode == kv.MODE_SWITCHED:
+            model = int(kv.switch_model(vm.KINEMATIC, u0[kv.VH_V], cfg))
+        filters = [_ModelEKF(model, x0, P0, vp, q, cfg)]
+        aux = float(model)
+    u = u0.copy()
+    L = np.empty((vm.NX, vm.NX))
+    rows = np.empty((kv.M_MAX, 2), np.int64)
+    blocks = np.empty((kv.M_MAX, 4), np.int64)
+    z, r, nu = np.empty(kv.M_MAX), np.empty(kv.M_MAX), np.empty(kv.M_MAX)
+    H, S = np.empty((kv.M_MAX, vm.NX)), np.empty((kv.M_MAX, kv.M_MAX))
+    nis, accepted = np.empty(kv.M_MAX), np.empty(kv.M_MAX, np.int64)
+    acc = np.empty(kv.M_MAX, np.int64)
+    work = np.empty((3, 6))
+    reject_since = -np.ones(cm.N_STREAMS, np.int64)
+    x, P = x0.copy(), P0.copy()
+    kv._record(t0, x, P, aux, out_t, out_x, out_P, out_aux, counts)
+    t_cur = t0
+    for k in range(stops.shape[0]):
+        t = int(stops[k, kv.VS_T])
+        for f in filters:
+            f.dt, f.u = (t - t_cur) * 1e-9, u.copy()
+        t_cur = t
+        if imm_on:
+            imm.predict()
+        else:
+            filters[0].predict()
+        vi = int(stops[k, kv.VS_VEH])
+        if vi >= 0:
+            u[:] = veh[vi]
+        if mode == kv.MODE_SWITCHED and vi >= 0:
+            filters[0].model = int(kv.switch_model(filters[0].model, u[kv.VH_V], cfg))
+        m, nb_, _ = kv.epoch_rows(stops[k], veh, fix, rows, blocks)
+        for f in filters:
+            f._lik = 1.0
+        if m > 0:
+            per: list[tuple[F64, F64, F64]] = []
+            for f in filters:
+                xf = np.ascontiguousarray(f.x, dtype=float)
+                kv.epoch_values(f.model, xf, rows, m, veh, fix, u, vp, cfg, z, r, nu, H)
+                per.append((nu.copy(), H.copy(), np.empty_like(S)))
+            g = 0 if not imm_on or imm.cbar[0] >= imm.cbar[1] else 1
+            for attempt in range(2):
+                for f, (_, H_f, S_f) in zip(filters, per, strict=True):
+                    kv.innovation_cov(np.ascontiguousarray(f.P), H_f, r, m, S_f)
+                cm.gate_blocks(per[g][0], per[g][2], blocks, nb_, gate, nis, accepted, work)
+                if attempt == 1:
+                    break
+                reset = cm.streams_to_reset(
+                    t, blocks, nb_, accepted, reject_since, cfg[kv.VC_TIMEOUT_S]
+                )
+                if reset.sum() == 0:
+                    break
+                for st in np.flatnonzero(reset):
+                    big = 0.0
+                    for f, (nu_f, _, _) in zip(filters, per, strict=True):
+                        Pf = np.ascontiguousarray(f.P, dtype=float)
+                        big = kv.reset_stream(Pf, int(st), nu_f, blocks, nb_)
+                        f.P = Pf
+                    cm.record_event(ev_i, ev_f, counts, t, cm.EV_RESET, int(st), -1, big)
+            cm.update_reject_since(t, blocks, nb_, accepted, reject_since)
+            nu_g, _, S_g = per[g]
+            cm.record_innovations(
+                t, nu_g, S_g, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts, ev_i, ev_f
+            )
+            ma = int(cm.accepted_rows(blocks, nb_, accepted, acc))
+            a = acc[:ma]
+            for f, (nu_f, H_f, S_f) in zip(filters, per, strict=True):
+                if ma == 0:
+                    continue
+                hx = z[a] - nu_f[a]
+                f.pending = (z[a].copy(), hx, H_f[a].copy(), np.diag(r[a]))
+                ll = kv.log_likelihood(nu_f, S_f, acc, ma)
+                f._lik = float(kv.likelihood(ll, cfg[kv.VC_LIK_FLOOR]))
+        if imm_on:
+            imm.update(None)
+            x, P = np.asarray(imm.x, dtype=float), np.asarray(imm.P, dtype=float)
+            aux = float(imm.mu[1])
+        else:
+            f = filters[0]
+            if f.pending is not None:
+                f.update()
+            x, P = np.asarray(f.x, dtype=float), np.asarray(f.P, dtype=float)
+            aux = float(f.model)
+        ok = True
+        for f in filters:
+            Pf = np.ascontiguousarray(f.P, dtype=float)
+            ok = bool(cm.keep_pd(Pf, vm.NX, L, t, ev_i, ev_f, counts)) and ok
+            f.P = Pf
+        if not imm_on:
+            P = np.asarray(filters[0].P, dtype=float)
+        status = int(kv.check(np.ascontiguousarray(x), np.ascontiguousarray(P), cfg)) if ok else 3
+        if status != cm.STATUS_OK:
+            return int(cm.fail(t, status, ev_i, ev_f, counts))
+        if stops[k, kv.VS_OUT] > 0:
+            kv._record(t, np.ascontiguousarray(x), np.ascontiguousarray(P), aux, out_t, out_x,
+                       out_P, out_aux, counts)  # fmt: skip
+        counts[cm.CNT_STOP] = k + 1
+    return cm.STATUS_OK

@@ -1,0 +1,105 @@
+"""Run one paper experiment over ingested tables; write JSON/CSV tables and figures.
+
+Experiments (pure functions in pipeline/experiments/):
+  vehicle_bands      paper 003: the four vehicle filters per speed band, nominal and with
+                     periodic GNSS outages, and the switched/IMM acceptance check
+                     (--tables: car_speed_ramp)
+  fwekf_convergence  paper 004: EKF against FWEKF from the same start, noisy and noise-free
+                     (--tables: fwekf_reference, --tables-noise-free: fwekf_reference_noise_free)
+  fwekf_faults       paper 004 on seoul_campus: nominal, F7 multipath burst, F8 optimistic
+                     accuracy, outages (--tables: seoul_campus_cw)
+  vehicle_smartloc   paper 003 on the real smartLoc drive: least-squares fixes from the
+                     pseudoranges, the four vehicle filters with and without outages
+                     (--tables: `navreplay ingest` of the smartLoc Input and GT files)
+
+examples:
+  navreplay experiment vehicle_bands --tables datasets/car_speed_ramp/tables \\
+      --out datasets/car_speed_ramp/experiments/vehicle_bands
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from pipeline.errors import ParamsError
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+    from ingest.meta import SensorMeta
+
+log = logging.getLogger(__name__)
+
+EXPERIMENTS = ("vehicle_bands", "fwekf_convergence", "fwekf_faults", "vehicle_smartloc")
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("name", choices=EXPERIMENTS, help="experiment")
+    parser.add_argument("--tables", type=Path, required=True, metavar="DIR", help="tables dir")
+    parser.add_argument(
+        "--tables-noise-free",
+        type=Path,
+        metavar="DIR",
+        help="fwekf_convergence: tables of the noise-free dataset",
+    )
+    parser.add_argument("--params", type=Path, default=Path("params.yaml"), help="parameters")
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output dir")
+
+
+def _read(tables_dir: Path) -> tuple[dict[str, pa.Table], SensorMeta]:
+    from ingest.meta import read_meta
+    from ingest.schema import TableName
+    from ingest.tables import read_table
+
+    tables: dict[str, pa.Table] = {}
+    for name in TableName:
+        path = tables_dir / f"{name.value}.parquet"
+        if path.is_file():
+            tables[name.value] = read_table(path, name).table
+    return tables, read_meta(tables_dir).sensors
+
+
+def run(args: argparse.Namespace) -> int:
+    from pipeline.experiments import fwekf_faults, fwekf_paper, vehicle_bands, vehicle_smartloc
+    from pipeline.experiments.outputs import write_rows
+    from pipeline.params import load_params
+
+    params = load_params(args.params)
+    out: Path = args.out
+    dpi = params.report.figure_dpi
+    tables, sensors = _read(args.tables)
+    if args.name == "vehicle_bands":
+        rows = vehicle_bands.band_table(tables, params.filters)
+        checks = vehicle_bands.acceptance([r for r in rows if r["subset"] == "all"])
+        write_rows(out, "bands", rows)
+        write_rows(out, "acceptance", checks, all_ok=all(c["ok"] for c in checks))
+        vehicle_bands.band_figure(rows, out / "bands.png", dpi)
+        print(f"vehicle_bands: {sum(c['ok'] for c in checks)}/{len(checks)} checks ok -> {out}")
+    elif args.name == "fwekf_convergence":
+        if args.tables_noise_free is None:
+            raise ParamsError("--tables-noise-free", "fwekf_convergence needs both datasets")
+        nf_tables, nf_sensors = _read(args.tables_noise_free)
+        rest = params.synth.fwekf_reference.alignment_s
+        cases, rows = {}, []
+        for case, tabs, sens in (("noisy", tables, sensors), ("noise_free", nf_tables, nf_sensors)):
+            for paper_r in (False, True):
+                runs = fwekf_paper.run_case(tabs, sens, params.filters, rest, paper_r=paper_r)
+                tuning = "paper_r" if paper_r else "declared"
+                rows += [dict(r, tuning=tuning) for r in fwekf_paper.convergence_rows(case, runs)]
+                if not paper_r:
+                    cases[case] = runs
+        write_rows(out, "convergence", rows)
+        fwekf_paper.convergence_figure(cases, out / "convergence.png", dpi)
+        print(f"fwekf_convergence: {len(rows)} rows -> {out}")
+    elif args.name == "vehicle_smartloc":
+        rows = vehicle_smartloc.smartloc_rows(tables, params.filters)
+        write_rows(out, "smartloc", rows)
+        print(f"vehicle_smartloc: {len(rows)} rows -> {out}")
+    else:
+        rows = fwekf_faults.fault_rows(tables, sensors, params.filters, params.synth.seed)
+        write_rows(out, "faults", rows)
+        print(f"fwekf_faults: {len(rows)} rows -> {out}")
+    return 0

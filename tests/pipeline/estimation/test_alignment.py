@@ -1,0 +1,73 @@
+"""Initialization and coarse alignment: heading from GNSS velocity, level from the accelerometer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow as pa
+
+from ingest.meta import SensorMeta
+from pipeline.estimation import inputs as inp
+from pipeline.estimation.alignment import align
+from pipeline.estimation.config import FiltersParams
+from pipeline.estimation.models import ins
+from pipeline.estimation.replay import run_filter
+from tests.pipeline.estimation.conftest import Tables, t0_ns, truth_state
+
+
+def aligned(
+    tables: Tables, sensors: SensorMeta, filters: FiltersParams, with_fixes: bool
+) -> tuple[np.ndarray, np.ndarray, str, float]:
+    p = filters.tc_ekf
+    imu = inp.prepare_imu(tables["imu"], p.step)
+    fixes = inp.prepare_fixes(tables["gnss"], p.gnss) if with_fixes else None
+    obs = inp.prepare_obs(tables["gnss_obs"], p.gnss)
+    assert sensors.imu_noise is not None
+    lever = np.array(sensors.lever_arm_m)
+    al = align(imu, imu.segments[0], fixes, obs, p.init, sensors.imu_noise, lever, ins.N_TIGHT)
+    assert al is not None
+    truth = tables["truth"]
+    k = int(np.searchsorted(truth.column("t_ns").to_numpy(), al.t_ns))
+    err = ins.difference(truth_state(truth, k), al.x0, ins.N_TIGHT)
+    return err, np.sqrt(np.diag(al.P0)), al.method, (al.t_ns - t0_ns(tables)) * 1e-9
+
+
+def test_alignment_from_fixes_is_within_its_initial_covariance(
+    filters: FiltersParams, drive60: tuple[Tables, SensorMeta]
+) -> None:
+    err, sig, method, t_s = aligned(*drive60, filters, with_fixes=True)
+    assert method == "gnss_velocity+static_gyro_bias"  # 10 s at rest before the start
+    assert 10.0 < t_s < 16.0  # the first fix at 2 m/s after moving off at 10 s
+    nav = slice(0, ins.E_BG + 3)
+    assert np.all(np.abs(err[nav]) <= 3.0 * sig[nav])
+    assert np.degrees(np.abs(err[ins.E_ATT : ins.E_ATT + 3])).max() < 2.0
+    # the static window estimates the gyro bias far better than its prior (5e-4 rad/s)
+    assert np.abs(err[ins.E_BG : ins.E_BG + 3]).max() < 1e-4
+
+
+def test_without_fixes_the_pseudoranges_give_position_velocity_and_clock(
+    filters: FiltersParams, drive60: tuple[Tables, SensorMeta]
+) -> None:
+    err, sig, _, _ = aligned(*drive60, filters, with_fixes=False)
+    assert np.all(np.abs(err) <= 3.0 * sig)
+    assert np.abs(err[ins.E_POS : ins.E_POS + 3]).max() < 10.0  # single-point solution
+    assert abs(err[ins.E_CB]) < 10.0  # clock bias from the pseudorange residuals
+    tables, sensors = drive60
+    r = run_filter(dict(tables, gnss=tables["gnss"].slice(0, 0)), sensors, "tc_ukf",
+                   filters.tc_ukf)  # fmt: skip
+    assert r.status == "ok"
+    assert r.t_ns.size > 500
+
+
+def test_a_vehicle_that_never_moves_is_not_aligned(
+    filters: FiltersParams, drive60: tuple[Tables, SensorMeta]
+) -> None:
+    tables, sensors = drive60
+    t0 = t0_ns(tables)
+
+    def first_9_s(t: pa.Table) -> pa.Table:
+        return t.filter(pa.array(t.column("t_ns").to_numpy() < t0 + 9_000_000_000))
+
+    still = {k: first_9_s(t) for k, t in tables.items()}
+    r = run_filter(still, sensors, "lc_ekf", filters.lc_ekf)
+    assert r.t_ns.size == 0
+    assert [e.kind for e in r.events] == ["no_alignment"]
