@@ -63,13 +63,18 @@ class IngestParams:
 @dataclass(frozen=True)
 class RunParams:
     """``run``: the run matrix of dvc.yaml (datasets x filters, each under every scenario of
-    ``scenarios``; the Monte Carlo and outage experiments cover the same datasets) and the
-    backend."""
+    ``scenarios``; the Monte Carlo and outage experiments cover the same datasets), the
+    backend, and the processes one ``navreplay run`` spreads its scenarios over."""
 
     backend: Literal["numba", "filterpy"]
     datasets: tuple[str, ...]
     filters: tuple[str, ...]
     scenarios: tuple[str, ...]
+    workers: int = 1
+
+    def __post_init__(self) -> None:
+        if self.workers < 1:
+            raise FieldError("workers", "must be >= 1")
 
 
 @dataclass(frozen=True)

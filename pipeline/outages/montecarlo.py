@@ -10,8 +10,9 @@ after it, instead of from the start of the log. The replay is the same ``run_fil
 errors before the checkpoint are the nominal run's, so the window metrics equal those of a
 full replay of that scenario (a test checks this to 1e-6 m) at a fraction of the cost.
 
-Starts are spread over ``workers`` processes (``concurrent.futures`` with the ``spawn``
-context; numba's cache on disk means each worker loads, not recompiles, the kernels).
+Starts are spread over ``workers`` processes (``concurrent.futures``; forked where the
+platform allows, so the workers share the loaded kernels and tables; spawned elsewhere, when
+numba's cache on disk means each worker loads, not recompiles, the kernels).
 """
 
 from __future__ import annotations
@@ -168,7 +169,10 @@ def replay_start(job: Job, start: Start) -> list[dict[str, Any]]:
         )
         t_run = time.perf_counter() - t_wall
         if job.track.reference == "truth":
-            after = truth_track(r, job.tables["truth"], job.track.origin)
+            # the truth around the replay only: interpolating the whole drive's truth for
+            # every replay cost more than replaying a loosely coupled filter
+            truth = _slice(job.tables["truth"], t_c - NS, hi + NS)
+            after = truth_track(r, truth, job.track.origin)
         else:
             after = fixes_track(r, job.tables["gnss"], job.lever_b, job.track.origin)
         track = _merge(job.track, after, t_c)
@@ -262,7 +266,11 @@ def run_montecarlo(
         for s in starts:
             rows += replay_start(job, s)
     else:
-        ctx = multiprocessing.get_context("spawn")
+        # fork shares the compiled kernels and the tables with the workers (copy on write);
+        # a spawned worker re-imports and re-loads every numba kernel, measured 4-8 s each,
+        # more than a default-size Monte Carlo of a loosely coupled filter takes
+        methods = multiprocessing.get_all_start_methods()
+        ctx = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
         with ProcessPoolExecutor(
             workers, mp_context=ctx, initializer=_init, initargs=(job,)
         ) as pool:

@@ -11,7 +11,9 @@ chosen, faults injected) goes into ``metrics.json`` and the Parquet provenance.
 from __future__ import annotations
 
 import logging
+import multiprocessing
 from collections.abc import Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,7 +26,7 @@ from pipeline.estimation.metrics import compute_metrics
 from pipeline.estimation.replay import Backend, RunResult, run_filter
 from pipeline.estimation.run import RunOutput, read_inputs
 from pipeline.scenarios.apply import AppliedScenario, apply_scenario
-from pipeline.scenarios.config import ScenariosParams
+from pipeline.scenarios.config import ScenariosParams, ScenarioSpec
 from pipeline.scenarios.criteria import check_fault
 
 log = logging.getLogger(__name__)
@@ -83,11 +85,14 @@ def run_scenarios(
     scenarios: ScenariosParams,
     names: Sequence[str],
     backend: Backend,
+    workers: int = 1,
 ) -> Iterator[tuple[str, RunOutput, AppliedScenario]]:
-    """Replay filter ``name`` under each scenario of ``names``, in order.
+    """Replay filter ``name`` under each scenario of ``names``; yields them in order.
 
-    The nominal run is made first when a fault scenario needs it for its checks (and yielded
-    only if ``names`` asks for it).
+    Scenarios that transform the tables alike (``sats_0`` and a complete outage of the same
+    windows) are replayed once. The replays run on ``workers`` processes (forked, so they
+    share the tables and compiled kernels) when there are several. The nominal run is made
+    when a fault scenario needs it for its checks (and yielded only if ``names`` asks).
 
     Raises:
         KeyError: a name is not in ``scenarios.named``.
@@ -95,21 +100,25 @@ def run_scenarios(
         DivergenceError: a run diverged and the filter's params say ``raise``.
     """
     specs = {s: scenarios.get(s) for s in names}
-    nominal: RunResult | None = None
-    needs_nominal = any(spec.faults for spec in specs.values())
-    order = list(names)
-    if needs_nominal and "nominal" in order:
-        order.remove("nominal")
-        order.insert(0, "nominal")
-    elif needs_nominal:
-        nominal = run_filter(inputs.tables, inputs.sensors, name, params, backend=backend)
-    for sname in order:
-        applied = apply_scenario(
-            inputs.tables, sname, specs[sname], mask_deg=scenarios.selection_mask_deg
-        )
-        result = run_filter(applied.tables, inputs.sensors, name, params, backend=backend)
-        if sname == "nominal":
-            nominal = result
+    if any(spec.faults for spec in specs.values()) and "nominal" not in specs:
+        specs = {"nominal": scenarios.get("nominal"), **specs}
+    first: dict[tuple[Any, ...], str] = {}
+    for sname, spec in specs.items():
+        first.setdefault(_transform_key(spec), sname)
+    job = _Job(inputs, name, params, scenarios, backend)
+    replays = list(first.values())
+    if workers > 1 and len(replays) > 1 and "fork" in multiprocessing.get_all_start_methods():
+        ctx = multiprocessing.get_context("fork")
+        n = min(workers, len(replays))
+        with ProcessPoolExecutor(n, mp_context=ctx, initializer=_init, initargs=(job,)) as pool:
+            results = list(pool.map(_replay, replays))
+    else:
+        results = [job.replay(s) for s in replays]
+    by_key = {_transform_key(specs[s]): r for s, r in zip(replays, results, strict=True)}
+    nominal = by_key.get(_transform_key(specs["nominal"])) if "nominal" in specs else None
+    for sname in names:
+        applied = job.apply(sname)
+        result = by_key[_transform_key(specs[sname])]
         metrics = scenario_metrics(inputs, applied, result, scenarios)
         if applied.injected:
             assert nominal is not None
@@ -120,3 +129,46 @@ def run_scenarios(
             metrics["fault_checks_passed"] = all(c.passed for c in checks)
         log.info("%s under %s: %s", name, sname, result.status)
         yield sname, RunOutput(result, metrics, inputs.sources), applied
+
+
+@dataclass(frozen=True)
+class _Job:
+    """One filter over one dataset's tables: applies a scenario and replays it."""
+
+    inputs: Inputs
+    name: str
+    params: InsFilterParams
+    scenarios: ScenariosParams
+    backend: Backend
+
+    def apply(self, scenario: str) -> AppliedScenario:
+        spec = self.scenarios.get(scenario)
+        mask = self.scenarios.selection_mask_deg
+        return apply_scenario(self.inputs.tables, scenario, spec, mask_deg=mask)
+
+    def replay(self, scenario: str) -> RunResult:
+        applied = self.apply(scenario)
+        p, i = self.params, self.inputs
+        return run_filter(applied.tables, i.sensors, self.name, p, backend=self.backend)
+
+
+def _transform_key(spec: ScenarioSpec) -> tuple[Any, ...]:
+    """What a scenario does to the tables (its description aside): keeping 0 satellites in
+    a window is a complete outage of it."""
+    sats = spec.satellites
+    if sats is not None and sats.keep == 0:
+        sats = None
+    return (spec.windows, sats, spec.faults)
+
+
+_JOB: _Job | None = None
+
+
+def _init(job: _Job) -> None:
+    global _JOB  # noqa: PLW0603 -- one job per (forked) worker process, set once by the pool
+    _JOB = job
+
+
+def _replay(scenario: str) -> RunResult:
+    assert _JOB is not None
+    return _JOB.replay(scenario)

@@ -108,7 +108,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     section = params.filters.get(args.filter)
     inputs = Inputs.read(args.tables)
-    runs = run_scenarios(inputs, args.filter, section, params.scenarios, names, backend)
+    runs = run_scenarios(
+        inputs, args.filter, section, params.scenarios, names, backend, params.run.workers
+    )
     if single:
         for name, out, applied in runs:
             write_run(args.out, out, section, name, applied.metadata()["windows"])

@@ -47,7 +47,7 @@ def montecarlo(name: str, cases: list[Case], workers: int = 1) -> list[dict[str,
     rows, _ = run_montecarlo(
         tables,
         sensors,
-        (0.6, 0.2, -1.2),
+        sensors.lever_arm_m,
         name,
         params().filters.get(name),
         [Start(1, 0, t0 + round(START_S * NS)), Start(1, 1, t0 + 90 * NS)],

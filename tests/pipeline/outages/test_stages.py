@@ -52,7 +52,7 @@ def params_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
             named[name] = dict(spec, windows=WINDOWS)
         for fault in spec.get("faults", []):
             fault["at_s"] = 40.0
-    data["run"]["scenarios"] = ["nominal", "outage_60s", "sats_3", "f11_nan_field"]
+    data["run"]["scenarios"] = ["nominal", "outage_60s", "sats_0", "sats_3", "f11_nan_field"]
     data["outages"] = dict(
         data["outages"],
         seeds=[1, 2],
@@ -81,6 +81,7 @@ def test_run_all_scenarios_writes_one_run_per_scenario_with_its_windows(
         "f11_nan_field",
         "nominal",
         "outage_60s",
+        "sats_0",
         "sats_3",
     ]
     text = capsys.readouterr().out
@@ -103,6 +104,40 @@ def test_run_all_scenarios_writes_one_run_per_scenario_with_its_windows(
     nominal = json.loads((out / "nominal" / "metrics.json").read_text())
     assert nominal["windows"] == []
     assert "outage_windows" not in nominal
+    # every field issue 6 lists
+    for key in RUN_FIELDS:
+        assert m[key] is not None, key
+    assert all(s["nis_mean"] > 0 for s in m["nis"].values())
+    assert set(m["nis"]) == {"gnss_obs"}
+    for w in m["outage_windows"]:
+        assert set(WINDOW_FIELDS) <= set(w)
+    # keeping no satellite is the complete outage: replayed once, measured the same
+    sats0 = json.loads((out / "sats_0" / "metrics.json").read_text())
+    complete = json.loads((out / "outage_60s" / "metrics.json").read_text())
+    assert sats0["outage_windows"] == complete["outage_windows"]
+    assert sats0["pos_err_3d_rms_m"] == complete["pos_err_3d_rms_m"]
+
+
+RUN_FIELDS = (
+    "pos_err_h_rms_m",
+    "pos_err_3d_rms_m",
+    "pos_err_3d_max_m",
+    "nees_mean",
+    "nis_mean",
+    "gate_rejections",
+    "runtime_s",
+    "realtime_factor",
+)
+WINDOW_FIELDS = (
+    "start_s",
+    "duration_s",
+    "sats",
+    "err_end_m",
+    "err_max_m",
+    "err_rms_m",
+    "drift_pct_distance",
+    "reconverge_s",
+)
 
 
 def test_one_scenario_writes_the_run_directory_itself(
