@@ -8,8 +8,10 @@ filter run) and returning what the summary needs.
 Which filters fit (``plan``): the INS/GNSS filters need an ``imu`` table; loosely coupled
 ones (``lc_*``) need ``gnss`` fixes, tightly coupled ones (``tc_*``) need ``gnss_obs`` with
 satellite positions. A filter that does not fit is skipped with the reason, never run on
-data it cannot use. Scenarios other than ``nominal`` need the scenario engine (issue 6);
-until it is there they are skipped with that reason.
+data it cannot use. Each filter replays under each scenario (``pipeline.outages.runs``: the
+scenario engine applies outage windows, k-satellite windows or faults to the tables first);
+a scenario the log cannot support (e.g. k satellites without raw observables) or a run that
+fails is skipped with its reason, and the others go on.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from ingest.api import IngestOptions, ingest
 from ingest.config import DatasetConfig
 from ingest.tables import params_hash
 from ingest.typed import to_plain
-from pipeline.errors import DivergenceError, PipelineError
+from pipeline.errors import DivergenceError, ParamsError, PipelineError
 from pipeline.estimation.config import FILTER_KINDS
 from pipeline.params import Params
 from pipeline.report.render import RenderedReport
@@ -107,13 +109,18 @@ def analyze(
     progress: Progress = lambda _: None,
 ) -> AnalysisResult:
     """Ingest, run and report one log (see the module docstring)."""
-    from pipeline.estimation.run import run_tables, write_run
+    from pipeline.estimation.run import write_run
+    from pipeline.outages.runs import Inputs, run_scenarios
     from pipeline.report.inputs import load_dataset
     from pipeline.report.render import render_dataset
 
     t_start = time.perf_counter()
     filters = list(filters or params.run.filters)
     scenarios = list(scenarios or params.run.scenarios)
+    unknown = [sc for sc in scenarios if sc not in params.scenarios.named]
+    if unknown:
+        known = ", ".join(params.scenarios.named)
+        raise ParamsError("scenarios.named", f"no scenario {unknown} (known: {known})")
     tables_dir = out_dir / "tables"
     progress(f"ingest {', '.join(str(p) for p in logs)}")
     options = IngestOptions(
@@ -127,24 +134,30 @@ def analyze(
     runnable, skipped = plan(tables_dir, filters)
     runs_dir = out_dir / "runs"
     todo = [(f, s) for f in runnable for s in scenarios]
+    inputs = Inputs.read(tables_dir) if todo else None
     for i, (f, sc) in enumerate(todo, start=1):
+        assert inputs is not None  # read above whenever there is something to run
         run_dir = runs_dir / f / sc
-        if sc != "nominal":
-            s = Skipped(f, sc, f"scenario {sc!r} needs the scenario engine (issue 6), not built")
-            skipped.append(s)
-            _write_skip(run_dir, s)
-            continue
         progress(f"run {i}/{len(todo)}: {f} under {sc}")
         t0 = time.perf_counter()
+        section = params.filters.get(f)
         try:
-            out = run_tables(tables_dir, f, params.filters.get(f), params.run.backend)
+            ((_, out, applied),) = run_scenarios(
+                inputs, f, section, params.scenarios, [sc], params.run.backend
+            )
         except (DivergenceError, PipelineError) as err:
             s = Skipped(f, sc, f"failed: {err}")
             skipped.append(s)
             _write_skip(run_dir, s)
-            progress(f"  {f}: {err}")
+            progress(f"  {f} under {sc}: {err}")
             continue
-        write_run(run_dir, out, params.filters.get(f), sc)
+        if params.scenarios.get(sc).windows is not None and not applied.outage_windows:
+            s = Skipped(f, sc, "none of the scenario's outage windows fits in this log")
+            skipped.append(s)
+            _write_skip(run_dir, s)
+            progress(f"  {f} under {sc}: {s.reason}")
+            continue
+        write_run(run_dir, out, section, sc, applied.metadata()["windows"])
         progress(f"  {f}: {_one_line(out.metrics)} ({time.perf_counter() - t0:.1f} s)")
     for s in skipped:
         if s.scenario == "*":

@@ -8,7 +8,7 @@ Unknown or misspelled keys, wrong types, duplicated keys and missing sections ar
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
@@ -18,6 +18,8 @@ from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
 from pipeline.estimation.config import FiltersParams
 from pipeline.experiments.tractor_cascaded.runs import TractorExperimentParams
+from pipeline.outages.config import OutagesParams
+from pipeline.scenarios.config import ScenariosParams
 from pipeline.synth.car import CarSpeedRampParams
 from pipeline.synth.fwekf import FwekfReferenceParams
 from pipeline.synth.seoul_params import SeoulCampusParams
@@ -60,47 +62,27 @@ class IngestParams:
 
 
 @dataclass(frozen=True)
-class RunGroup:
-    """One ``run.groups`` entry: datasets that share a filter set (a ``dvc.yaml`` matrix).
+class RunParams:
+    """``run``: the run matrix of dvc.yaml (datasets x filters, each under every scenario of
+    ``scenarios``; the Monte Carlo and outage experiments cover the same datasets), the
+    backend, and the processes one ``navreplay run`` spreads its scenarios over.
+    ``datasets`` may hold built-in and recorded datasets; ``filters`` and ``scenarios`` are
+    also the defaults of ``navreplay analyze``."""
 
-    ``dvc.yaml`` has one ``run_<group>`` stage per group, a matrix over
-    datasets x filters x scenarios, so that a filter runs only on data it can use (the INS
-    filters need an IMU; the tightly coupled ones raw observables with orbits).
-    """
-
+    backend: Literal["numba", "filterpy"]
     datasets: tuple[str, ...]
     filters: tuple[str, ...]
     scenarios: tuple[str, ...]
+    workers: int = 1
 
     def __post_init__(self) -> None:
-        for key in ("datasets", "filters", "scenarios"):
-            if not getattr(self, key):
-                raise FieldError(key, "must not be empty")
-
-
-@dataclass(frozen=True)
-class RunParams:
-    """``run``: which filters and scenarios the pipeline runs, and on which backend.
-
-    Attributes:
-        backend: ``numba`` or ``filterpy``.
-        filters, scenarios: the defaults of ``navreplay analyze``.
-        groups: what ``dvc repro`` runs, per group of datasets (``RunGroup``).
-    """
-
-    backend: Literal["numba", "filterpy"]
-    filters: tuple[str, ...]
-    scenarios: tuple[str, ...]
-    groups: dict[str, RunGroup] = field(default_factory=dict)
+        if self.workers < 1:
+            raise FieldError("workers", "must be >= 1")
 
 
 @dataclass(frozen=True)
 class ReportParams:
-    """``report``: rendering of the HTML reports.
-
-    Attributes:
-        figure_dpi: resolution of raster (PNG) figures; the report's own figures are SVG.
-    """
+    """``report``: rendering of the HTML reports."""
 
     figure_dpi: int
 
@@ -119,7 +101,9 @@ class ExperimentsParams:
 @dataclass(frozen=True)
 class Params:
     """The whole of ``params.yaml``; ``filters`` holds one section per filter
-    (``pipeline.estimation.config``). ``datasets`` are the built-in, synthesized datasets;
+    (``pipeline.estimation.config``), ``scenarios`` the named scenarios
+    (``pipeline.scenarios.config``) and ``outages`` the outage experiments
+    (``pipeline.outages.config``). ``datasets`` are the built-in, synthesized datasets;
     ``recorded`` the datasets whose logs the user put under ``datasets/<id>/raw/``."""
 
     datasets: tuple[str, ...]
@@ -129,9 +113,19 @@ class Params:
     report: ReportParams
     filters: FiltersParams
     experiments: ExperimentsParams
+    scenarios: ScenariosParams
+    outages: OutagesParams
     recorded: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
+        for i, ds in enumerate(self.run.datasets):
+            if ds not in self.datasets and ds not in self.recorded:
+                raise FieldError(
+                    f"run.datasets[{i}]", f"{ds!r} is in neither datasets nor recorded"
+                )
+        for i, name in enumerate(self.run.scenarios):
+            if name not in self.scenarios.named:
+                raise FieldError(f"run.scenarios[{i}]", f"{name!r} is not in scenarios.named")
         for i, ds in enumerate(self.datasets):
             if not _ID_RE.match(ds):
                 raise FieldError(
@@ -142,12 +136,6 @@ class Params:
         for i, ds in enumerate(self.recorded):
             if not _ID_RE.match(ds) or ds in self.datasets:
                 raise FieldError(f"recorded[{i}]", f"{ds!r}: a new dataset id (lowercase)")
-        for name, group in self.run.groups.items():
-            for ds in group.datasets:
-                if ds not in self.datasets and ds not in self.recorded:
-                    raise FieldError(
-                        f"run.groups.{name}.datasets", f"{ds!r} is in neither datasets nor recorded"
-                    )
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):

@@ -28,12 +28,6 @@ def test_summarize_stage_lists_every_dataset_report() -> None:
     assert all(f"reports/{d} " in stage["cmd"] for d in datasets)
 
 
-def test_a_run_group_per_params_group() -> None:
-    spec = yaml.safe_load((REPO / "dvc.yaml").read_text())
-    groups = load_params(REPO / "params.yaml").run.groups
-    assert {s for s in spec["stages"] if s.startswith("run_")} == {f"run_{g}" for g in groups}
-
-
 def _dvc(root: Path, *args: str) -> str:
     done = subprocess.run(
         [str(Path(shutil.which("dvc") or REPO / ".venv/bin/dvc")), *args],
@@ -76,18 +70,16 @@ def test_changing_one_filter_reruns_only_its_runs_and_then_the_reports(tmp_path:
     assert changed != params
     (tmp_path / "params.yaml").write_text(changed)
     status = yaml.safe_load(_dvc(tmp_path, "status", "--json"))
-    groups = load_params(REPO / "params.yaml").run.groups
-    expected = {
-        f"run_{g}@{d}-tc_ukf-{s}"
-        for g, grp in groups.items()
-        if "tc_ukf" in grp.filters
-        for d in grp.datasets
-        for s in grp.scenarios
-    }
+    prm = load_params(REPO / "params.yaml")
     # the ukf section is shared by tc_ukf and tc_ukf_nhc (a YAML anchor): both re-run
-    expected |= {e.replace("-tc_ukf-", "-tc_ukf_nhc-") for e in expected}
+    ukfs = [f for f in ("tc_ukf", "tc_ukf_nhc") if f in prm.run.filters]
+    expected = {f"run@{d}-{f}" for d in prm.run.datasets for f in ukfs}
+    expected |= {
+        f"montecarlo@{d}-{f}" for d in prm.run.datasets for f in ukfs if f in prm.outages.filters
+    }
     assert set(status) == expected
-    # downstream of them (stages whose deps hold their outputs): the two reports, the summary
+    # downstream of them (stages whose deps hold their outputs): the outage tables, the
+    # reports of those datasets, the summary
     with Repo(str(tmp_path)) as repo:
         graph = repo.index.graph  # an edge A -> B: stage A depends on stage B
         by_name = {st.addressing.split(":")[-1]: st for st in graph.nodes}
@@ -99,8 +91,10 @@ def test_changing_one_filter_reruns_only_its_runs_and_then_the_reports(tmp_path:
                 if name not in after:
                     after.add(name)
                     todo.append(st)
-    seoul = {d for g in groups.values() if "tc_ukf" in g.filters for d in g.datasets}
-    assert after == {f"report@{d}" for d in seoul} | {"summarize"}
+    datasets = set(prm.run.datasets)
+    assert after == {f"report@{d}" for d in datasets} | {f"outages@{d}" for d in datasets} | {
+        "summarize"
+    }
 
 
 def test_a_recorded_dataset_gets_ingest_run_and_report_stages(tmp_path: Path) -> None:
@@ -108,12 +102,12 @@ def test_a_recorded_dataset_gets_ingest_run_and_report_stages(tmp_path: Path) ->
     shutil.copy(REPO / "dvc.yaml", tmp_path)
     text = (REPO / "params.yaml").read_text()
     text = text.replace("recorded: []", "recorded: [my_rig]", 1)
-    text = text.replace("datasets: [seoul_campus_cw, seoul_campus_ccw]",
-                        "datasets: [seoul_campus_cw, seoul_campus_ccw, my_rig]", 1)  # fmt: skip
+    text = text.replace("  datasets: [seoul_campus_cw, seoul_campus_ccw]",
+                        "  datasets: [seoul_campus_cw, seoul_campus_ccw, my_rig]", 1)  # fmt: skip
     (tmp_path / "params.yaml").write_text(text)
     load_params(tmp_path / "params.yaml")  # still valid
     _dvc(tmp_path, "init", "-q")
     names = {line.split()[0] for line in _dvc(tmp_path, "stage", "list").splitlines()}
     assert {"ingest_recorded@my_rig", "report_recorded@my_rig"} <= names
-    assert "run_ins_raw_gnss@my_rig-tc_ukf-nominal" in names
+    assert "run@my_rig-tc_ukf" in names
     assert not any(n.startswith("synth@my_rig") for n in names)
