@@ -36,6 +36,10 @@ class FieldError(ValueError):
         self.reason = reason
         super().__init__(f"{field}: {reason}")
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # picklable (errors cross process-pool boundaries): rebuild from the fields
+        return (type(self), (self.field, self.reason))
+
 
 class KeyPathError(Exception):
     """A value at a dotted key path is wrong. Subclassed by each caller's error type.
@@ -52,6 +56,16 @@ class KeyPathError(Exception):
         self.source = source
         where = f"{source}: " if source else ""
         super().__init__(f"{where}{key_path or '<top level>'}: {reason}")
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # picklable (errors cross process-pool boundaries): rebuild from the fields
+        return (_rebuild_key_path_error, (type(self), self.key_path, self.reason, self.source))
+
+
+def _rebuild_key_path_error(
+    cls: type[KeyPathError], key_path: str, reason: str, source: str | None
+) -> KeyPathError:
+    return cls(key_path, reason, source=source)
 
 
 def load_dataclass(

@@ -29,7 +29,15 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "pipeline.stages.ingest",
         "convert logs (MCAP, ROS bags, tlog, DataFlash, ULog, RINEX, CSV) to tables",
     ),
-    "run": ("pipeline.stages.run", "replay a filter over canonical tables under a scenario"),
+    "run": ("pipeline.stages.run", "replay a filter over canonical tables under scenarios"),
+    "montecarlo": (
+        "pipeline.stages.montecarlo",
+        "replay one filter under outages drawn over the drive (Monte Carlo)",
+    ),
+    "outages": (
+        "pipeline.stages.outages",
+        "reduction per satellite count and drift vs outage length from the Monte Carlo",
+    ),
     "analyze": (
         "pipeline.stages.analyze",
         "one-off post-mission analysis of a log: ingest + filters + report",

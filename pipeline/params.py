@@ -18,6 +18,8 @@ from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
 from pipeline.estimation.config import FiltersParams
 from pipeline.experiments.tractor_cascaded.runs import TractorExperimentParams
+from pipeline.outages.config import OutagesParams
+from pipeline.scenarios.config import ScenariosParams
 from pipeline.synth.car import CarSpeedRampParams
 from pipeline.synth.fwekf import FwekfReferenceParams
 from pipeline.synth.seoul_params import SeoulCampusParams
@@ -61,11 +63,19 @@ class IngestParams:
 
 @dataclass(frozen=True)
 class RunParams:
-    """``run``: which filters and scenarios the pipeline runs, and on which backend."""
+    """``run``: the run matrix of dvc.yaml (datasets x filters, each under every scenario of
+    ``scenarios``; the Monte Carlo and outage experiments cover the same datasets), the
+    backend, and the processes one ``navreplay run`` spreads its scenarios over."""
 
     backend: Literal["numba", "filterpy"]
+    datasets: tuple[str, ...]
     filters: tuple[str, ...]
     scenarios: tuple[str, ...]
+    workers: int = 1
+
+    def __post_init__(self) -> None:
+        if self.workers < 1:
+            raise FieldError("workers", "must be >= 1")
 
 
 @dataclass(frozen=True)
@@ -89,7 +99,9 @@ class ExperimentsParams:
 @dataclass(frozen=True)
 class Params:
     """The whole of ``params.yaml``; ``filters`` holds one section per filter
-    (``pipeline.estimation.config``)."""
+    (``pipeline.estimation.config``), ``scenarios`` the named scenarios
+    (``pipeline.scenarios.config``) and ``outages`` the outage experiments
+    (``pipeline.outages.config``)."""
 
     datasets: tuple[str, ...]
     synth: SynthParams
@@ -98,8 +110,16 @@ class Params:
     report: ReportParams
     filters: FiltersParams
     experiments: ExperimentsParams
+    scenarios: ScenariosParams
+    outages: OutagesParams
 
     def __post_init__(self) -> None:
+        for i, ds in enumerate(self.run.datasets):
+            if ds not in self.datasets:
+                raise FieldError(f"run.datasets[{i}]", f"{ds!r} is not in datasets")
+        for i, name in enumerate(self.run.scenarios):
+            if name not in self.scenarios.named:
+                raise FieldError(f"run.scenarios[{i}]", f"{name!r} is not in scenarios.named")
         for i, ds in enumerate(self.datasets):
             if not _ID_RE.match(ds):
                 raise FieldError(

@@ -10,11 +10,13 @@ attitude error (the nav-frame rotation vector of ``C_true C_est^T``). Consistenc
   over K updates (``K * mean ~ chi2(sum of the block dimensions)``, bad-inputs.md), and the
   fraction of blocks rejected by the gate.
 
-Issue 6 adds the outage-window metrics to the same file.
+Outage windows (``outage_metrics``): with ``windows``, ``outage_windows`` lists the drift
+metrics of each window, against the truth or, without one, against the withheld fixes.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -24,9 +26,12 @@ from scipy.stats import chi2
 
 from pipeline.estimation.models import ins
 from pipeline.estimation.models import measurement as me
+from pipeline.estimation.outage_metrics import outage_windows
 from pipeline.estimation.outputs import BIAS_COLUMNS, CLOCK_COLUMNS
 from pipeline.estimation.replay import RunResult
 from pipeline.nav.earth import E2, F64, A
+from pipeline.scenarios.config import WindowMetricsParams
+from pipeline.scenarios.windows import Window
 
 _NAV_TRUTH = ("lat_deg", "lon_deg", "alt_m", "vel_n_mps", "vel_e_mps", "vel_d_mps")
 _ANGLES = ("roll_rad", "pitch_rad", "yaw_rad")
@@ -128,8 +133,21 @@ def nis_summary(result: RunResult) -> dict[str, dict[str, Any]]:
     return out
 
 
-def compute_metrics(result: RunResult, truth: pa.Table | None) -> dict[str, Any]:
-    """The metrics of one run (see the module docstring); error metrics need ``truth``."""
+def compute_metrics(
+    result: RunResult,
+    truth: pa.Table | None,
+    *,
+    windows: Sequence[Window] = (),
+    t0_ns: int = 0,
+    window_params: WindowMetricsParams | None = None,
+    fixes: pa.Table | None = None,
+    lever_b: Sequence[float] = (0.0, 0.0, 0.0),
+) -> dict[str, Any]:
+    """The metrics of one run (see the module docstring); error metrics need ``truth``.
+
+    ``windows`` (from ``t0_ns``) add ``outage_windows``; ``fixes`` (the unmodified GNSS fixes)
+    are their reference when there is no truth, with the antenna ``lever_b``.
+    """
     kinds: dict[str, int] = {}
     for e in result.events:
         kinds[e.kind] = kinds.get(e.kind, 0) + 1
@@ -152,6 +170,9 @@ def compute_metrics(result: RunResult, truth: pa.Table | None) -> dict[str, Any]
         "events": kinds,
         "alignment": [a.summary() for a in result.alignments],
     }
+    if windows:
+        params = window_params or WindowMetricsParams()
+        m["outage_windows"] = outage_windows(result, truth, fixes, lever_b, windows, t0_ns, params)
     if truth is None or truth.num_rows == 0 or result.t_ns.size == 0:
         m["truth"] = False
         return m

@@ -8,6 +8,7 @@ the result and metrics; ``write_run`` writes the run directory atomically
 
 from __future__ import annotations
 
+import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,15 +67,23 @@ def run_tables(tables_dir: Path, name: str, params: InsFilterParams, backend: Ba
     return RunOutput(result, metrics, (*sources, tables_dir / META_NAME))
 
 
-def write_run(out_dir: Path, run: RunOutput, params: InsFilterParams, scenario: str) -> None:
-    """Write the run directory atomically (all files appear together, or none)."""
+def write_run(
+    out_dir: Path,
+    run: RunOutput,
+    params: InsFilterParams,
+    scenario: str,
+    windows: list[dict[str, Any]] | None = None,
+) -> None:
+    """Write the run directory atomically (all files appear together, or none).
+
+    ``windows`` (the scenario's outage and fault windows) also go into the Parquet
+    provenance, as JSON under ``extra["scenario_windows"]``.
+    """
     plain = to_plain(params)
-    prov = Provenance.create(
-        TableName.ESTIMATOR,
-        sources=run.sources,
-        params=plain,
-        extra={"filter": run.result.filter, "scenario": scenario, "backend": run.result.backend},
-    )
+    extra = {"filter": run.result.filter, "scenario": scenario, "backend": run.result.backend}
+    if windows is not None:
+        extra["scenario_windows"] = json.dumps(windows, sort_keys=True)
+    prov = Provenance.create(TableName.ESTIMATOR, sources=run.sources, params=plain, extra=extra)
     meta = {b"navreplay": prov.to_json().encode()}
     metrics = dict(run.metrics, scenario=scenario, params_hash=prov.params_hash)
     with atomic_directory(out_dir) as tmp:

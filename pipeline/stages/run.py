@@ -1,14 +1,23 @@
-"""Replay one filter over a dataset's canonical tables under one scenario.
+"""Replay one filter over a dataset's canonical tables under one or more scenarios.
 
-Reads TABLES_DIR/{imu,gnss,gnss_obs,truth}.parquet and meta.json (IMU noise, lever arm).
-Writes DIR atomically: estimate.parquet (the navigation solution under the truth table's
-column names, with a sigma column for each), innovations.parquet (NIS per update),
-events.parquet (gate rejections, resets, skipped inputs) and metrics.json. A diverging
-filter exits with status 2 and writes nothing, unless its params say on_divergence: flag.
+Reads TABLES_DIR/{imu,gnss,gnss_obs,truth}.parquet and meta.json (IMU noise, lever arm),
+applies each scenario of params.yaml `scenarios.named` to the tables (outage windows, k
+satellites kept, faults) and replays the filter. Writes a run directory atomically:
+estimate.parquet (the navigation solution under the truth table's column names, with a sigma
+column for each), innovations.parquet (NIS per update), events.parquet (gate rejections,
+resets, skipped inputs) and metrics.json (accuracy, consistency, cost; per outage window the
+drift metrics; the scenario and its windows under `windows`; for fault scenarios the
+catalogue's pass criteria under `fault_checks`). A diverging filter exits with status 2 and
+writes nothing, unless its params say on_divergence: flag.
+
+With one --scenario, DIR is the run directory. With several, or `--scenario all` (the
+scenarios of params.yaml `run.scenarios`), DIR holds one run directory per scenario,
+DIR/<scenario>/, and appears as a whole or not at all.
 
 examples:
   navreplay run datasets/seoul_campus_cw/tables --filter tc_ukf_nhc --out runs/tc_ukf_nhc
   navreplay run TABLES --filter lc_ekf --scenario outage_60s --out runs/lc_ekf-outage
+  navreplay run TABLES --filter tc_ukf --scenario all --out datasets/seoul_campus_cw/runs/tc_ukf
 """
 
 from __future__ import annotations
@@ -16,6 +25,7 @@ from __future__ import annotations
 import argparse
 import logging
 from pathlib import Path
+from typing import Any
 
 from pipeline.errors import NotBuiltError, ParamsError
 
@@ -38,9 +48,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--scenario",
-        default="nominal",
+        action="append",
         metavar="NAME",
-        help="scenario name from params.yaml (default: nominal)",
+        help="scenario name from params.yaml scenarios.named (default: nominal); repeat for "
+        "several, or `all` for those of run.scenarios (DIR then holds one folder per scenario)",
     )
     parser.add_argument(
         "--params",
@@ -59,26 +70,68 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ingest.atomic import atomic_directory
+    from pipeline.estimation.config import FILTER_KINDS
     from pipeline.estimation.families import runner
+    from pipeline.estimation.run import write_run
+    from pipeline.outages.runs import Inputs, run_scenarios
     from pipeline.params import load_params
 
     params = load_params(args.params)
     try:
-        run_filter = runner(args.filter)
+        run_family = runner(args.filter)
     except KeyError as err:
         raise ParamsError(
             f"filters.{args.filter}", str(err.args[0]), source=str(args.params)
         ) from err
-    if args.scenario != "nominal":
-        raise NotBuiltError(
-            f"scenario {args.scenario!r}: only 'nominal' exists until the scenario engine "
-            "arrives (issue 'Outage and satellite-count experiments'); nothing was written"
-        )
+    asked: list[str] = args.scenario or ["nominal"]
+    names = list(params.run.scenarios) if asked == ["all"] else asked
+    for name in names:
+        if name not in params.scenarios.named:
+            known = ", ".join(params.scenarios.named)
+            raise ParamsError(
+                "scenarios.named",
+                f"no scenario {name!r} (known: {known}, all)",
+                source=str(args.params),
+            )
+    single = len(asked) == 1 and asked != ["all"]
     backend = args.backend or params.run.backend
-    m = run_filter(args.tables, args.filter, params.filters, backend, args.out, args.scenario)
-    summary = f"{args.filter} ({backend}): {m['status']}, {m['epochs']} epochs"
-    if m.get("truth"):
-        summary += f", horizontal RMS {m['pos_err_h_rms_m']:.2f} m"
-    summary += f", {m['realtime_factor']:.0f}x real time -> {args.out}"
-    print(summary)
+    if args.filter not in FILTER_KINDS:
+        # the vehicle-model filters (paper 003) replay the tables as they are
+        if names != ["nominal"]:
+            raise NotBuiltError(
+                f"scenario {names!r} for {args.filter}: the scenario engine drives the "
+                "INS/GNSS filters; vehicle-model filters run the nominal scenario only"
+            )
+        m = run_family(args.tables, args.filter, params.filters, backend, args.out, "nominal")
+        _summary(args.filter, backend, "nominal", m, args.out)
+        return 0
+    section = params.filters.get(args.filter)
+    inputs = Inputs.read(args.tables)
+    runs = run_scenarios(
+        inputs, args.filter, section, params.scenarios, names, backend, params.run.workers
+    )
+    if single:
+        for name, out, applied in runs:
+            write_run(args.out, out, section, name, applied.metadata()["windows"])
+            _summary(args.filter, backend, name, out.metrics, args.out)
+        return 0
+    with atomic_directory(args.out) as tmp:
+        for name, out, applied in runs:
+            write_run(tmp / name, out, section, name, applied.metadata()["windows"])
+            _summary(args.filter, backend, name, out.metrics, args.out / name)
     return 0
+
+
+def _summary(filt: str, backend: str, scenario: str, m: dict[str, Any], out: Path) -> None:
+    text = f"{filt} ({backend}) {scenario}: {m['status']}, {m['epochs']} epochs"
+    if m.get("truth"):
+        text += f", horizontal RMS {m['pos_err_h_rms_m']:.2f} m"
+    wins = [w for w in m.get("outage_windows", []) if w["err_end_m"] is not None]
+    if wins:
+        mean_end = sum(w["err_end_m"] for w in wins) / len(wins)
+        text += f", {len(wins)} outage windows ending at {mean_end:.1f} m on average"
+    if "fault_checks_passed" in m:
+        text += f", fault criteria {'passed' if m['fault_checks_passed'] else 'FAILED'}"
+    text += f", {m['realtime_factor']:.0f}x real time -> {out}"
+    print(text)

@@ -133,9 +133,10 @@ def test_unknown_filter_and_scenario_are_refused(
     out = tmp_path / "run"
     assert main(["run", str(tables_dir), "--filter", "lc_ukf", "--out", str(out)]) == 2
     assert "filters.lc_ukf" in capsys.readouterr().err
-    rc = main(["run", str(tables_dir), "--filter", "lc_ekf", "--scenario", "outage_60s",
+    rc = main(["run", str(tables_dir), "--filter", "lc_ekf", "--scenario", "no_such_scenario",
                "--out", str(out)])  # fmt: skip
-    assert rc == 3
+    assert rc == 2
+    assert "no_such_scenario" in capsys.readouterr().err
     assert not out.exists()
 
 

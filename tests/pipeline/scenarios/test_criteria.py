@@ -1,0 +1,95 @@
+"""Each fault scenario's behaviour against the catalogue's pass criteria (bad-inputs.md).
+
+The drives are the seoul_campus synthesizer's (10 s at rest, then driving; fix errors
+correlated over 30 s as params.yaml sets them); every fault comes after the filters have
+converged on the move (heading and biases), as the catalogue's criteria assume. The faults are
+injected by the scenario engine and judged by ``scenarios.criteria``, the same code that
+writes ``fault_checks`` into metrics.json.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from pipeline.estimation.config import FILTER_KINDS
+from pipeline.estimation.replay import RunResult, run_filter
+from pipeline.scenarios.apply import apply_scenario
+from pipeline.scenarios.config import FaultSpec, ScenarioSpec
+from pipeline.scenarios.criteria import Check, check_fault
+from tests.pipeline.scenarios.drives import drive, params
+
+# fault -> (drive length s, fault time s): long enough for the fault and its aftermath
+CASES = {
+    "F1": (60.0, 30.0),
+    "F2": (90.0, 25.0),
+    "F4": (480.0, 120.0),  # the catalogue's 300 s outage
+    "F5": (150.0, 60.0),
+    "F7": (90.0, 20.0),
+    "F9": (90.0, 60.0),
+    "F11": (60.0, 30.0),
+    "F12": (60.0, 30.0),
+}
+FILTERS = ("lc_ekf", "tc_ekf", "tc_ukf")
+
+_nominal: dict[tuple[str, float], RunResult] = {}
+
+
+def checks(kind: str, name: str) -> list[Check]:
+    duration, at = CASES[kind]
+    tables, sensors = drive(duration)
+    p = params().filters.get(name)
+    if (name, duration) not in _nominal:
+        _nominal[name, duration] = run_filter(tables, sensors, name, p)
+    applied = apply_scenario(tables, kind, ScenarioSpec(faults=(FaultSpec(kind, at),)))  # type: ignore[arg-type]
+    r = run_filter(applied.tables, sensors, name, p)
+    assert r.status == "ok"
+    out = check_fault(applied, r, _nominal[name, duration], tables["truth"], p.gating.timeout_s)
+    assert out, "no criterion was checked"
+    return out
+
+
+def failed(out: list[Check]) -> list[str]:
+    return [f"{c.criterion}: {c.value} (needs {c.threshold})" for c in out if not c.passed]
+
+
+@pytest.mark.parametrize("name", FILTERS)
+@pytest.mark.parametrize("kind", ["F1", "F4", "F5", "F9", "F11", "F12"])
+def test_fault_meets_the_catalogue_criteria(kind: str, name: str) -> None:
+    assert failed(checks(kind, name)) == []
+
+
+def test_f2_step_is_followed_after_exactly_one_reset_by_loose_coupling() -> None:
+    out = checks("F2", "lc_ekf")
+    assert failed(out) == []
+    assert {c.criterion for c in out} >= {"resets", "reset delay, s"}
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="estimation core: a gnss_obs epoch counts as accepted when any one satellite passes "
+    "the gate (kernels/common.py streams_to_reset), so under a consistent 100 m step the "
+    "satellites whose line of sight is nearly perpendicular to it keep the timeout from "
+    "firing: no reset, and the filter creeps to the new position over more than 60 s",
+)
+@pytest.mark.parametrize("name", ["tc_ekf", "tc_ukf"])
+def test_f2_step_is_followed_after_exactly_one_reset_by_tight_coupling(name: str) -> None:
+    assert failed(checks("F2", name)) == []
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_f7_rejects_the_outliers_larger_than_the_gate(name: str) -> None:
+    """Every filter rejects the outliers whose error alone exceeds its gate, within 20 %, and
+    stays within 3 sigma. That is fewer than the catalogue's injected fraction: on 0.8-2 m
+    pseudoranges about a third of N(0, 20 m) errors are smaller than the 99.99 % gate, and
+    loose coupling inflates the fix variance for 30 s error correlation (1 + 2 tau / dt: a
+    1.5 m fix becomes ~12 m), inside which most 20 m outliers are consistent with the fix.
+    No filter rejects more than the injected fraction."""
+    out = {c.criterion: c for c in checks("F7", name)}
+    gate = out["rejected fraction vs outliers beyond the gate"]
+    assert gate.passed, gate
+    assert out["position inside 3 sigma"].passed
+    raw = out["rejected fraction in the burst"]
+    assert raw.value is not None
+    assert raw.value <= 1.2 * 0.1
+    if FILTER_KINDS[name].coupling == "tight":
+        assert raw.value > 0.5 * 0.1
