@@ -12,8 +12,14 @@ pure-Python reference a filterpy user would write. Cold start: ``navreplay run``
 subprocess with an empty numba cache, then again with the cache it left. Finally the
 accuracy cost of the speed choices on the 900 s seoul_campus drive.
 
+Every figure is CPU seconds (user + system) unless labelled wall: the benchmark machine is
+shared, and CPU time is what a loaded machine does not inflate much.
+
 Targets (issue 5): tc_ukf <= 5 s, lc_ekf and tc_ekf <= 1.5 s per hour; >= 300x filterpy for
-the UKF; a cold first run compiles in <= 20 s.
+the UKF (read here as against filterpy with the interpreted model: what a filterpy user
+writes; the ratio against filterpy driving our compiled model functions is printed too, and
+is much smaller, because then filterpy's own Python and numpy overhead is all that is left);
+a cold first run compiles in <= 20 s.
 """
 
 from __future__ import annotations
@@ -35,6 +41,9 @@ from benchmarks._table import print_table
 
 FILTERS = ("lc_ekf", "tc_ekf", "tc_ukf", "tc_ukf_10")
 TARGET_S = {"lc_ekf": 1.5, "tc_ekf": 1.5, "tc_ukf": 5.0, "tc_ukf_10": None}
+TARGET_RATIO = {"tc_ukf": 300.0}  # against filterpy + interpreted model
+COLD_FILTERS = ("lc_ekf", "tc_ekf", "tc_ukf")
+COLD_BUDGET_S = 20.0
 MASK_DEG = 5.0
 
 
@@ -122,24 +131,30 @@ def _run(tables: dict[str, Any], sensors: Any, name: str, backend: str) -> tuple
 
 
 def _python_reference(tables_dir: Path, name: str) -> float:
-    """filterpy with every model function interpreted (fresh process, NUMBA_DISABLE_JIT=1)."""
+    """CPU s per hour of filterpy with every model function interpreted (fresh process,
+    ``NUMBA_DISABLE_JIT=1``), timed around the replay inside that process."""
     code = (
-        "import json; from pathlib import Path\n"
+        "import json, resource; from pathlib import Path\n"
         "from benchmarks.bench_estimation import _params\n"
         "from pipeline.estimation.run import run_tables\n"
+        "def cpu():\n"
+        "    r = resource.getrusage(resource.RUSAGE_SELF)\n"
+        "    return r.ru_utime + r.ru_stime\n"
+        "c = cpu()\n"
         f"r = run_tables(Path({str(tables_dir)!r}), {name!r}, _params({name!r}), 'filterpy')\n"
-        "print(json.dumps([r.result.runtime_s, r.result.duration_s]))\n"
+        "print(json.dumps([cpu() - c, r.result.duration_s]))\n"
     )
     env = dict(os.environ, NUMBA_DISABLE_JIT="1")
     done = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
     )
-    runtime_s, duration_s = json.loads(done.stdout.strip().splitlines()[-1])
-    return float(runtime_s) * 3600.0 / float(duration_s)
+    cpu_s, duration_s = json.loads(done.stdout.strip().splitlines()[-1])
+    return float(cpu_s) * 3600.0 / float(duration_s)
 
 
-def _cold(tables_dir: Path, name: str, tmp: Path) -> tuple[float, float, float]:
-    """(cold wall, cold cpu, warm wall) of ``navreplay run`` with an empty numba cache."""
+def _cold(tables_dir: Path, name: str, tmp: Path) -> tuple[float, float, float, float]:
+    """(cold cpu, cold wall, warm cpu, warm wall) of ``navreplay run`` in a fresh process,
+    first with an empty numba cache, then with the cache the first run left."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp / f"cache-{name}"))
     cmd = [sys.executable, "-m", "pipeline.cli", "-q", "run", str(tables_dir), "--filter", name]
     out: list[float] = []
@@ -148,8 +163,8 @@ def _cold(tables_dir: Path, name: str, tmp: Path) -> tuple[float, float, float]:
         wall = time.perf_counter()
         subprocess.run([*cmd, "--out", str(tmp / f"run-{name}-{k}")], env=env, check=True,
                        capture_output=True)  # fmt: skip
-        out += [time.perf_counter() - wall, _children_cpu() - cpu]
-    return out[0], out[1], out[2]
+        out += [_children_cpu() - cpu, time.perf_counter() - wall]
+    return out[0], out[1], out[2], out[3]
 
 
 def run(options: argparse.Namespace) -> None:
@@ -168,30 +183,46 @@ def run(options: argparse.Namespace) -> None:
         py_s = options.estimation_python_s
         py_dir = _write_tables(_slice(tables, py_s), sensors, tmp / "py")
         for name in FILTERS:
-            wall, cpu, res = _run(tables, sensors, name, "numba")
-            per_h = 3600.0 / res.duration_s
-            fw, _, fres = _run(_slice(tables, fp_s), sensors, name, "filterpy")
-            fp_h = fw * 3600.0 / fres.duration_s
-            py_h = _python_reference(py_dir, "tc_ukf" if name == "tc_ukf_10" else name)
-            if name == "tc_ukf_10":
-                py_h = float("nan")  # the interpreted 10-substep UKF would take hours
+            _, cpu, res = _run(tables, sensors, name, "numba")
+            cpu_h = cpu * 3600.0 / res.duration_s
+            _, fcpu, fres = _run(_slice(tables, fp_s), sensors, name, "filterpy")
+            fp_h = fcpu * 3600.0 / fres.duration_s
+            py_h = float("nan")  # the interpreted 10-substep UKF would take hours
+            if name != "tc_ukf_10":
+                py_h = _python_reference(py_dir, name)
             target = TARGET_S[name]
             rows.append([
-                name, wall * per_h, cpu * per_h, "-" if target is None else target,
-                fp_h, fp_h / (wall * per_h), py_h, py_h / (wall * per_h),
+                name, cpu_h, "-" if target is None else target, fp_h, fp_h / cpu_h,
+                py_h, py_h / cpu_h, TARGET_RATIO.get(name, "-"),
             ])  # fmt: skip
-        print(f"   per hour of data; filterpy timed on {fp_s:g} s, interpreted on {py_s:g} s,")
-        print("   both scaled to one hour; tc_ukf_10 = the paper's 10 RK4 substeps")
+        print(f"   CPU s per hour of data. numba: the compiled replay over all {hours:g} h.")
+        print("   ratio A = filterpy driving our COMPILED model functions / numba: what the")
+        print("             compiled loop itself buys over filterpy's Python loop;")
+        print("   ratio B = filterpy with the INTERPRETED model (NUMBA_DISABLE_JIT) / numba: a")
+        print("             filterpy user's pure-Python filter; the issue's >= 300x target for")
+        print("             the UKF is read as this one (target B).")
+        print(f"   filterpy timed on {fp_s:g} s (A) and {py_s:g} s (B) of the data, scaled to one")
+        print("   hour; tc_ukf_10 = the paper's 10 RK4 substeps")
         print_table(
-            ["filter", "numba s/h", "cpu s/h", "target", "filterpy s/h", "ratio",
-             "python s/h", "ratio"],
+            ["filter", "numba s/h", "target", "fp+compiled s/h", "ratio A",
+             "fp+python s/h", "ratio B", "target B"],
             rows,
         )  # fmt: skip
         if not options.estimation_no_cold:
             small = _write_tables(warm, sensors, tmp / "cold")
-            cold_rows = [[n, *_cold(small, n, tmp)] for n in ("lc_ekf", "tc_ukf")]
-            print("   navreplay run on 90 s of data with an empty numba cache, then again")
-            print_table(["filter", "cold wall s", "cold cpu s", "warm wall s"], cold_rows)
+            cold_rows = []
+            for n in COLD_FILTERS:
+                c_cpu, c_wall, w_cpu, w_wall = _cold(small, n, tmp)
+                cold_rows.append([n, c_cpu, c_wall, w_cpu, w_wall, c_cpu - w_cpu,
+                                  c_wall - w_wall, COLD_BUDGET_S])  # fmt: skip
+            print("   navreplay run (fresh process) on 90 s of data: first with an empty numba")
+            print("   cache, then with the cache it left; compile = cold - warm (imports, data and")
+            print(f"   the replay itself cancel), against the issue's {COLD_BUDGET_S:g} s budget")
+            print_table(
+                ["filter", "cold cpu s", "cold wall s", "warm cpu s", "warm wall s",
+                 "compile cpu s", "compile wall s", "budget s"],
+                cold_rows,
+            )  # fmt: skip
         _accuracy_cost()
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -178,58 +178,67 @@ def nav_derivative(x: F64, f_b: F64, w_ib_b: F64) -> F64:
 
 @nb.njit(cache=True, error_model="numpy")
 def propagate_into(
-    x: F64, f0: F64, w0: F64, f1: F64, w1: F64, dt: float, substeps: int, out: F64, work: F64
+    x: F64, f0: F64, w0: F64, f1: F64, w1: F64, dt: float, substeps: int, out: F64
 ) -> None:
     """Allocation-free ``propagate``: writes the result into ``out`` (may alias ``x``).
 
-    ``work`` is scratch space of shape (5, 10).
+    The state lives in scalars (registers) through the RK4 stages instead of scratch rows:
+    the same operations in the same order as the array form (bitwise the same result), a
+    third less time per derivative evaluation.
     """
     h = dt / substeps
-    y, kk, pt, acc = work[0], work[1], work[2], work[3]
-    for j in range(NAV_DIM):
-        y[j] = x[j]
-    df = (f1[0] - f0[0], f1[1] - f0[1], f1[2] - f0[2])
-    dw = (w1[0] - w0[0], w1[1] - w0[1], w1[2] - w0[2])
+    y0, y1, y2, y3, y4 = x[0], x[1], x[2], x[3], x[4]
+    y5, y6, y7, y8, y9 = x[5], x[6], x[7], x[8], x[9]
+    df0, df1, df2 = f1[0] - f0[0], f1[1] - f0[1], f1[2] - f0[2]
+    dw0, dw1, dw2 = w1[0] - w0[0], w1[1] - w0[1], w1[2] - w0[2]
     lr = x[I_LAT]
     sr, cr = math.sin(lr), math.cos(lr)
     for k in range(substeps):
-        for j in range(NAV_DIM):
-            acc[j] = 0.0
+        s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = s8 = s9 = 0.0
+        k0 = k1 = k2 = k3 = k4 = k5 = k6 = k7 = k8 = k9 = 0.0
         # the four RK4 stages in one loop: one inlined copy of the derivative, not four
         for st in range(4):
             if st == 0:
                 a = k / substeps
-                for j in range(NAV_DIM):
-                    pt[j] = y[j]
+                p0, p2, p3, p4, p5 = y0, y2, y3, y4, y5
+                p6, p7, p8, p9 = y6, y7, y8, y9
             else:
                 a = (k + 0.5) / substeps if st < 3 else (k + 1.0) / substeps
                 c = 0.5 * h if st < 3 else h
-                for j in range(NAV_DIM):
-                    pt[j] = y[j] + c * kk[j]
-            _derivative_into(
-                pt,
-                f0[0] + a * df[0],
-                f0[1] + a * df[1],
-                f0[2] + a * df[2],
-                w0[0] + a * dw[0],
-                w0[1] + a * dw[1],
-                w0[2] + a * dw[2],
-                kk,
-                lr,
-                sr,
-                cr,
-            )
+                p0, p2, p3, p4, p5 = y0 + c * k0, y2 + c * k2, y3 + c * k3, y4 + c * k4, y5 + c * k5
+                p6, p7, p8, p9 = y6 + c * k6, y7 + c * k7, y8 + c * k8, y9 + c * k9
+            if abs(p0 - lr) < 1e-3:  # as _derivative_into
+                sl, cl = _sincos_near(p0, lr, sr, cr)
+            else:
+                sl, cl = math.sin(p0), math.cos(p0)
+            k0, k1, k2, k3, k4, k5, k6, k7, k8, k9 = _rates(
+                p2, p3, p4, p5, p6, p7, p8, p9, sl, cl,
+                f0[0] + a * df0, f0[1] + a * df1, f0[2] + a * df2,
+                w0[0] + a * dw0, w0[1] + a * dw1, w0[2] + a * dw2,
+            )  # fmt: skip
             wgt = 2.0 if 0 < st < 3 else 1.0
-            for j in range(NAV_DIM):
-                acc[j] += wgt * kk[j]
-        for j in range(NAV_DIM):
-            y[j] = y[j] + (h / 6.0) * acc[j]
-        n = math.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
-        s = 1.0 / n if y[6] >= 0.0 else -1.0 / n
-        for j in range(I_QW, I_QW + 4):
-            y[j] *= s
-    for j in range(NAV_DIM):
-        out[j] = y[j]
+            s0, s1, s2, s3, s4 = (
+                s0 + wgt * k0,
+                s1 + wgt * k1,
+                s2 + wgt * k2,
+                s3 + wgt * k3,
+                s4 + wgt * k4,
+            )
+            s5, s6, s7, s8, s9 = (
+                s5 + wgt * k5,
+                s6 + wgt * k6,
+                s7 + wgt * k7,
+                s8 + wgt * k8,
+                s9 + wgt * k9,
+            )
+        w6 = h / 6.0
+        y0, y1, y2, y3, y4 = y0 + w6 * s0, y1 + w6 * s1, y2 + w6 * s2, y3 + w6 * s3, y4 + w6 * s4
+        y5, y6, y7, y8, y9 = y5 + w6 * s5, y6 + w6 * s6, y7 + w6 * s7, y8 + w6 * s8, y9 + w6 * s9
+        n = math.sqrt(y6 * y6 + y7 * y7 + y8 * y8 + y9 * y9)
+        sc = 1.0 / n if y6 >= 0.0 else -1.0 / n
+        y6, y7, y8, y9 = y6 * sc, y7 * sc, y8 * sc, y9 * sc
+    out[0], out[1], out[2], out[3], out[4] = y0, y1, y2, y3, y4
+    out[5], out[6], out[7], out[8], out[9] = y5, y6, y7, y8, y9
 
 
 @nb.njit(cache=True)
@@ -243,7 +252,7 @@ def propagate(x: F64, f0: F64, w0: F64, f1: F64, w1: F64, dt: float, substeps: i
         the state at the time of sample 1, shape (10,).
     """
     out = np.empty(NAV_DIM)
-    propagate_into(x, f0, w0, f1, w1, dt, substeps, out, np.empty((5, NAV_DIM)))
+    propagate_into(x, f0, w0, f1, w1, dt, substeps, out)
     return out
 
 
@@ -264,12 +273,9 @@ def integrate(x0: F64, t_ns: I64, acc: F64, gyro: F64, substeps: int) -> F64:
     n = t_ns.shape[0]
     out = np.empty((n, NAV_DIM))
     out[0] = x0
-    work = np.empty((5, NAV_DIM))
     for i in range(1, n):
         dt = (t_ns[i] - t_ns[i - 1]) * 1e-9
-        propagate_into(
-            out[i - 1], acc[i - 1], gyro[i - 1], acc[i], gyro[i], dt, substeps, out[i], work
-        )
+        propagate_into(out[i - 1], acc[i - 1], gyro[i - 1], acc[i], gyro[i], dt, substeps, out[i])
     return out
 
 

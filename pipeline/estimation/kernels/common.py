@@ -241,24 +241,44 @@ def gate_blocks(
 
 
 @nb.njit(cache=True, error_model="numpy")
+def stream_health(blocks: I64, nb_: int, accepted: I64) -> tuple[I64, I64]:
+    """Per stream: (seen this epoch, accepted this epoch) flags, each (N_STREAMS,).
+
+    A stream is accepted when at least half of its blocks pass their gates. One block per
+    stream (loose coupling) is accepted or not; for pseudoranges (one block per satellite) a
+    consistent position step (F2) is rejected on most satellites, while the few whose line of
+    sight is nearly perpendicular to it still pass: those must not keep the stream from its
+    timeout reset, or the filter creeps towards the new position for minutes.
+    """
+    n_seen = np.zeros(N_STREAMS, np.int64)
+    n_ok = np.zeros(N_STREAMS, np.int64)
+    for b in range(nb_):
+        s = blocks[b, 2]
+        n_seen[s] += 1
+        if accepted[b]:
+            n_ok[s] += 1
+    seen = np.zeros(N_STREAMS, np.int64)
+    ok = np.zeros(N_STREAMS, np.int64)
+    for s in range(N_STREAMS):
+        if n_seen[s] > 0:
+            seen[s] = 1
+            ok[s] = 1 if 2 * n_ok[s] >= n_seen[s] else 0
+    return seen, ok
+
+
+@nb.njit(cache=True, error_model="numpy")
 def streams_to_reset(
     t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64, timeout_s: float
 ) -> I64:
-    """Streams whose blocks have all been rejected for the timeout or longer (F2).
+    """Streams that have been rejected (``stream_health``) for the timeout or longer (F2).
 
     ``reject_since[stream]`` holds the time (ns) of the first rejection of the current run of
-    rejections, -1 if the stream's last block was accepted. The NHC stream is never reset.
+    rejections, -1 if the stream was last accepted. The NHC stream is never reset.
 
     Returns:
         (N_STREAMS,) flags, 1 = reset that stream's states now.
     """
-    seen = np.zeros(N_STREAMS, np.int64)
-    ok = np.zeros(N_STREAMS, np.int64)
-    for b in range(nb_):
-        s = blocks[b, 2]
-        seen[s] = 1
-        if accepted[b]:
-            ok[s] = 1
+    seen, ok = stream_health(blocks, nb_, accepted)
     out = np.zeros(N_STREAMS, np.int64)
     for s in range(N_STREAMS):
         if s == S_NHC or not seen[s] or ok[s] or reject_since[s] < 0:
@@ -271,13 +291,7 @@ def streams_to_reset(
 @nb.njit(cache=True, error_model="numpy")
 def update_reject_since(t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64) -> None:
     """Advance the per-stream rejection clocks after an epoch's final gating decisions."""
-    seen = np.zeros(N_STREAMS, np.int64)
-    ok = np.zeros(N_STREAMS, np.int64)
-    for b in range(nb_):
-        s = blocks[b, 2]
-        seen[s] = 1
-        if accepted[b]:
-            ok[s] = 1
+    seen, ok = stream_health(blocks, nb_, accepted)
     for s in range(N_STREAMS):
         if not seen[s]:
             continue

@@ -322,7 +322,7 @@ def propagate_span(
         max_step_s: longest RK4 step, s.
         gap_s: sample intervals longer than this are IMU gaps (their time is accumulated).
         u_end: out, the input at ``t_end``, (6,).
-        work: scratch, (9, 10).
+        work: scratch, (9, 10) (rows 5-8: the interval end inputs).
         acc: out when ``accumulate`` (``ACC_DIM``,): integrals of the nav-frame specific
             force and of ``C_b^n``, span and gap durations, for ``transition``.
         accumulate: fill ``acc`` (done for the EKF nominal and the UKF central sigma point).
@@ -332,7 +332,6 @@ def propagate_span(
     """
     n_imu = imu_t.shape[0]
     nav = X[:NAV_DIM]
-    rk = work[:5]
     f0, w0, f1, w1 = work[5, :3], work[6, :3], work[7, :3], work[8, :3]
     if accumulate:
         for j in range(ACC_DIM):
@@ -361,7 +360,7 @@ def propagate_span(
             # a piece of a gap between two samples, however the stops cut that gap
             if 0 < i < n_imu and (imu_t[i] - imu_t[i - 1]) * 1e-9 > gap_s:
                 acc[ACC_GAP] += dt
-        propagate_into(nav, f0, w0, f1, w1, dt, ns, nav, rk)
+        propagate_into(nav, f0, w0, f1, w1, dt, ns, nav)
         t_cur = t_next
         if advance:
             i += 1

@@ -64,13 +64,6 @@ def test_f2_step_is_followed_after_exactly_one_reset_by_loose_coupling() -> None
     assert {c.criterion for c in out} >= {"resets", "reset delay, s"}
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="estimation core: a gnss_obs epoch counts as accepted when any one satellite passes "
-    "the gate (kernels/common.py streams_to_reset), so under a consistent 100 m step the "
-    "satellites whose line of sight is nearly perpendicular to it keep the timeout from "
-    "firing: no reset, and the filter creeps to the new position over more than 60 s",
-)
 @pytest.mark.parametrize("name", ["tc_ekf", "tc_ukf"])
 def test_f2_step_is_followed_after_exactly_one_reset_by_tight_coupling(name: str) -> None:
     assert failed(checks("F2", name)) == []
