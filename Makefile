@@ -5,21 +5,30 @@ PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.navreplay-installed
+DEV_STAMP := $(VENV)/.navreplay-dev-installed
 export DVC_NO_ANALYTICS := 1
 # dvc.yaml stages call the `navreplay` console script: run them with the venv first on PATH.
 export PATH := $(CURDIR)/$(VENV)/bin:$(PATH)
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
-.PHONY: demo test venv lint typecheck pytest bench clean-venv
+.PHONY: demo test venv dev lint typecheck pytest bench clean-venv browser
 
 venv: $(STAMP)
 
+# The package and its runtime dependencies: all that `make demo` needs.
 $(STAMP): pyproject.toml Makefile
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "navreplay needs Python >= 3.11; found " + sys.version.split()[0] + " at $(PYTHON)")'
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade "pip>=25.1"
-	$(BIN)/python -m pip install --quiet --editable . --group dev
+	$(BIN)/python -m pip install --quiet --editable .
 	@touch $(STAMP)
+
+# The development tools on top (pytest, ruff, mypy and stubs, selenium): `make test`.
+dev: $(DEV_STAMP)
+
+$(DEV_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet --group dev
+	@touch $(DEV_STAMP)
 
 demo: venv
 	$(BIN)/dvc repro
@@ -27,17 +36,39 @@ demo: venv
 
 test: lint typecheck pytest
 
-lint: venv
+lint: dev
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
-typecheck: venv
+typecheck: dev
 	$(BIN)/mypy
 
-pytest: venv
-	$(BIN)/pytest
+# Headless Chromium for the report tests (tests/browser): Debian's chromium and chromium-driver,
+# installed with apt when missing (CI runs `make test` as root on a fresh machine).
+CHROMIUM := /usr/bin/chromium
+CHROMEDRIVER := /usr/bin/chromedriver
+# As root apt-get runs directly, otherwise through passwordless sudo; when neither works the
+# browser tests skip and say why.
+browser:
+	@if [ ! -x $(CHROMIUM) ] || [ ! -x $(CHROMEDRIVER) ]; then \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=; \
+	  elif command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then SUDO="sudo -n"; \
+	  else SUDO=none; fi; \
+	  if command -v apt-get >/dev/null 2>&1 && [ "$$SUDO" != none ]; then \
+	    echo "installing chromium and chromium-driver (Debian packages) for the browser tests"; \
+	    $$SUDO env DEBIAN_FRONTEND=noninteractive apt-get update -qq && \
+	    $$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver \
+	      >/dev/null || echo "apt-get could not install chromium: the browser tests will skip"; \
+	  else \
+	    echo "no $(CHROMIUM) and neither root nor sudo for apt-get: the browser tests will skip"; \
+	  fi; \
+	fi
 
-bench: venv
+pytest: dev browser
+	NAVREPLAY_REQUIRE_BROWSER=$$(test -x $(CHROMIUM) && test -x $(CHROMEDRIVER) && echo 1) \
+	  $(BIN)/pytest
+
+bench: dev
 	$(BIN)/python -m benchmarks
 
 clean-venv:

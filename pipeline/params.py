@@ -65,7 +65,9 @@ class IngestParams:
 class RunParams:
     """``run``: the run matrix of dvc.yaml (datasets x filters, each under every scenario of
     ``scenarios``; the Monte Carlo and outage experiments cover the same datasets), the
-    backend, and the processes one ``navreplay run`` spreads its scenarios over."""
+    backend, and the processes one ``navreplay run`` spreads its scenarios over.
+    ``datasets`` may hold built-in and recorded datasets; ``filters`` and ``scenarios`` are
+    also the defaults of ``navreplay analyze``."""
 
     backend: Literal["numba", "filterpy"]
     datasets: tuple[str, ...]
@@ -101,7 +103,8 @@ class Params:
     """The whole of ``params.yaml``; ``filters`` holds one section per filter
     (``pipeline.estimation.config``), ``scenarios`` the named scenarios
     (``pipeline.scenarios.config``) and ``outages`` the outage experiments
-    (``pipeline.outages.config``)."""
+    (``pipeline.outages.config``). ``datasets`` are the built-in, synthesized datasets;
+    ``recorded`` the datasets whose logs the user put under ``datasets/<id>/raw/``."""
 
     datasets: tuple[str, ...]
     synth: SynthParams
@@ -112,11 +115,14 @@ class Params:
     experiments: ExperimentsParams
     scenarios: ScenariosParams
     outages: OutagesParams
+    recorded: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         for i, ds in enumerate(self.run.datasets):
-            if ds not in self.datasets:
-                raise FieldError(f"run.datasets[{i}]", f"{ds!r} is not in datasets")
+            if ds not in self.datasets and ds not in self.recorded:
+                raise FieldError(
+                    f"run.datasets[{i}]", f"{ds!r} is in neither datasets nor recorded"
+                )
         for i, name in enumerate(self.run.scenarios):
             if name not in self.scenarios.named:
                 raise FieldError(f"run.scenarios[{i}]", f"{name!r} is not in scenarios.named")
@@ -127,6 +133,9 @@ class Params:
                 )
         if len(set(self.datasets)) != len(self.datasets):
             raise FieldError("datasets", "lists a dataset twice")
+        for i, ds in enumerate(self.recorded):
+            if not _ID_RE.match(ds) or ds in self.datasets:
+                raise FieldError(f"recorded[{i}]", f"{ds!r}: a new dataset id (lowercase)")
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):

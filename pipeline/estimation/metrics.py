@@ -133,6 +133,12 @@ def nis_summary(result: RunResult) -> dict[str, dict[str, Any]]:
     return out
 
 
+def _full_truth(truth: pa.Table) -> bool:
+    """Whether the truth has position, velocity and attitude (a simulator's may lack some)."""
+    cols = (*_NAV_TRUTH, *_ANGLES)
+    return all(c in truth.column_names and truth.column(c).null_count < len(truth) for c in cols)
+
+
 def compute_metrics(
     result: RunResult,
     truth: pa.Table | None,
@@ -173,7 +179,7 @@ def compute_metrics(
     if windows:
         params = window_params or WindowMetricsParams()
         m["outage_windows"] = outage_windows(result, truth, fixes, lever_b, windows, t0_ns, params)
-    if truth is None or truth.num_rows == 0 or result.t_ns.size == 0:
+    if truth is None or truth.num_rows == 0 or result.t_ns.size == 0 or not _full_truth(truth):
         m["truth"] = False
         return m
     inside, err, names = error_states(result, truth)

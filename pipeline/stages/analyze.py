@@ -1,7 +1,10 @@
 """One-off post-mission analysis of a log that is not in the DVC registry.
 
-Ingests LOG (and any companion files), runs the default filters under the default scenarios,
-and renders a report into DIR, showing progress on the long steps and a summary at the end.
+Ingests LOG (and any companion files), runs the filters that fit what the log contains under
+the chosen scenarios, and renders a report into DIR/report, showing progress on stderr and a
+summary at the end: where the report is, the key metrics, what was skipped and why, and the
+warnings of the ingest audit. Filters that do not fit (no IMU, no fixes, no satellite orbits)
+are skipped with the reason.
 
 examples:
   navreplay analyze flight.bin --out analysis/flight
@@ -11,9 +14,8 @@ examples:
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
-
-from pipeline.errors import NotBuiltError
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -30,12 +32,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--filters",
         metavar="A,B",
-        help="comma-separated filter names (default: those in params.yaml)",
+        help="comma-separated filter names (default: run.filters in params.yaml)",
     )
     parser.add_argument(
         "--scenarios",
         metavar="X,Y",
-        help="comma-separated scenario names (default: those in params.yaml)",
+        help="comma-separated scenario names (default: run.scenarios in params.yaml)",
     )
     parser.add_argument(
         "--dataset-config",
@@ -51,7 +53,47 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _split(text: str | None) -> list[str] | None:
+    return [t.strip() for t in text.split(",") if t.strip()] if text else None
+
+
+def _progress(line: str) -> None:
+    print(f"[analyze] {line}", file=sys.stderr, flush=True)
+
+
 def run(args: argparse.Namespace) -> int:
-    raise NotBuiltError(
-        "one-off analysis arrives with the issue 'Per-dataset HTML reports'; nothing was written"
+    from ingest.config import load_dataset_config
+    from pipeline.analyze import analyze
+    from pipeline.params import load_params
+    from pipeline.report.tables import fmt
+
+    params = load_params(args.params)
+    config = load_dataset_config(args.dataset_config) if args.dataset_config else None
+    res = analyze(
+        args.logs,
+        args.out,
+        params,
+        filters=_split(args.filters),
+        scenarios=_split(args.scenarios),
+        config=config,
+        config_dir=args.dataset_config.parent if args.dataset_config else None,
+        progress=_progress,
     )
+    lines = [f"navreplay analyze: done in {res.seconds:.1f} s", f"  report: {res.report.index}"]
+    ran = [r for r in res.report.runs if r["status"] == "ok"]
+    for r in ran:
+        ref = r.get("reference") or "-"
+        lines.append(
+            f"  {r['filter']:<12} {r['scenario']:<12} horizontal RMS "
+            f"{fmt(r.get('pos_err_h_rms_m')) or '-':>8} m (vs {ref}), 3-D max "
+            f"{fmt(r.get('pos_err_3d_max_m')) or '-':>8} m, "
+            f"{fmt(r.get('realtime_factor')) or '-'}x real time"
+        )
+    if not ran:
+        lines.append("  no filter could run on this log (see skipped)")
+    for s in res.skipped:
+        lines.append(f"  skipped {s.filter} / {s.scenario}: {s.reason}")
+    for w in res.report.warnings:
+        lines.append(f"  warning (ingest audit): {w}")
+    print("\n".join(lines))
+    return 0

@@ -1,7 +1,12 @@
-"""Render the self-contained HTML report of one dataset from its runs.
+"""Render the self-contained HTML report of one dataset from its tables, runs and experiments.
+
+Reads TABLES (meta.json, ingest_report.json, truth and gnss tables), every run directory
+under RUNS (any directory with a metrics.json) and every experiment directory under
+EXPERIMENTS; writes DIR/index.html, DIR/tables/*.csv|json and DIR/metrics.json atomically.
+Missing runs or experiments leave their sections out; a malformed file is an error naming it.
 
 examples:
-  navreplay report seoul_campus_cw --tables datasets/seoul_campus_cw/tables \
+  navreplay report seoul_campus_cw --tables datasets/seoul_campus_cw/tables \\
       --runs datasets/seoul_campus_cw/runs --out reports/seoul_campus_cw
 """
 
@@ -9,8 +14,6 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-
-from pipeline.errors import NotBuiltError
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -25,16 +28,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--runs",
         type=Path,
-        required=True,
         metavar="DIR",
-        help="directory holding the dataset's run directories",
+        help="directory holding the dataset's run directories (default: TABLES/../runs)",
+    )
+    parser.add_argument(
+        "--experiments",
+        type=Path,
+        metavar="DIR",
+        help="directory of the dataset's experiments (default: TABLES/../experiments)",
     )
     parser.add_argument(
         "--out",
         type=Path,
         required=True,
         metavar="DIR",
-        help="report directory (index.html, tables/, figures)",
+        help="report directory (index.html, tables/, metrics.json)",
     )
     parser.add_argument(
         "--params",
@@ -45,6 +53,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    raise NotBuiltError(
-        "reports arrive with the issue 'Per-dataset HTML reports'; nothing was written"
+    from ingest.tables import params_hash
+    from ingest.typed import to_plain
+    from pipeline.params import load_params
+    from pipeline.report.inputs import load_dataset
+    from pipeline.report.render import render_dataset
+
+    params = load_params(args.params)
+    runs = args.runs or args.tables.parent / "runs"
+    experiments = args.experiments or args.tables.parent / "experiments"
+    data = load_dataset(args.dataset, args.tables, runs, experiments)
+    out = render_dataset(
+        data,
+        args.out,
+        experiments_dir=experiments,
+        params_hash=params_hash(to_plain(params)),
     )
+    print(f"{args.dataset}: {out.index} ({len(out.runs)} runs, {out.figures} figures)")
+    return 0

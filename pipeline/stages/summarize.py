@@ -1,5 +1,8 @@
 """Rank filters across datasets, with paired differences and confidence intervals.
 
+Reads REPORT_DIR/tables/runs.json and sat_reduction.csv of each dataset report; writes
+DIR/index.html, DIR/tables/{ranking,paired,sat_reduction}.csv and DIR/metrics.json.
+
 examples:
   navreplay summarize reports/seoul_campus_cw reports/tractor_straight --out reports/summary
 """
@@ -9,24 +12,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pipeline.errors import NotBuiltError
-
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "reports", nargs="+", type=Path, metavar="REPORT_DIR", help="per-dataset report directories"
     )
     parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="summary directory")
-    parser.add_argument(
-        "--params",
-        type=Path,
-        default=Path("params.yaml"),
-        help="parameter file (default: params.yaml)",
-    )
 
 
 def run(args: argparse.Namespace) -> int:
-    raise NotBuiltError(
-        "the cross-dataset summary arrives with the issue 'Per-dataset HTML "
-        "reports'; nothing was written"
-    )
+    from pipeline.report.summary import render_summary
+
+    index = render_summary(args.reports, args.out)
+    print(f"summary: {index}")
+    return 0

@@ -1,0 +1,183 @@
+"""One-off post-mission analysis: ingest a log, run the filters that fit it, render a report.
+
+``analyze(logs, out_dir, ...)`` writes ``out_dir/tables`` (``navreplay ingest``),
+``out_dir/runs/<filter>/<scenario>`` (``navreplay run``) and ``out_dir/report``
+(``navreplay report``), reporting progress through ``progress`` (one line per step and per
+filter run) and returning what the summary needs.
+
+Which filters fit (``plan``): the INS/GNSS filters need an ``imu`` table; loosely coupled
+ones (``lc_*``) need ``gnss`` fixes, tightly coupled ones (``tc_*``) need ``gnss_obs`` with
+satellite positions. A filter that does not fit is skipped with the reason, never run on
+data it cannot use. Each filter replays under each scenario (``pipeline.outages.runs``: the
+scenario engine applies outage windows, k-satellite windows or faults to the tables first);
+a scenario the log cannot support (e.g. k satellites without raw observables) or a run that
+fails is skipped with its reason, and the others go on.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pyarrow.parquet as pq
+
+from ingest.api import IngestOptions, ingest
+from ingest.config import DatasetConfig
+from ingest.tables import params_hash
+from ingest.typed import to_plain
+from pipeline.errors import DivergenceError, ParamsError, PipelineError
+from pipeline.estimation.config import FILTER_KINDS
+from pipeline.params import Params
+from pipeline.report.render import RenderedReport
+
+Progress = Callable[[str], None]
+
+
+@dataclass
+class Skipped:
+    """A filter or scenario that was not run, and why."""
+
+    filter: str
+    scenario: str
+    reason: str
+
+
+@dataclass
+class AnalysisResult:
+    """What ``analyze`` did: the report, the runs, the skips."""
+
+    tables_dir: Path
+    report: RenderedReport
+    skipped: list[Skipped] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+def _has_sat_positions(tables_dir: Path) -> bool:
+    path = tables_dir / "gnss_obs.parquet"
+    if not path.is_file():
+        return False
+    col = pq.read_table(path, columns=["sat_x_m"]).column("sat_x_m")
+    return len(col) > 0 and col.null_count < len(col)
+
+
+def plan(tables_dir: Path, filters: Sequence[str]) -> tuple[list[str], list[Skipped]]:
+    """The filters of ``filters`` that fit the tables, and the others with the reason."""
+    have = {p.stem for p in tables_dir.glob("*.parquet")}
+    run, skip = [], []
+    for f in filters:
+        kind = FILTER_KINDS.get(f)
+        if kind is None:
+            skip.append(Skipped(f, "*", "not an INS/GNSS filter analyze can run yet"))
+        elif "imu" not in have:
+            skip.append(Skipped(f, "*", "the log has no IMU stream"))
+        elif kind.coupling == "loose" and "gnss" not in have:
+            skip.append(Skipped(f, "*", "loose coupling needs GNSS fixes; the log has none"))
+        elif kind.coupling == "tight" and not _has_sat_positions(tables_dir):
+            why = (
+                "raw observables without satellite positions (no ephemeris)"
+                if "gnss_obs" in have
+                else "no raw GNSS observables"
+            )
+            skip.append(Skipped(f, "*", f"tight coupling needs pseudoranges and orbits: {why}"))
+        else:
+            run.append(f)
+    return run, skip
+
+
+def _write_skip(run_dir: Path, s: Skipped) -> None:
+    from ingest.atomic import atomic_write_json
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(
+        run_dir / "metrics.json",
+        {"filter": s.filter, "scenario": s.scenario, "status": "skipped", "reason": s.reason},
+    )
+
+
+def analyze(
+    logs: Sequence[Path],
+    out_dir: Path,
+    params: Params,
+    *,
+    filters: Sequence[str] | None = None,
+    scenarios: Sequence[str] | None = None,
+    config: DatasetConfig | None = None,
+    config_dir: Path | None = None,
+    progress: Progress = lambda _: None,
+) -> AnalysisResult:
+    """Ingest, run and report one log (see the module docstring)."""
+    from pipeline.estimation.run import write_run
+    from pipeline.outages.runs import Inputs, run_scenarios
+    from pipeline.report.inputs import load_dataset
+    from pipeline.report.render import render_dataset
+
+    t_start = time.perf_counter()
+    filters = list(filters or params.run.filters)
+    scenarios = list(scenarios or params.run.scenarios)
+    unknown = [sc for sc in scenarios if sc not in params.scenarios.named]
+    if unknown:
+        known = ", ".join(params.scenarios.named)
+        raise ParamsError("scenarios.named", f"no scenario {unknown} (known: {known})")
+    tables_dir = out_dir / "tables"
+    progress(f"ingest {', '.join(str(p) for p in logs)}")
+    options = IngestOptions(
+        strict=params.ingest.strict,
+        reorder_window_s=params.ingest.reorder_window_s,
+        gap_factor=params.ingest.gap_factor,
+    )
+    result = ingest(logs, tables_dir, config=config, config_dir=config_dir, options=options)
+    rows = ", ".join(f"{k} {v:,}" for k, v in sorted(result.tables.items()))
+    progress(f"ingest done: {rows}")
+    runnable, skipped = plan(tables_dir, filters)
+    runs_dir = out_dir / "runs"
+    todo = [(f, s) for f in runnable for s in scenarios]
+    inputs = Inputs.read(tables_dir) if todo else None
+    for i, (f, sc) in enumerate(todo, start=1):
+        assert inputs is not None  # read above whenever there is something to run
+        run_dir = runs_dir / f / sc
+        progress(f"run {i}/{len(todo)}: {f} under {sc}")
+        t0 = time.perf_counter()
+        section = params.filters.get(f)
+        try:
+            ((_, out, applied),) = run_scenarios(
+                inputs, f, section, params.scenarios, [sc], params.run.backend
+            )
+        except (DivergenceError, PipelineError) as err:
+            s = Skipped(f, sc, f"failed: {err}")
+            skipped.append(s)
+            _write_skip(run_dir, s)
+            progress(f"  {f} under {sc}: {err}")
+            continue
+        if params.scenarios.get(sc).windows is not None and not applied.outage_windows:
+            s = Skipped(f, sc, "none of the scenario's outage windows fits in this log")
+            skipped.append(s)
+            _write_skip(run_dir, s)
+            progress(f"  {f} under {sc}: {s.reason}")
+            continue
+        write_run(run_dir, out, section, sc, applied.metadata()["windows"])
+        progress(f"  {f}: {_one_line(out.metrics)} ({time.perf_counter() - t0:.1f} s)")
+    for s in skipped:
+        if s.scenario == "*":
+            _write_skip(runs_dir / s.filter / "nominal", Skipped(s.filter, "nominal", s.reason))
+    progress("report")
+    dataset = config.id if config is not None else logs[0].stem
+    data = load_dataset(dataset, tables_dir, runs_dir, out_dir / "experiments")
+    report = render_dataset(
+        data,
+        out_dir / "report",
+        params_hash=params_hash(to_plain(params)),
+        title=f"navreplay analysis: {', '.join(p.name for p in logs)}",
+    )
+    return AnalysisResult(tables_dir, report, skipped, time.perf_counter() - t_start)
+
+
+def _one_line(m: dict[str, Any]) -> str:
+    parts = [str(m.get("status"))]
+    if m.get("pos_err_h_rms_m") is not None:
+        parts.append(f"horizontal RMS {m['pos_err_h_rms_m']:.2f} m vs truth")
+    if m.get("realtime_factor"):
+        parts.append(f"{m['realtime_factor']:.0f}x real time")
+    return ", ".join(parts)

@@ -1,0 +1,85 @@
+"""Outage figures: a detail panel per outage window, and drift against outage length.
+
+``windows_detail`` draws, for one scenario, the 3-D error of every filter from
+``PRE_S`` before each window to ``POST_S`` after it (x: seconds from the window's start),
+one panel per window (the first ``MAX_PANELS``), so an engineer can read each outage of a
+long drive at full detail. ``drift_by_length`` plots the rows of ``tables.drift_by_length``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from pipeline.report.inputs import DatasetInputs
+from pipeline.report.series import ErrorSeries
+from pipeline.report.svg import OUTAGE_COLOUR, colour, figure_svg, style
+
+PRE_S = 10.0
+POST_S = 30.0
+MAX_PANELS = 12
+
+
+def windows_detail(
+    data: DatasetInputs, scenario: str, series: dict[tuple[str, str], ErrorSeries], key: str
+) -> str | None:
+    """Per-window detail of one scenario (see the module docstring); None without windows."""
+    runs = [r for r in data.runs if r.scenario == scenario and r.windows]
+    runs = [r for r in runs if (r.filter, scenario) in series]
+    if not runs:
+        return None
+    windows = runs[0].windows[:MAX_PANELS]
+    filters = data.filters()
+    cols = min(3, len(windows))
+    rows = (len(windows) + cols - 1) // cols
+    with style() as plt:
+        fig, axes = plt.subplots(
+            rows, cols, figsize=(3.4 * cols, 0.6 + 2.3 * rows), squeeze=False, layout="constrained"
+        )
+        for i, w in enumerate(windows):
+            ax = axes[i // cols, i % cols]
+            ax.axvspan(0.0, w.duration_s, color=OUTAGE_COLOUR, alpha=0.25, lw=0)
+            for r in runs:
+                s = series[(r.filter, scenario)]
+                a = w.start_ns - round(PRE_S * 1e9)
+                b = w.end_ns + round(POST_S * 1e9)
+                sel = (s.t_ns >= a) & (s.t_ns <= b)
+                t = (s.t_ns[sel] - w.start_ns) / 1e9
+                ax.plot(t, s.err_3d_m[sel], color=colour(filters.index(r.filter)), label=r.filter)
+            sats = w.metrics.get("sats")
+            extra = f", {sats} sats" if sats is not None else ""
+            ax.set_title(f"window {i + 1}{extra}", loc="left")
+            ax.set_xlabel("s from outage start")
+            ax.set_ylabel("3-D error, m")
+        for j in range(len(windows), rows * cols):
+            axes[j // cols, j % cols].set_visible(False)
+        axes[0, 0].legend(loc="upper left")
+        more = len(runs[0].windows) - len(windows)
+        note = f" (first {len(windows)} of {len(runs[0].windows)})" if more > 0 else ""
+        fig.suptitle(f"{data.dataset}: error around each outage window, {scenario}{note}")
+        return figure_svg(fig, key)
+
+
+def drift_by_length(rows: Sequence[dict[str, Any]], filters: list[str], key: str) -> str | None:
+    """Mean 3-D error at the end of complete outages against their length, 95 % intervals."""
+    if not rows:
+        return None
+    with style() as plt:
+        fig, ax = plt.subplots(figsize=(6.5, 4.0), layout="constrained")
+        names = sorted({str(r["filter"]) for r in rows}, key=lambda f: (f not in filters, f))
+        for f in names:
+            rr = sorted((r for r in rows if r["filter"] == f), key=lambda r: r["outage_s"])
+            x = np.array([r["outage_s"] for r in rr], dtype=float)
+            y = np.array([r["err_end_mean_m"] for r in rr], dtype=float)
+            lo = np.array([r["ci_low_m"] for r in rr], dtype=float)
+            hi = np.array([r["ci_high_m"] for r in rr], dtype=float)
+            err = np.vstack([np.nan_to_num(y - lo), np.nan_to_num(hi - y)])
+            c = colour(filters.index(f)) if f in filters else "#000000"
+            ax.errorbar(x, y, yerr=err, color=c, marker="o", ms=3.5, capsize=3, label=f)
+        ax.set_xlabel("outage length, s")
+        ax.set_ylabel("3-D error at outage end, m")
+        ax.set_title("drift against outage length (complete outages; bars: 95 % CI)")
+        ax.legend(loc="upper left")
+        return figure_svg(fig, key)

@@ -1,0 +1,202 @@
+"""One dataset's report: ``index.html`` and ``tables/`` (CSV and JSON of every number shown).
+
+``render_dataset(data, out_dir, ...)`` writes, atomically (``ingest.atomic.atomic_directory``):
+
+- ``index.html``: self-contained (inline CSS, script and SVG; no network);
+- ``tables/runs.csv|json`` (one row per run: accuracy, consistency, gating, cost),
+  ``tables/nis.csv`` (per run and stream), ``tables/windows.csv`` (per outage window),
+  ``tables/drift_by_length.csv`` (complete outages of the runs by length), the outages
+  stage's ``tables/sat_reduction.csv`` and ``tables/drift_vs_length.csv`` copied as they are
+  (when ``experiments_dir`` holds them: ``experiments.find_outage_results``),
+  ``tables/audit.csv`` and ``tables/provenance.json``;
+- ``metrics.json``: the headline numbers per filter and scenario, flat, for
+  ``dvc metrics show/diff``.
+
+Sections appear only when their data exist. The same inputs give the same bytes: figures are
+byte-stable (``svg``), tables are sorted, JSON is written with sorted keys, and nothing
+records the time of rendering.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
+from ingest.tables import git_commit, package_version
+from pipeline.report import audit, figures, figures_outage, sections
+from pipeline.report import html as h
+from pipeline.report import tables as tb
+from pipeline.report.experiments import DRIFT_NAME, SAT_REDUCTION_NAME, find_outage_results
+from pipeline.report.inputs import DatasetInputs
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RenderedReport:
+    """What was written, and what ``navreplay analyze`` prints at the end."""
+
+    out_dir: Path
+    index: Path
+    runs: list[dict[str, Any]]
+    warnings: list[str]
+    figures: int
+
+
+def _headline(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    keys = ("pos_err_h_rms_m", "pos_err_3d_rms_m", "pos_err_3d_max_m", "nees_mean",
+            "realtime_factor", "gate_rejections")  # fmt: skip
+    out: dict[str, Any] = {}
+    for r in rows:
+        vals = {k: r[k] for k in keys if r.get(k) is not None}
+        if vals:
+            out.setdefault(str(r["filter"]), {})[str(r["scenario"])] = vals
+    return out
+
+
+def render_dataset(
+    data: DatasetInputs,
+    out_dir: Path,
+    *,
+    experiments_dir: Path | None = None,
+    params_hash: str | None = None,
+    title: str | None = None,
+) -> RenderedReport:
+    """Render the report of ``data`` into ``out_dir`` (see the module docstring)."""
+    series = tb.all_series(data)
+    run_rows = tb.metrics_rows(data, series)
+    nis_rows = tb.nis_rows(data.runs)
+    win_rows = tb.window_rows(data, series)
+    drift_rows = tb.drift_by_length(win_rows)
+    outage = find_outage_results(experiments_dir)
+    audit_rows = audit.audit_rows(data.ingest_report)
+    filters = data.filters()
+    figs: list[str] = []
+
+    def fig(svg: str | None, caption: str) -> str:
+        if svg is None:
+            return ""
+        figs.append(svg)
+        return h.figure(svg, caption)
+
+    track = fig(
+        figures.track(data, "track"),
+        "Track: reference and each filter's nominal run (east/north from the first sample).",
+    )
+    err_parts = []
+    for i, sc in enumerate(data.scenarios()):
+        err_parts.append(
+            fig(
+                figures.errors(data, sc, series, f"err{i}"),
+                f"{sc}: horizontal position error (line) and the filter's 3σ (band); "
+                "outage windows shaded.",
+            )
+        )
+    outage_parts = []
+    for i, sc in enumerate(data.scenarios()):
+        outage_parts.append(
+            fig(
+                figures_outage.windows_detail(data, sc, series, f"win{i}"),
+                f"{sc}: 3-D error from {figures_outage.PRE_S:g} s before to "
+                f"{figures_outage.POST_S:g} s after each outage window.",
+            )
+        )
+    drift_fig = fig(
+        figures_outage.drift_by_length(drift_rows, filters, "drift"),
+        "Mean 3-D error at the end of complete outages, by outage length.",
+    )
+    nis_parts = [
+        fig(figures.nis(data, r, f"nis{j}"), f"NIS of {r.filter} ({r.scenario}) per stream.")
+        for j, r in enumerate(r for r in data.runs if r.scenario == "nominal" and r.ran)
+    ]
+    bias_fig = fig(
+        figures.biases(data, "bias"),
+        "IMU bias estimates with ±3σ bands; dashed: the true biases where the dataset has them.",
+    )
+    exp_html = sections.experiments(data.experiments, figs)
+    provenance = {
+        "dataset": data.dataset,
+        "package_version": package_version(),
+        "git_commit": git_commit(),
+        "params_hash": params_hash,
+        "time_base": data.meta.time_base if data.meta else None,
+        "sources": [
+            {"name": s.name, "sha256": s.sha256, "format": s.format}
+            for s in (data.meta.sources if data.meta else ())
+        ],
+        "runs": [
+            {
+                "filter": r.filter,
+                "scenario": r.scenario,
+                "params_hash": r.metrics.get("params_hash"),
+                "backend": r.metrics.get("backend"),
+                "path": r.path.name,
+            }
+            for r in data.runs
+        ],
+    }
+    body = [
+        ("overview", "Overview", sections.overview(data, run_rows)),
+        ("audit", "Data quality", audit.audit_section(data)),
+        ("track", "Track", track),
+        ("metrics", "Accuracy and consistency", sections.metrics(run_rows)),
+        ("errors", "Errors against time", "".join(err_parts)),
+        ("outages", "Outage windows", sections.windows(win_rows) + "".join(outage_parts)),
+        (
+            "drift",
+            "Drift against outage length",
+            sections.drift(drift_rows, outage.drift) + drift_fig,
+        ),
+        (
+            "satellites",
+            "Error reduction per satellite count",
+            sections.sat_reduction(outage.sat_reduction, outage.sat_reduction_note),
+        ),
+        ("nis", "Innovation consistency (NIS)", sections.nis(nis_rows) + "".join(nis_parts)),
+        ("biases", "Bias estimates", bias_fig),
+        ("experiments", "Experiments", exp_html),
+        ("cost", "Run cost", sections.cost(run_rows)),
+        ("provenance", "Provenance", sections.provenance(provenance)),
+    ]
+    subtitle = (
+        f"{len(data.runs)} runs of {len(filters)} filters under {len(data.scenarios())} "
+        f"scenarios; navreplay {provenance['package_version']}"
+    )
+    page = h.page(title or f"navreplay report: {data.dataset}", subtitle, body)
+    with atomic_directory(out_dir) as tmp:
+        (tmp / "tables").mkdir()
+        atomic_write_text(tmp / "index.html", page)
+        atomic_write_text(tmp / "tables" / "runs.csv", tb.to_csv(run_rows))
+        atomic_write_json(tmp / "tables" / "runs.json", run_rows)
+        atomic_write_text(tmp / "tables" / "nis.csv", tb.to_csv(nis_rows, _NIS_COLS))
+        atomic_write_text(tmp / "tables" / "windows.csv", tb.to_csv(win_rows, _WIN_COLS))
+        atomic_write_text(tmp / "tables" / "drift_by_length.csv", tb.to_csv(drift_rows, _DRIFT))
+        atomic_write_text(tmp / "tables" / "audit.csv", tb.to_csv(audit_rows, _AUDIT))
+        atomic_write_json(tmp / "tables" / "provenance.json", provenance)
+        for e in data.experiments:
+            for t in e.tables:
+                dest = tmp / "tables" / "experiments" / e.name / t.path.name
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(t.path, dest)
+        for table, name in ((outage.sat_reduction, SAT_REDUCTION_NAME), (outage.drift, DRIFT_NAME)):
+            if table is not None:
+                shutil.copyfile(table.path, tmp / "tables" / name)
+        atomic_write_json(tmp / "metrics.json", _headline(run_rows))
+    log.info("wrote %s (%d figures)", out_dir / "index.html", len(figs))
+    return RenderedReport(
+        out_dir, out_dir / "index.html", run_rows, audit.warnings(data), len(figs)
+    )
+
+
+_NIS_COLS = ("filter", "scenario", "stream", "count", "nis_mean", "dof_mean", "bound_low",
+             "bound_high", "consistent", "rejected")  # fmt: skip
+_WIN_COLS = ("filter", "scenario", "window", "start_s", "duration_s", "sats", "err_end_m",
+             "err_max_m", "err_mean_m", "err_rms_m", "drift_pct_distance", "reconverge_s",
+             "inside_3sigma_frac", "reference")  # fmt: skip
+_DRIFT = ("filter", "outage_s", "windows", "err_end_mean_m", "ci_low_m", "ci_high_m")
+_AUDIT = tuple(k for k, _ in audit.COLUMNS)

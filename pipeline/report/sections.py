@@ -1,0 +1,247 @@
+"""HTML of the report's table sections (figures come from ``figures``/``figures_outage``)."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from typing import Any
+
+from pipeline.report import html as h
+from pipeline.report import markdown
+from pipeline.report.experiments import CsvTable, Experiment
+from pipeline.report.inputs import DatasetInputs
+from pipeline.report.tables import PAPER_PAIR, PAPER_REDUCTION_PCT
+
+Row = dict[str, Any]
+MAX_TABLE_ROWS = 40  # rows of an experiment's CSV shown on the page
+
+
+def overview(data: DatasetInputs, rows: Sequence[Row]) -> str:
+    """What the dataset holds, which runs exist (filter x scenario), what was skipped, why."""
+    parts = []
+    meta = data.meta
+    if meta is not None:
+        tables = ", ".join(f"{k} ({v:,} rows)" for k, v in sorted(meta.tables.items()))
+        parts.append(h.para(f"Tables: {tables}. Time base: {meta.time_base}."))
+    truth = "the truth table" if data.truth is not None else (
+        "the GNSS fixes (no truth: inside an outage window the withheld fixes are the truth; "
+        "outside, the error is a residual)")  # fmt: skip
+    if rows:
+        parts.append(h.para(f"Errors are measured against {truth}."))
+        filters, scenarios = data.filters(), data.scenarios()
+        grid = []
+        status = {(r["filter"], r["scenario"]): r for r in rows}
+        for f in filters:
+            g: Row = {"filter": f}
+            for sc in scenarios:
+                r = status.get((f, sc))
+                g[sc] = None if r is None else r["status"]
+            grid.append(g)
+        cls = {sc: _status_cls(sc) for sc in scenarios}
+        parts.append(h.table(grid, [("filter", "filter")] + [(s, s) for s in scenarios], cls=cls))
+        skipped = [r for r in rows if r["status"] != "ok"]
+        if skipped:
+            items = "".join(
+                f"<li><b>{h.esc(r['filter'])}</b> / {h.esc(r['scenario'])}: "
+                f"{h.esc(r['status'])}: {h.esc(r.get('reason') or 'no reason given')}</li>"
+                for r in skipped
+            )
+            parts.append(f"<h3>Not run or not finished</h3><ul>{items}</ul>")
+    else:
+        parts.append(h.para("No filter runs for this dataset yet.", "note"))
+    return "".join(parts)
+
+
+def _status_cls(key: str) -> Any:
+    return lambda r: {"ok": "ok", None: ""}.get(r.get(key), "bad")
+
+
+_METRIC_COLS = (
+    ("filter", "filter"),
+    ("scenario", "scenario"),
+    ("status", "status"),
+    ("reference", "against"),
+    ("pos_err_h_rms_m", "horiz. RMS m"),
+    ("pos_err_3d_rms_m", "3-D RMS m"),
+    ("pos_err_3d_max_m", "3-D max m"),
+    ("vel_err_3d_rms_mps", "vel RMS m/s"),
+    ("nees_mean", "NEES mean"),
+    ("nees_dof", "NEES dof"),
+    ("gate_rejections", "gate rejections"),
+    ("gate_resets", "gate resets"),
+)
+
+
+def metrics(rows: Sequence[Row]) -> str:
+    if not rows:
+        return ""
+    return h.table(
+        rows, _METRIC_COLS, cls={"status": lambda r: "ok" if r["status"] == "ok" else "bad"}
+    ) + h.para(
+        "RMS and max over the whole run; NEES over position, velocity and attitude "
+        "(its expected value is the dof). The full list is in tables/runs.csv.",
+        "note",
+    )
+
+
+def windows(rows: Sequence[Row]) -> str:
+    if not rows:
+        return ""
+    cols = (("filter", "filter"), ("scenario", "scenario"), ("window", "#"),
+            ("start_s", "start s"), ("duration_s", "length s"), ("sats", "sats"),
+            ("err_end_m", "err at end m"), ("err_max_m", "max m"), ("err_mean_m", "mean m"),
+            ("err_rms_m", "RMS m"), ("drift_pct_distance", "drift % dist."),
+            ("reconverge_s", "reconverge s"), ("inside_3sigma_frac", "inside 3σ"))  # fmt: skip
+    return h.table(rows, cols) + h.para(
+        "3-D error inside each window against the reference, with no re-alignment at the "
+        "window's start; drift is the error at the end over the distance travelled in it.",
+        "note",
+    )
+
+
+def _pair(text: str) -> tuple[str, ...]:
+    """``"tc_ukf -> tc_ukf_nhc"`` (any separator) as its filter names."""
+    return tuple(re.findall(r"[A-Za-z0-9_]+", text))
+
+
+def paper_pct(pair: str, sats: str) -> str:
+    """Paper 001's Table 1 value for a row of a reduction table (its pair only), else ""."""
+    if _pair(pair) != PAPER_PAIR or not sats.strip().isdigit():
+        return ""
+    return str(PAPER_REDUCTION_PCT.get(int(sats), ""))
+
+
+def sat_reduction(table: CsvTable | None, note_md: str | None) -> str:
+    """Paper 001 Table 1 as the outages stage computed it, beside the paper's values.
+
+    A ``paper %`` column joins the paper's numbers (its pair, ``PAPER_PAIR``, by ``sats``);
+    ``note_md`` is the stage's explanation of the differences (Markdown).
+    """
+    if table is None:
+        return ""
+    i_pair, i_sats = table.header.index("pair"), table.header.index("sats")
+    rows = [(*r, paper_pct(r[i_pair], r[i_sats])) for r in table.rows]
+    src = f"{table.path.parent.name}/{table.path.name}"
+    parts = [
+        h.text_table((*table.header, "paper %"), rows),
+        h.para(
+            "Reduction = 100 (e_A - e_B) / e_A, e the mean 3-D error over the outage windows "
+            f"with k satellites, with its 95 % interval (from the outages stage's {src}). "
+            f"Paper 001, Table 1 gives {' -> '.join(PAPER_PAIR)} only.",
+            "note",
+        ),
+    ]
+    if note_md:
+        parts.append(f'<div class="md">{markdown.to_html(note_md)}</div>')
+    return "".join(parts)
+
+
+def drift(rows: Sequence[Row], table: CsvTable | None) -> str:
+    """Drift against outage length: the outages stage's table when there is one, else the
+    complete outages of the runs grouped by length (``tables.drift_by_length``)."""
+    if table is not None:
+        src = f"{table.path.parent.name}/{table.path.name}"
+        return h.text_table(table.header, table.rows[:MAX_TABLE_ROWS]) + h.para(
+            f"From the outages stage's {src}.", "note"
+        )
+    if not rows:
+        return ""
+    cols = (("filter", "filter"), ("outage_s", "outage s"), ("windows", "windows"),
+            ("err_end_mean_m", "mean err at end m"), ("ci_low_m", "95 % low"),
+            ("ci_high_m", "95 % high"))  # fmt: skip
+    return h.table(rows, cols)
+
+
+def nis(rows: Sequence[Row]) -> str:
+    if not rows:
+        return ""
+    cols = (("filter", "filter"), ("scenario", "scenario"), ("stream", "stream"),
+            ("count", "updates"), ("nis_mean", "mean NIS"), ("dof_mean", "mean dof"),
+            ("bound_low", "95 % low"), ("bound_high", "95 % high"),
+            ("consistent", "within"), ("rejected", "gated out"))  # fmt: skip
+    cls = {"consistent": lambda r: {True: "ok", False: "warn"}.get(r.get("consistent"), "")}
+    return h.table(rows, cols, cls=cls) + h.para(
+        "Bounds: two-sided 95 % chi-square interval of the time-averaged NIS over the run's "
+        "updates (its expected value is the mean dof).",
+        "note",
+    )
+
+
+def cost(rows: Sequence[Row]) -> str:
+    rows = [r for r in rows if r.get("runtime_s") is not None]
+    if not rows:
+        return ""
+    cols: tuple[tuple[str, str], ...] = (("filter", "filter"), ("scenario", "scenario"),
+            ("epochs", "output epochs"), ("duration_s", "data s"), ("runtime_s", "wall s"),
+            ("realtime_factor", "x real time"))  # fmt: skip
+    if any(r.get("compile_s") is not None for r in rows):
+        cols = (*cols, ("compile_s", "of which JIT s"))
+    return h.table(rows, cols) + h.para(
+        "Wall time of the replay (inputs, alignment, filter) on one core; a run that found no "
+        "compiled kernel in the numba cache includes the compilation.",
+        "note",
+    )
+
+
+def provenance(p: dict[str, Any]) -> str:
+    rows = [
+        {"item": "package version", "value": p["package_version"]},
+        {"item": "git commit", "value": p["git_commit"] or "not a git checkout"},
+        {"item": "params hash (params.yaml)", "value": p["params_hash"] or "n/a"},
+        {"item": "time base", "value": p["time_base"] or "n/a"},
+    ]
+    rows += [
+        {"item": f"input {s['name']} ({s['format']})", "value": f"sha256 {s['sha256']}"}
+        for s in p["sources"]
+    ]
+    rows += [
+        {"item": f"run {r['filter']} / {r['scenario']}",
+         "value": f"params {r['params_hash'] or 'n/a'}, backend {r['backend'] or 'n/a'}"}
+        for r in p["runs"]
+    ]  # fmt: skip
+    return h.table(rows, (("item", "item"), ("value", "value")))
+
+
+_VERDICT_CLS = {"agrees": "ok", "differs": "bad", "partly": "warn"}
+
+
+def experiments(exps: Sequence[Experiment], figs: list[str]) -> str:
+    """Each experiment directory as a sub-section (``pipeline.report.experiments``)."""
+    parts = []
+    for e in exps:
+        parts.append(f'<h3 id="exp-{h.esc(e.name)}">{h.esc(e.title)}</h3>')
+        parts += [h.para(p) for p in e.summary]
+        parts += [f'<div class="md">{markdown.to_html(n)}</div>' for n in e.notes]
+        if e.claims:
+            parts.append(
+                h.table(
+                    e.claims,
+                    (
+                        ("claim", "claim"),
+                        ("paper", "paper"),
+                        ("ours", "ours"),
+                        ("verdict", "verdict"),
+                    ),
+                    cls={"verdict": lambda r: _VERDICT_CLS.get(r["verdict"], "")},
+                )
+            )
+        for t in e.tables:
+            parts.append(f"<h4>{h.esc(t.title)}</h4>")
+            parts.append(h.text_table(t.header, t.rows[:MAX_TABLE_ROWS]))
+            if len(t.rows) > MAX_TABLE_ROWS:
+                where = f"tables/experiments/{e.name}/{t.path.name}"
+                note = f"First {MAX_TABLE_ROWS} of {len(t.rows)} rows; all in {where}."
+                parts.append(h.para(note, "note"))
+            if t.caption:
+                parts.append(h.para(t.caption, "note"))
+        for i, f in enumerate(e.figures):
+            svg = f.svg
+            if svg is not None:
+                from pipeline.report.svg import prefix_ids
+
+                svg = prefix_ids(svg, f"exp-{e.name}-{i}")
+                figs.append(svg)
+            parts.append(h.figure(svg, f.caption or f.title, png_uri=f.png_data_uri))
+            if svg is None:
+                figs.append(f.png_data_uri or "")
+    return "".join(parts)

@@ -1,0 +1,272 @@
+"""The cross-dataset summary: filters ranked with paired differences and intervals.
+
+Reads each dataset report's ``tables/runs.json`` (``render``) and ``tables/sat_reduction.csv``.
+A *cell* is one (dataset, scenario) in which several filters ran; filters are compared only
+inside cells, on the same data (paired):
+
+- rank: per cell, filters ranked by 3-D RMS position error (1 = best, ties share the mean
+  rank); the table gives the mean rank, the cells it rests on, and the cells won;
+- paired difference of B against A over their common cells: the log-ratio
+  ``ln(e_B / e_A)`` per cell, its mean with a 95 % t-interval, reported as the ratio
+  ``exp(mean)`` (below 1: B is better), and the mean difference in metres with its interval.
+  One cell gives a point value without an interval.
+
+Also the per-satellite-count reduction table of every dataset that has one (paper 001).
+Writes ``index.html``, ``tables/ranking.csv``, ``tables/paired.csv``, ``tables/runs.csv``
+(every finished run of every dataset, the data of ``dvc plots``),
+``tables/sat_reduction.csv`` and ``metrics.json`` (the ranking, for ``dvc metrics``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
+from ingest.tables import git_commit, package_version
+from pipeline.report import html as h
+from pipeline.report import tables as tb
+from pipeline.report.experiments import SAT_REDUCTION_NAME, read_csv
+from pipeline.report.inputs import ReportInputError, read_json
+from pipeline.report.sections import paper_pct
+from pipeline.report.tables import PAPER_PAIR
+
+Row = dict[str, Any]
+METRIC = "pos_err_3d_rms_m"
+
+
+@dataclass(frozen=True)
+class DatasetResult:
+    """One dataset report's numbers."""
+
+    dataset: str
+    path: Path
+    runs: list[Row]
+    sat_reduction: tuple[tuple[str, ...], tuple[tuple[str, ...], ...]] | None
+
+
+def load_report(report_dir: Path) -> DatasetResult:
+    """A dataset report directory written by ``render.render_dataset``."""
+    path = report_dir / "tables" / "runs.json"
+    if not path.is_file():
+        raise ReportInputError(path, "missing: not a dataset report directory (run the report)")
+    runs = read_json(path)
+    if not isinstance(runs, list) or not all(isinstance(r, dict) for r in runs):
+        raise ReportInputError(path, "expected a list of run rows")
+    prov = read_json(report_dir / "tables" / "provenance.json")
+    dataset = str(prov.get("dataset", report_dir.name)) if isinstance(prov, dict) else ""
+    red_path = report_dir / "tables" / SAT_REDUCTION_NAME
+    red = None
+    if red_path.is_file():
+        t = read_csv(red_path)
+        red = (t.header, t.rows)
+    return DatasetResult(dataset or report_dir.name, report_dir, runs, red)
+
+
+_RUN_COLS = ("run", "dataset", "filter", "scenario", "pos_err_h_rms_m", "pos_err_3d_rms_m",
+             "pos_err_3d_max_m", "nees_mean", "realtime_factor")  # fmt: skip
+
+
+def _cells(results: Sequence[DatasetResult]) -> dict[tuple[str, str], dict[str, float]]:
+    cells: dict[tuple[str, str], dict[str, float]] = {}
+    for d in results:
+        for r in d.runs:
+            v = r.get(METRIC)
+            if r.get("status") == "ok" and isinstance(v, int | float) and math.isfinite(v):
+                cells.setdefault((d.dataset, str(r["scenario"])), {})[str(r["filter"])] = float(v)
+    return {k: v for k, v in sorted(cells.items()) if len(v) >= 2}
+
+
+def ranking(cells: dict[tuple[str, str], dict[str, float]]) -> list[Row]:
+    """Mean rank per filter over the cells (see the module docstring), best first."""
+    ranks: dict[str, list[float]] = {}
+    wins: dict[str, int] = {}
+    for errs in cells.values():
+        names = sorted(errs)
+        r = stats.rankdata([errs[n] for n in names])
+        for n, rk in zip(names, r, strict=True):
+            ranks.setdefault(n, []).append(float(rk))
+        best = min(names, key=lambda n: (errs[n], n))
+        wins[best] = wins.get(best, 0) + 1
+    rows = [
+        {
+            "filter": f,
+            "mean_rank": float(np.mean(rs)),
+            "cells": len(rs),
+            "wins": wins.get(f, 0),
+            "datasets": len({c[0] for c, e in cells.items() if f in e}),
+        }
+        for f, rs in ranks.items()
+    ]
+    return sorted(rows, key=lambda r: (r["mean_rank"], -r["cells"], r["filter"]))
+
+
+def _interval(x: np.ndarray) -> tuple[float, float, float]:
+    m = float(x.mean())
+    if x.size < 2:
+        return m, math.nan, math.nan
+    half = float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
+    return m, m - half, m + half
+
+
+def paired(cells: dict[tuple[str, str], dict[str, float]], order: Sequence[str]) -> list[Row]:
+    """Every pair (A better-ranked, B) with common cells: ratio and difference intervals."""
+    rows = []
+    for a, b in itertools.combinations(order, 2):
+        common = [e for e in cells.values() if a in e and b in e]
+        if not common:
+            continue
+        ea = np.array([e[a] for e in common])
+        eb = np.array([e[b] for e in common])
+        lm, llo, lhi = _interval(np.log(eb / ea))
+        dm, dlo, dhi = _interval(eb - ea)
+        rows.append(
+            {
+                "a": a,
+                "b": b,
+                "cells": len(common),
+                "ratio_b_over_a": math.exp(lm),
+                "ratio_ci_low": math.exp(llo) if math.isfinite(llo) else math.nan,
+                "ratio_ci_high": math.exp(lhi) if math.isfinite(lhi) else math.nan,
+                "diff_m": dm,
+                "diff_ci_low_m": dlo,
+                "diff_ci_high_m": dhi,
+            }
+        )
+    return rows
+
+
+def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
+    """Write the summary (see the module docstring); returns the path of its index.html."""
+    results = sorted((load_report(p) for p in report_dirs), key=lambda d: d.dataset)
+    cells = _cells(results)
+    rank = ranking(cells)
+    pairs = paired(cells, [r["filter"] for r in rank])
+    best = rank[0]["filter"] if rank else None
+    vs_best = [p for p in pairs if p["a"] == best]
+    all_runs = [
+        {"run": f"{d.dataset}/{r['filter']}/{r['scenario']}", "dataset": d.dataset, **r}
+        for d in results
+        for r in d.runs
+        if r.get("status") == "ok" and r.get(METRIC) is not None
+    ]
+    red_rows: list[Row] = []
+    for d in results:
+        if d.sat_reduction is not None:
+            header, rows = d.sat_reduction
+            red_rows += [{"dataset": d.dataset, **dict(zip(header, r, strict=True))} for r in rows]
+    ds_rows = [
+        {
+            "dataset": d.dataset,
+            "runs": len(d.runs),
+            "ok": sum(r.get("status") == "ok" for r in d.runs),
+            "filters": len({r["filter"] for r in d.runs}),
+            "report": f"../{d.path.name}/index.html",
+        }
+        for d in results
+    ]
+    pair_cols = (("a", "A"), ("b", "B"), ("cells", "cells"), ("ratio_b_over_a", "e_B / e_A"),
+                 ("ratio_ci_low", "95 % low"), ("ratio_ci_high", "95 % high"),
+                 ("diff_m", "e_B - e_A m"), ("diff_ci_low_m", "95 % low m"),
+                 ("diff_ci_high_m", "95 % high m"))  # fmt: skip
+    links = "".join(
+        f'<li><a href="{h.esc(r["report"])}">{h.esc(r["dataset"])}</a>: {r["ok"]} of '
+        f"{r['runs']} runs finished, {r['filters']} filters</li>"
+        for r in ds_rows
+    )
+    red_html = ""
+    if red_rows:
+        keys = list(dict.fromkeys(k for r in red_rows for k in r))
+        red_cells = [
+            [
+                *(str(r.get(k, "")) for k in keys),
+                paper_pct(str(r.get("pair", "")), str(r.get("sats", ""))),
+            ]
+            for r in red_rows
+        ]
+        red_html = h.text_table([*keys, "paper %"], red_cells) + h.para(
+            f"Paper 001, Table 1 gives {' -> '.join(PAPER_PAIR)} only.", "note"
+        )
+    sections = [
+        (
+            "datasets",
+            "Datasets",
+            h.table(
+                ds_rows,
+                (
+                    ("dataset", "dataset"),
+                    ("runs", "runs"),
+                    ("ok", "finished"),
+                    ("filters", "filters"),
+                ),
+            )
+            + f"<ul>{links}</ul>",
+        ),
+        (
+            "ranking",
+            "Filters ranked",
+            h.table(
+                rank,
+                (
+                    ("filter", "filter"),
+                    ("mean_rank", "mean rank"),
+                    ("cells", "cells"),
+                    ("wins", "best in"),
+                    ("datasets", "datasets"),
+                ),
+            )
+            + h.para(
+                "A cell is one dataset under one scenario; ranks by 3-D RMS position error "
+                "among the filters that ran there (1 = best).",
+                "note",
+            )
+            if rank
+            else "",
+        ),
+        (
+            "paired",
+            f"Paired differences against {best}" if best else "Paired differences",
+            h.table(vs_best, pair_cols)
+            + h.para(
+                "Over the cells both filters ran in: the geometric-mean error ratio and the "
+                "mean difference with 95 % t-intervals (no interval from one cell). Every pair "
+                "is in tables/paired.csv.",
+                "note",
+            )
+            if vs_best
+            else "",
+        ),
+        ("satellites", "Error reduction per satellite count", red_html),
+        (
+            "provenance",
+            "Provenance",
+            h.para(f"navreplay {package_version()}, git commit {git_commit() or 'n/a'}."),
+        ),
+    ]
+    page = h.page(
+        "navreplay: summary across datasets",
+        f"{len(results)} datasets, {len(cells)} comparable cells",
+        sections,
+    )
+    with atomic_directory(out_dir) as tmp:
+        (tmp / "tables").mkdir()
+        atomic_write_text(tmp / "index.html", page)
+        atomic_write_text(tmp / "tables" / "ranking.csv", tb.to_csv(rank))
+        atomic_write_text(tmp / "tables" / "runs.csv", tb.to_csv(all_runs, _RUN_COLS))
+        atomic_write_text(
+            tmp / "tables" / "paired.csv", tb.to_csv(pairs, [k for k, _ in pair_cols])
+        )
+        if red_rows:
+            atomic_write_text(tmp / "tables" / "sat_reduction.csv", tb.to_csv(red_rows))
+        atomic_write_json(
+            tmp / "metrics.json",
+            {r["filter"]: {"mean_rank": r["mean_rank"], "cells": r["cells"]} for r in rank},
+        )
+    return out_dir / "index.html"
