@@ -87,7 +87,8 @@ def plan(tables_dir: Path, filters: Sequence[str]) -> tuple[list[str], list[Skip
     return run, skip
 
 
-def _write_skip(run_dir: Path, s: Skipped) -> None:
+def write_skip(run_dir: Path, s: Skipped) -> None:
+    """``run_dir/metrics.json`` of a run that was not made: status skipped and the reason."""
     from ingest.atomic import atomic_write_json
 
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -148,20 +149,20 @@ def analyze(
         except (DivergenceError, PipelineError) as err:
             s = Skipped(f, sc, f"failed: {err}")
             skipped.append(s)
-            _write_skip(run_dir, s)
+            write_skip(run_dir, s)
             progress(f"  {f} under {sc}: {err}")
             continue
         if params.scenarios.get(sc).windows is not None and not applied.outage_windows:
             s = Skipped(f, sc, "none of the scenario's outage windows fits in this log")
             skipped.append(s)
-            _write_skip(run_dir, s)
+            write_skip(run_dir, s)
             progress(f"  {f} under {sc}: {s.reason}")
             continue
         write_run(run_dir, out, section, sc, applied.metadata()["windows"])
         progress(f"  {f}: {_one_line(out.metrics)} ({time.perf_counter() - t0:.1f} s)")
     for s in skipped:
         if s.scenario == "*":
-            _write_skip(runs_dir / s.filter / "nominal", Skipped(s.filter, "nominal", s.reason))
+            write_skip(runs_dir / s.filter / "nominal", Skipped(s.filter, "nominal", s.reason))
     progress("report")
     dataset = config.id if config is not None else logs[0].stem
     data = load_dataset(dataset, tables_dir, runs_dir, out_dir / "experiments")

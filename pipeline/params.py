@@ -17,7 +17,7 @@ import yaml
 from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
 from pipeline.estimation.config import FiltersParams
-from pipeline.experiments.tractor_cascaded.runs import TractorExperimentParams
+from pipeline.experiments.tractor_cascaded.config import TractorExperimentParams
 from pipeline.outages.config import OutagesParams
 from pipeline.scenarios.config import ScenariosParams
 from pipeline.synth.car import CarSpeedRampParams

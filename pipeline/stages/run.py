@@ -67,10 +67,18 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out", type=Path, required=True, metavar="DIR", help="output directory of the run"
     )
+    parser.add_argument(
+        "--skip-unfit",
+        action="store_true",
+        help="when the tables lack what the filter needs (e.g. tight coupling without raw "
+        "observables), write a run marked skipped with the reason and exit 0 instead of failing "
+        "(the dvc run matrix uses this, so a recorded log without raw GNSS still gets its report)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     from ingest.atomic import atomic_directory
+    from pipeline.analyze import Skipped, plan, write_skip
     from pipeline.estimation.config import FILTER_KINDS
     from pipeline.estimation.families import runner
     from pipeline.estimation.run import write_run
@@ -106,6 +114,15 @@ def run(args: argparse.Namespace) -> int:
         m = run_family(args.tables, args.filter, params.filters, backend, args.out, "nominal")
         _summary(args.filter, backend, "nominal", m, args.out)
         return 0
+    if args.skip_unfit:
+        _, unfit = plan(args.tables, [args.filter])
+        if unfit:
+            reason = unfit[0].reason
+            with atomic_directory(args.out) as tmp:
+                for name in names:
+                    write_skip(tmp if single else tmp / name, Skipped(args.filter, name, reason))
+            print(f"{args.filter}: skipped ({reason}) -> {args.out}")
+            return 0
     section = params.filters.get(args.filter)
     inputs = Inputs.read(args.tables)
     runs = run_scenarios(

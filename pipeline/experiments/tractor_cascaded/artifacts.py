@@ -35,10 +35,9 @@ from ingest.typed import to_plain
 from pipeline.estimation.cascaded.metrics import BIASES
 from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
 from pipeline.experiments.tractor_cascaded.comparison import mechanisms, paper_comparison
+from pipeline.experiments.tractor_cascaded.config import BASELINE, NOMINAL
 from pipeline.experiments.tractor_cascaded.figures import draw_all
 from pipeline.experiments.tractor_cascaded.runs import (
-    BASELINE,
-    NOMINAL,
     ExperimentInputs,
     RunSummary,
     labels,

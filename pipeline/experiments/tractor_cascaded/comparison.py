@@ -37,7 +37,7 @@ import math
 from typing import Any
 
 from pipeline.estimation.cascaded.config import CascadedFilterParams
-from pipeline.experiments.tractor_cascaded.runs import (
+from pipeline.experiments.tractor_cascaded.config import (
     BASELINE,
     NOMINAL,
     PSI_D_LABEL,

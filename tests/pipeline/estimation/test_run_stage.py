@@ -146,3 +146,25 @@ def test_missing_meta_json_names_the_fix(
     rc = main(["run", str(tmp_path), "--filter", "lc_ekf", "--out", str(tmp_path / "run")])
     assert rc == 2
     assert "meta.json" in capsys.readouterr().err
+
+
+def test_skip_unfit_marks_a_tight_filter_skipped_on_a_log_without_raw_observables(
+    tables_dir: Path, tmp_path: Path
+) -> None:
+    loose_only = tmp_path / "tables"
+    loose_only.mkdir()
+    for p in tables_dir.iterdir():
+        if p.name != "gnss_obs.parquet":
+            (loose_only / p.name).write_bytes(p.read_bytes())
+    out = tmp_path / "runs" / "tc_ukf"
+    argv = ["-q", "run", str(loose_only), "--filter", "tc_ukf"]
+    assert main([*argv, "--out", str(out), "--scenario", "all", "--skip-unfit"]) == 0
+    scenarios = sorted(p.name for p in out.iterdir())
+    assert scenarios == sorted(read_yaml(REPO / "params.yaml")["run"]["scenarios"])
+    m = json.loads((out / "nominal" / "metrics.json").read_text())
+    assert m["status"] == "skipped"
+    assert "no raw GNSS observables" in m["reason"]
+    assert list((out / "nominal").iterdir()) == [out / "nominal" / "metrics.json"]
+    # without the flag the same request is an error, not a silent skip
+    assert main([*argv, "--out", str(tmp_path / "strict")]) != 0
+    assert not (tmp_path / "strict").exists()

@@ -12,9 +12,9 @@ import pytest
 
 from pipeline.estimation.cascaded.config import CASCADED_KINDS, CascadedFilterParams
 from pipeline.experiments.tractor_cascaded.artifacts import write_experiment
+from pipeline.experiments.tractor_cascaded.config import TractorExperimentParams
 from pipeline.experiments.tractor_cascaded.runs import (
     ExperimentInputs,
-    TractorExperimentParams,
     mean_ci,
 )
 from pipeline.params import load_params
