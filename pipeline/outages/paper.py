@@ -122,12 +122,12 @@ def _differences(per_sats: Sequence[Mapping[str, Any]]) -> list[str]:
     below = [r["sats"] for r in rows if r["difference_pct_points"] < 0]
     inside = [r["sats"] for r in rows if r["paper_inside_ci"]]
     outside = [r["sats"] for r in rows if r["paper_inside_ci"] is False]
+    sides = _split("Our reduction is", "above the paper's", above, "below it", below)
     out = [
-        f"Our reduction is above the paper's for k = {_ks(above)} and below it for "
-        f"k = {_ks(below)}; the differences range from {min(diffs):+.1f} to "
-        f"{max(diffs):+.1f} percentage points.",
-        f"The paper's value lies inside our 95 % interval for k = {_ks(inside)} and outside "
-        f"it for k = {_ks(outside)}.",
+        f"{sides}; the differences range from {min(diffs):+.1f} to {max(diffs):+.1f} "
+        "percentage points.",
+        _split("The paper's value lies", "inside our 95 % interval", inside, "outside it", outside)
+        + ".",
     ]
     by_k = {r["sats"]: r for r in rows}
     if 3 in by_k and 4 in by_k:
@@ -150,6 +150,12 @@ def _differences(per_sats: Sequence[Mapping[str, Any]]) -> list[str]:
 
 def _ks(ks: Sequence[int]) -> str:
     return ", ".join(str(k) for k in ks) if ks else "none"
+
+
+def _split(subject: str, yes: str, ks_yes: Sequence[int], no: str, ks_no: Sequence[int]) -> str:
+    """ "<subject> <yes> for k = ... and <no> for k = ...", naming only the non-empty sides."""
+    parts = [f"{what} for k = {_ks(ks)}" for what, ks in ((yes, ks_yes), (no, ks_no)) if ks]
+    return f"{subject} {' and '.join(parts)}" if parts else f"{subject} {yes} for no k"
 
 
 def _mean(values: Sequence[float | None]) -> float | None:
