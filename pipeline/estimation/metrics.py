@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pyarrow as pa
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
@@ -110,17 +111,23 @@ def nees(err: F64, P: F64) -> F64:
     return np.asarray(np.sum(err * sol, axis=1))
 
 
-def nis_summary(result: RunResult) -> dict[str, dict[str, Any]]:
-    """Per stream: count, mean NIS, mean dof, the 95 % interval of the mean, rejections."""
+def nis_by_stream(
+    inn_i: npt.NDArray[np.int64], inn_f: F64, stream_names: Sequence[str]
+) -> dict[str, dict[str, Any]]:
+    """Per stream of an innovation log (columns t_ns, stream, sv, dim, accepted / nis, ...):
+    count, mean NIS, mean dof, the 95 % interval of the mean, rejections.
+
+    Shared by every filter family (INS, vehicle, cascaded): stream codes index
+    ``stream_names``; streams without a block are left out.
+    """
     out: dict[str, dict[str, Any]] = {}
-    ii, ff = result.inn_i, result.inn_f
-    for code, name in enumerate(me.STREAM_NAMES):
-        sel = ii[:, 1] == code
+    for code, name in enumerate(stream_names):
+        sel = inn_i[:, 1] == code
         k = int(sel.sum())
         if k == 0:
             continue
-        dof = int(ii[sel, 3].sum())
-        mean = float(ff[sel, 0].mean())
+        dof = int(inn_i[sel, 3].sum())
+        mean = float(inn_f[sel, 0].mean())
         lo, hi = chi2.ppf(0.025, dof) / k, chi2.ppf(0.975, dof) / k
         out[name] = {
             "count": k,
@@ -128,9 +135,14 @@ def nis_summary(result: RunResult) -> dict[str, dict[str, Any]]:
             "dof_mean": dof / k,
             "nis_bounds_95": [float(lo), float(hi)],
             "consistent": bool(lo <= mean <= hi),
-            "rejected": int((ii[sel, 4] == 0).sum()),
+            "rejected": int((inn_i[sel, 4] == 0).sum()),
         }
     return out
+
+
+def nis_summary(result: RunResult) -> dict[str, dict[str, Any]]:
+    """``nis_by_stream`` of an INS/GNSS run (streams ``models.measurement.STREAM_NAMES``)."""
+    return nis_by_stream(result.inn_i, result.inn_f, me.STREAM_NAMES)
 
 
 def _full_truth(truth: pa.Table) -> bool:

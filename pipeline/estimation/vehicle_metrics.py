@@ -13,11 +13,9 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-from scipy.stats import chi2
 
 from pipeline.estimation.kernels import vehicle as kv
-from pipeline.estimation.metrics import nis_summary as _ins_nis_summary  # noqa: F401
-from pipeline.estimation.metrics import truth_at
+from pipeline.estimation.metrics import nis_by_stream, truth_at
 from pipeline.estimation.models import vehicle as vm
 from pipeline.estimation.vehicle_replay import VehicleRunResult
 from pipeline.nav.earth import F64
@@ -89,26 +87,8 @@ def per_band(
 
 
 def nis_summary(result: VehicleRunResult) -> dict[str, dict[str, Any]]:
-    """Per stream (``kernels.vehicle.STREAM_NAMES``): count, mean NIS, 95 % bounds, rejections."""
-    out: dict[str, dict[str, Any]] = {}
-    ii, ff = result.inn_i, result.inn_f
-    for code, name in enumerate(kv.STREAM_NAMES):
-        sel = ii[:, 1] == code
-        k = int(sel.sum())
-        if k == 0:
-            continue
-        dof = int(ii[sel, 3].sum())
-        mean = float(ff[sel, 0].mean())
-        lo, hi = chi2.ppf(0.025, dof) / k, chi2.ppf(0.975, dof) / k
-        out[name] = {
-            "count": k,
-            "nis_mean": mean,
-            "dof_mean": dof / k,
-            "nis_bounds_95": [float(lo), float(hi)],
-            "consistent": bool(lo <= mean <= hi),
-            "rejected": int((ii[sel, 4] == 0).sum()),
-        }
-    return out
+    """``metrics.nis_by_stream`` of a vehicle-filter run (``kernels.vehicle.STREAM_NAMES``)."""
+    return nis_by_stream(result.inn_i, result.inn_f, kv.STREAM_NAMES)
 
 
 def compute_metrics(result: VehicleRunResult, truth: pa.Table | None) -> dict[str, Any]:

@@ -21,13 +21,13 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-from scipy.stats import chi2
 
 from pipeline.estimation.cascaded.cascade import STREAM_NAMES
 from pipeline.estimation.cascaded.config import ConvergenceBand
 from pipeline.estimation.cascaded.engine import CascadedResult
 from pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, NX
 from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
+from pipeline.estimation.metrics import nis_by_stream
 from pipeline.nav.earth import F64
 from pipeline.nav.local import LocalFrame
 
@@ -100,25 +100,8 @@ def _rms(a: F64) -> float | None:
 
 
 def nis_summary(result: CascadedResult) -> dict[str, dict[str, Any]]:
-    """Per stream: count, mean NIS, the 95 % interval of the mean, rejections."""
-    out: dict[str, dict[str, Any]] = {}
-    ii, ff = result.inn_i, result.inn_f
-    for code, name in enumerate(STREAM_NAMES):
-        sel = ii[:, 1] == code
-        k = int(sel.sum())
-        if k == 0:
-            continue
-        dof = int(ii[sel, 3].sum())
-        mean = float(ff[sel, 0].mean())
-        lo, hi = chi2.ppf(0.025, dof) / k, chi2.ppf(0.975, dof) / k
-        out[name] = {
-            "count": k,
-            "nis_mean": mean,
-            "nis_bounds_95": [float(lo), float(hi)],
-            "consistent": bool(lo <= mean <= hi),
-            "rejected": int((ii[sel, 4] == 0).sum()),
-        }
-    return out
+    """``metrics.nis_by_stream`` of a cascaded run (``cascade.STREAM_NAMES``)."""
+    return nis_by_stream(result.inn_i, result.inn_f, STREAM_NAMES)
 
 
 def _nees(err: F64, P: F64) -> float | None:
