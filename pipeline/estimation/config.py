@@ -84,6 +84,8 @@ class GnssNoiseParams:
             by ``1 + 2 tau / dt`` (0: white errors, no inflation). Reported accuracies are
             per-fix sigmas and say nothing about correlation; without this a loosely coupled
             filter averages correlated errors as if they were white and becomes overconfident.
+            The inflation applies to the update only: a fix is gated, and its NIS computed,
+            against the marginal variance (``measurement.gate_shift``).
         vel_sigma_floor_mps: floor on the receiver's speed accuracy, m/s.
         vel_sigma_default_mps: velocity 1-sigma when the receiver reports none, m/s.
         use_velocity: fuse the receiver velocity where present (loose coupling).

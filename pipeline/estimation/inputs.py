@@ -134,6 +134,27 @@ def clean_imu(t: I64, data: F64, step: StepParams) -> ImuData:
     return ImuData(t_ok, d_ok, tuple(s for s in segments if s[1] - s[0] >= 2), tuple(events))
 
 
+def imu_white_noise(imu: ImuData) -> tuple[float, float]:
+    """White-noise densities the log itself shows: (accelerometer m/s^2/sqrt(Hz), gyro
+    rad/s/sqrt(Hz)), the largest over the three axes.
+
+    Per axis, the sample-to-sample differences inside the segments give
+    ``sigma = 1.4826 median|diff| / sqrt(2)`` (the MAD, robust to manoeuvres and glitches)
+    and the density ``sigma sqrt(dt)``. On a quiet MEMS at 100 Hz this is the datasheet
+    noise; on a log of decimated samples (ArduPilot's 25 Hz IMU messages of an 8 kHz sensor)
+    it is the aliased vibration, which the filter has to treat as noise. True motion adds to
+    it, so it is an upper estimate, used as a floor (``replay.resolve_imu_noise``).
+    """
+    diffs = [np.diff(imu.data[lo:hi], axis=0) for lo, hi in imu.segments if hi - lo >= 3]
+    if not diffs:
+        return 0.0, 0.0
+    d = np.concatenate(diffs)
+    sigma = 1.4826 * np.median(np.abs(d), axis=0) / math.sqrt(2.0)
+    dt = float(np.median(np.diff(imu.t_ns))) * 1e-9
+    density = sigma * math.sqrt(dt)
+    return float(density[:3].max()), float(density[3:].max())
+
+
 def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
     """Receiver fixes -> ``fix`` rows with floored accuracies; NaN blocks skipped (F11).
 
@@ -167,12 +188,14 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
         np.where(np.isfinite(v_acc), v_acc, 1.5 * gnss.pos_sigma_default_m),
         gnss.pos_sigma_floor_m,
     )
+    fix[:, me.FX_POS_INFL] = 1.0
     tau = gnss.pos_error_corr_time_s
     if tau > 0.0 and n > 1:  # time-correlated errors: fewer independent fixes than fixes
         dt = float(np.median(np.diff(t))) * 1e-9
-        inflate = math.sqrt(1.0 + 2.0 * tau / dt)
-        fix[:, me.FX_SIG_H] *= inflate
-        fix[:, me.FX_SIG_V] *= inflate
+        inflate = 1.0 + 2.0 * tau / dt
+        fix[:, me.FX_SIG_H] *= math.sqrt(inflate)
+        fix[:, me.FX_SIG_V] *= math.sqrt(inflate)
+        fix[:, me.FX_POS_INFL] = inflate  # gated against the marginal variance
     s_acc = _col(table, "speed_acc_mps")
     fix[:, me.FX_SIG_VEL] = np.maximum(
         np.where(np.isfinite(s_acc), s_acc, gnss.vel_sigma_default_mps), gnss.vel_sigma_floor_mps

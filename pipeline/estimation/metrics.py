@@ -187,6 +187,7 @@ def compute_metrics(
         "cov_repairs": kinds.get("cov_repair", 0),
         "events": kinds,
         "alignment": [a.summary() for a in result.alignments],
+        "imu_noise": result.imu_noise,
     }
     if windows:
         params = window_params or WindowMetricsParams()

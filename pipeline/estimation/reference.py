@@ -242,6 +242,8 @@ def _ukf_update(
     ins.coords_scale(Xm, n, sc)
     z, r = np.empty(m), np.empty(m)
     me.epoch_z(rows, m, run.fix, run.obs, ref, run.nhc_sigma, z, r)
+    dr = np.empty(m)
+    me.gate_shift(rows, m, run.fix, r, dr)
     w_ib = run.u[3:6].copy()
     h_ref = np.empty(m)  # as the kernel: rows relative to the mean's prediction
     me.epoch_h(Xm, rows, m, run.obs, ref, w_ib, run.lever_b, h_ref)
@@ -256,7 +258,8 @@ def _ukf_update(
         dz = Z - zp
         S = np.ascontiguousarray(dz.T @ (wc[:, None] * dz) + np.diag(r))
         nu = z - zp
-        cm.gate_blocks(nu, S, blocks, nb_, run.gate, nis, accepted, np.empty((3, 6)))
+        Sg = cm.gating_cov(S, dr, m)
+        cm.gate_blocks(nu, Sg, blocks, nb_, run.gate, nis, accepted, np.empty((3, 6)))
         if attempt == 1:
             break
         reset = cm.streams_to_reset(
@@ -270,7 +273,7 @@ def _ukf_update(
             cm.record_event(ev_i, ev_f, counts, t, cm.EV_RESET, int(st), -1, big)
         ukf.P = P
     cm.record_innovations(
-        t, nu, S, blocks, nb_, nis, accepted, run.gate, inn_i, inn_f, counts, ev_i, ev_f
+        t, nu, Sg, blocks, nb_, nis, accepted, run.gate, inn_i, inn_f, counts, ev_i, ev_f
     )
     cm.update_reject_since(t, blocks, nb_, accepted, run.reject_since)
     a = np.empty(m, np.int64)

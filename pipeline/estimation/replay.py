@@ -20,7 +20,7 @@ import logging
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numba as nb
@@ -81,6 +81,8 @@ class RunResult:
         runtime_s: wall time of the replay (inputs, alignment, filter), without compile_s.
         compile_s: time spent compiling the kernel or loading it from numba's cache.
         duration_s: span of IMU time replayed.
+        extra: filter-specific series (fwekf: ``alpha``).
+        imu_noise: the IMU noise densities used and their ``source`` (``resolve_imu_noise``).
     """
 
     filter: str
@@ -99,15 +101,26 @@ class RunResult:
     compile_s: float = 0.0
     duration_s: float = 0.0
     extra: dict[str, Any] = field(default_factory=dict)
+    imu_noise: dict[str, Any] = field(default_factory=dict)
 
 
-def make_setup(name: str, params: InsFilterParams, sensors: SensorMeta | None) -> FilterSetup:
-    """Pack the settings of filter ``name`` for the kernels (sensor metadata first)."""
+def make_setup(
+    name: str,
+    params: InsFilterParams,
+    sensors: SensorMeta | None,
+    noise_model: ImuNoise | None = None,
+) -> FilterSetup:
+    """Pack the settings of filter ``name`` for the kernels (sensor metadata first).
+
+    ``noise_model``: the IMU noise to use (``resolve_imu_noise``); default: the dataset's,
+    else the params' fallback.
+    """
     kind = FILTER_KINDS[name]
     n = ins.N_TIGHT if kind.coupling == "tight" else ins.N_LOOSE
-    noise_model: ImuNoise = (
-        sensors.imu_noise if sensors is not None and sensors.imu_noise else params.imu_noise
-    )
+    if noise_model is None:
+        noise_model = (
+            sensors.imu_noise if sensors is not None and sensors.imu_noise else params.imu_noise
+        )
     lever = np.array(sensors.lever_arm_m if sensors is not None else (0.0, 0.0, 0.0), float)
     st, g = params.step, params.gating
     cfg = np.zeros(cm.CFG_DIM)
@@ -204,8 +217,9 @@ def run_filter(
     """
     t_wall = time.perf_counter()
     kind = FILTER_KINDS[name]
-    setup = make_setup(name, params, sensors)
     imu_data = imu if imu is not None else inp.prepare_imu(_table(tables, "imu", name), params.step)
+    noise_model, noise_source = resolve_imu_noise(params, sensors, imu_data)
+    setup = make_setup(name, params, sensors, noise_model)
     fixes = inp.prepare_fixes(tables["gnss"], params.gnss) if "gnss" in tables else None
     obs = inp.prepare_obs(tables["gnss_obs"], params.gnss) if "gnss_obs" in tables else None
     if kind.coupling == "loose" and fixes is None:
@@ -225,7 +239,6 @@ def run_filter(
     for k_seg, seg in enumerate(imu_data.segments):
         al: Alignment | None = initial
         if initial is None or k_seg > 0:
-            noise_model = _noise(setup, params, sensors)
             al = align(imu_data, seg, fixes, obs, params.init, noise_model, setup.lever_b, setup.n)
         if al is None:
             events.append(inp.Event(int(imu_data.t_ns[seg[0]]), "no_alignment", "imu"))
@@ -267,6 +280,11 @@ def run_filter(
         compile_s=compile_s,
         duration_s=duration,
         extra={"alpha": np.concatenate(alphas)} if setup.fuzzy is not None and alphas else {},
+        imu_noise={
+            "source": noise_source,
+            "accel_noise_mps2_rthz": noise_model.accel_noise_mps2_rthz,
+            "gyro_noise_radps_rthz": noise_model.gyro_noise_radps_rthz,
+        },
     )
 
 
@@ -274,10 +292,37 @@ def _typeof(value: object) -> Any:
     return nb.typeof(value)  # type: ignore[no-untyped-call]
 
 
-def _noise(setup: FilterSetup, params: InsFilterParams, sensors: SensorMeta | None) -> ImuNoise:
+def resolve_imu_noise(
+    params: InsFilterParams, sensors: SensorMeta | None, imu: inp.ImuData
+) -> tuple[ImuNoise, str]:
+    """The IMU noise model of a run and where it came from.
+
+    The dataset's model (``dataset.yaml`` ``imu.noise``) when it declares one:
+    ``"dataset"``. Otherwise the params' MEMS fallback (``filters.<name>.imu_noise``), its
+    white-noise densities floored by what the log shows (``inputs.imu_white_noise``):
+    ``"params"``, or ``"params, floored by the log"`` when the log is noisier. A log of
+    decimated, vibration-aliased samples fused with datasheet noise makes the filter
+    overconfident in its own prediction until the gates lock the GNSS out.
+    """
     if sensors is not None and sensors.imu_noise is not None:
-        return sensors.imu_noise
-    return params.imu_noise
+        return sensors.imu_noise, "dataset"
+    base = params.imu_noise
+    acc, gyro = inp.imu_white_noise(imu)
+    if acc <= base.accel_noise_mps2_rthz and gyro <= base.gyro_noise_radps_rthz:
+        return base, "params"
+    floored = replace(
+        base,
+        accel_noise_mps2_rthz=max(base.accel_noise_mps2_rthz, acc),
+        gyro_noise_radps_rthz=max(base.gyro_noise_radps_rthz, gyro),
+    )
+    log.info(
+        "no IMU noise model in the dataset: the log's samples are noisier than the fallback, "
+        "using accel %.3g m/s^2/rtHz, gyro %.3g rad/s/rtHz (declare imu.noise in "
+        "dataset.yaml to override)",
+        floored.accel_noise_mps2_rthz,
+        floored.gyro_noise_radps_rthz,
+    )
+    return floored, "params, floored by the log"
 
 
 def _run_segment(

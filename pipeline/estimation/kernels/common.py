@@ -241,6 +241,17 @@ def gate_blocks(
 
 
 @nb.njit(cache=True, error_model="numpy")
+def gating_cov(S: F64, dr: F64, m: int) -> F64:
+    """``S + diag(dr)`` over the first ``m`` rows: the covariance the innovations are gated
+    against, and their NIS and logged sigmas computed from, where a row's update variance
+    differs from its marginal one (``measurement.gate_shift``). ``S`` is left for the update."""
+    Sg = S[:m, :m].copy()
+    for k in range(m):
+        Sg[k, k] += dr[k]
+    return Sg
+
+
+@nb.njit(cache=True, error_model="numpy")
 def stream_health(blocks: I64, nb_: int, accepted: I64) -> tuple[I64, I64]:
     """Per stream: (seen this epoch, accepted this epoch) flags, each (N_STREAMS,).
 

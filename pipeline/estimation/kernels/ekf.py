@@ -34,6 +34,7 @@ from pipeline.estimation.kernels.common import (
     cholesky,
     fail,
     gate_blocks,
+    gating_cov,
     inflate_for_stream,
     innovation_cov,
     keep_pd,
@@ -53,6 +54,7 @@ from pipeline.estimation.models.measurement import (
     epoch_jac,
     epoch_layout,
     epoch_z,
+    gate_shift,
 )
 from pipeline.nav.earth import F64, I64
 
@@ -99,6 +101,8 @@ def ekf_prepare(
     """
     ref = X[:3].copy()
     epoch_z(rows, m, fix, obs, ref, nhc_sigma, z, r)
+    dr = np.empty(m)
+    gate_shift(rows, m, fix, r, dr)
     hx = np.empty(m)
     epoch_h(X, rows, m, obs, ref, w_ib_b, lever_b, hx)
     epoch_jac(X, rows, m, obs, w_ib_b, lever_b, n, H)
@@ -111,7 +115,8 @@ def ekf_prepare(
     PHt = np.empty((n, m))
     for attempt in range(2):
         innovation_cov(H, P, r, m, n, PHt, S)
-        gate_blocks(nu, S, blocks, nb_, gate, nis, accepted, gwork)
+        Sg = gating_cov(S, dr, m)
+        gate_blocks(nu, Sg, blocks, nb_, gate, nis, accepted, gwork)
         if attempt == 1:
             break
         reset = streams_to_reset(t_ns, blocks, nb_, accepted, reject_since, cfg[CFG_TIMEOUT_S])
@@ -122,7 +127,7 @@ def ekf_prepare(
                 big = inflate_for_stream(P, n, s, nu, blocks, nb_, ones, cfg)
                 record_event(ev_i, ev_f, counts, t_ns, EV_RESET, s, -1, big)
     record_innovations(
-        t_ns, nu, S, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts, ev_i, ev_f
+        t_ns, nu, Sg, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts, ev_i, ev_f
     )
     update_reject_since(t_ns, blocks, nb_, accepted, reject_since)
     return accepted_rows(blocks, nb_, accepted, acc_rows)

@@ -49,6 +49,7 @@ from pipeline.estimation.kernels.common import (
     cholesky,
     fail,
     gate_blocks,
+    gating_cov,
     inflate_for_stream,
     keep_pd,
     record_event,
@@ -76,7 +77,14 @@ from pipeline.estimation.models.ins import (
     to_full,
 )
 from pipeline.estimation.models.ins_errors import transition
-from pipeline.estimation.models.measurement import ST_OUT, ST_T, epoch_h, epoch_layout, epoch_z
+from pipeline.estimation.models.measurement import (
+    ST_OUT,
+    ST_T,
+    epoch_h,
+    epoch_layout,
+    epoch_z,
+    gate_shift,
+)
 from pipeline.nav.earth import F64, I64
 
 
@@ -204,6 +212,8 @@ def ukf_update(
     z = np.empty(m)
     r = np.empty(m)
     epoch_z(rows, m, fix, obs, ref, nhc_sigma, z, r)
+    dr = np.empty(m)
+    gate_shift(rows, m, fix, r, dr)
     # predictions relative to the mean's: pseudoranges are ~2e7 m and their unscented average
     # would otherwise lose ~1e-9 m to cancellation
     h_ref = np.empty(m)
@@ -226,14 +236,15 @@ def ukf_update(
         for k in range(m):
             S[k, k] += r[k]
             nu[k] = z[k] - zp[k]
-        gate_blocks(nu, S, blocks, nb_, gate, nis, accepted, gwork)
+        Sg = gating_cov(S, dr, m)
+        gate_blocks(nu, Sg, blocks, nb_, gate, nis, accepted, gwork)
         if attempt == 1 or not _reset_streams(
             t_ns, P, n, nu, blocks, nb_, accepted, reject_since, sc, cfg, ev_i, ev_f, counts
         ):
             break
     cross_cov(sig, s, Z, zp, wc, n, m, Pxz)
     record_innovations(
-        t_ns, nu, S, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts, ev_i, ev_f
+        t_ns, nu, Sg, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts, ev_i, ev_f
     )
     update_reject_since(t_ns, blocks, nb_, accepted, reject_since)
     a = np.empty(m, np.int64)

@@ -11,7 +11,9 @@ Array layouts shared with ``pipeline.estimation.inputs`` (which fills them) and 
 
 - ``fix`` (M, ``FIX_COLS``): latitude, longitude (rad), altitude (m), NED velocity (m/s),
   horizontal, vertical and speed 1-sigma, position dimension (0 = unusable, 2 = horizontal,
-  3) and velocity dimension (0 = unusable, 2 = north and east only, 3).
+  3), velocity dimension (0 = unusable, 2 = north and east only, 3) and the factor by which
+  the position variances were inflated for time-correlated errors (1 = white; see
+  ``gate_shift``).
 - ``obs`` (K, ``OBS_COLS``): satellite ECEF position and velocity, corrected pseudorange (m)
   and pseudorange rate (m/s), their 1-sigma, the satellite code (``sv_code``) and flags.
 - ``obs_start`` (E + 1,): rows of obs epoch ``e`` are ``obs_start[e]:obs_start[e + 1]``.
@@ -43,8 +45,8 @@ from pipeline.estimation.models.nhc import body_velocity, nhc_jac
 from pipeline.nav.earth import F64, I64
 
 FX_LAT, FX_LON, FX_ALT, FX_VN, FX_VE, FX_VD = 0, 1, 2, 3, 4, 5
-FX_SIG_H, FX_SIG_V, FX_SIG_VEL, FX_POS_DIM, FX_VEL_DIM = 6, 7, 8, 9, 10
-FIX_COLS = 11
+FX_SIG_H, FX_SIG_V, FX_SIG_VEL, FX_POS_DIM, FX_VEL_DIM, FX_POS_INFL = 6, 7, 8, 9, 10, 11
+FIX_COLS = 12
 
 OB_SAT = 0  # 0..5: ECEF x, y, z (m), vx, vy, vz (m/s)
 OB_PR, OB_PRR, OB_SIG_PR, OB_SIG_PRR, OB_SV, OB_PR_OK, OB_PRR_OK = 6, 7, 8, 9, 10, 11, 12
@@ -143,6 +145,27 @@ def epoch_z(
         else:
             z[k] = 0.0
             r[k] = nhc_sigma[kind - K_NHC] ** 2
+
+
+@nb.njit(cache=True, error_model="numpy")
+def gate_shift(rows: I64, m: int, fix: F64, r: F64, dr: F64) -> None:
+    """Per row, the gating variance minus the update variance ``r`` (``dr[:m]``, <= 0).
+
+    A fix position whose variance was inflated by ``1 + 2 tau / dt`` for time-correlated
+    errors (``inputs.prepare_fixes``) is *updated* with the inflated variance, so that a run
+    of correlated fixes is not counted as independent information; but one fix's error is
+    still distributed with the receiver's marginal variance, so the innovation is *gated*
+    (and its NIS reported) against ``H P H^T`` plus that marginal variance. Gating against
+    the inflated variance would let a 20 m multipath outlier through a 1.5 m fix's gate
+    (bad-inputs F7). Every other row gates with its update variance (``dr = 0``).
+    """
+    for k in range(m):
+        kind, src = rows[k, 0], rows[k, 1]
+        dr[k] = 0.0
+        if kind < K_VEL:
+            infl = fix[src, FX_POS_INFL]
+            if infl > 1.0:
+                dr[k] = r[k] * (1.0 / infl - 1.0)
 
 
 @nb.njit(cache=True, error_model="numpy")

@@ -72,11 +72,15 @@ def test_f2_step_is_followed_after_exactly_one_reset_by_tight_coupling(name: str
 @pytest.mark.parametrize("name", FILTERS)
 def test_f7_rejects_the_outliers_larger_than_the_gate(name: str) -> None:
     """Every filter rejects the outliers whose error alone exceeds its gate, within 20 %, and
-    stays within 3 sigma. That is fewer than the catalogue's injected fraction: on 0.8-2 m
-    pseudoranges about a third of N(0, 20 m) errors are smaller than the 99.99 % gate, and
-    loose coupling inflates the fix variance for 30 s error correlation (1 + 2 tau / dt: a
-    1.5 m fix becomes ~12 m), inside which most 20 m outliers are consistent with the fix.
-    No filter rejects more than the injected fraction."""
+    stays within 3 sigma; none rejects more than the injected fraction.
+
+    Loose coupling meets the catalogue's literal criterion too (rejected fraction = injected
+    10 % +- 20 %): a fix is gated against its marginal variance, not the variance inflated for
+    30 s error correlation, so a 20 m outlier on a 1.5 m fix is rejected. Tight coupling
+    cannot: on 0.8-2 m pseudoranges about a fifth to a quarter of N(0, 20 m) errors are
+    smaller than the gate (~4 sigma) and indistinguishable from noise; it rejects what is
+    beyond the gate, which is what the check above asserts.
+    """
     out = {c.criterion: c for c in checks("F7", name)}
     gate = out["rejected fraction vs outliers beyond the gate"]
     assert gate.passed, gate
@@ -84,5 +88,7 @@ def test_f7_rejects_the_outliers_larger_than_the_gate(name: str) -> None:
     raw = out["rejected fraction in the burst"]
     assert raw.value is not None
     assert raw.value <= 1.2 * 0.1
-    if FILTER_KINDS[name].coupling == "tight":
+    if FILTER_KINDS[name].coupling == "loose":
+        assert raw.passed, raw
+    else:
         assert raw.value > 0.5 * 0.1
