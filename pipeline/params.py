@@ -8,7 +8,7 @@ Unknown or misspelled keys, wrong types, duplicated keys and missing sections ar
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -18,6 +18,7 @@ from ingest.typed import FieldError, load_dataclass, to_plain
 from pipeline.errors import ParamsError
 from pipeline.estimation.config import FiltersParams
 from pipeline.experiments.tractor_cascaded.config import TractorExperimentParams
+from pipeline.experiments.vehicle_bands_config import VehicleBandsParams
 from pipeline.outages.config import OutagesParams
 from pipeline.scenarios.config import ScenariosParams
 from pipeline.synth.car import CarSpeedRampParams
@@ -96,6 +97,7 @@ class ExperimentsParams:
     """``experiments``: the experiments run by ``navreplay experiment NAME``."""
 
     tractor_cascaded: TractorExperimentParams
+    vehicle_bands: VehicleBandsParams = field(default_factory=VehicleBandsParams)
 
 
 @dataclass(frozen=True)

@@ -145,14 +145,16 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
             f._lik = 1.0
         if m > 0:
             per: list[tuple[F64, F64, F64]] = []
+            r_of: list[F64] = []  # the yaw-rate variance depends on the model
             for f in filters:
                 xf = np.ascontiguousarray(f.x, dtype=float)
                 kv.epoch_values(f.model, xf, rows, m, veh, fix, u, vp, cfg, z, r, nu, H)
                 per.append((nu.copy(), H.copy(), np.empty_like(S)))
+                r_of.append(r.copy())
             g = 0 if not imm_on or imm.cbar[0] >= imm.cbar[1] else 1
             for attempt in range(2):
-                for f, (_, H_f, S_f) in zip(filters, per, strict=True):
-                    kv.innovation_cov(np.ascontiguousarray(f.P), H_f, r, m, S_f)
+                for f, (_, H_f, S_f), r_f in zip(filters, per, r_of, strict=True):
+                    kv.innovation_cov(np.ascontiguousarray(f.P), H_f, r_f, m, S_f)
                 cm.gate_blocks(per[g][0], per[g][2], blocks, nb_, gate, nis, accepted, work)
                 if attempt == 1:
                     break
@@ -175,11 +177,11 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
             )
             ma = int(cm.accepted_rows(blocks, nb_, accepted, acc))
             a = acc[:ma]
-            for f, (nu_f, H_f, S_f) in zip(filters, per, strict=True):
+            for f, (nu_f, H_f, S_f), r_f in zip(filters, per, r_of, strict=True):
                 if ma == 0:
                     continue
                 hx = z[a] - nu_f[a]
-                f.pending = (z[a].copy(), hx, H_f[a].copy(), np.diag(r[a]))
+                f.pending = (z[a].copy(), hx, H_f[a].copy(), np.diag(r_f[a]))
                 ll = kv.log_likelihood(nu_f, S_f, acc, ma)
                 f._lik = float(kv.likelihood(ll, cfg[kv.VC_LIK_FLOOR]))
         if imm_on:

@@ -3,9 +3,9 @@
 ``band_table`` runs the four vehicle filters (``vehicle_kinematic``, ``vehicle_dynamic``,
 ``vehicle_switched``, ``vehicle_imm``) over one dataset, nominally and with periodic GNSS
 outages, and tabulates per true-speed band the RMS horizontal position, heading, sideslip and
-speed errors. ``acceptance`` checks that the switched and IMM filters are, in every band, as
-good as the better single model (within ``tol_m`` or ``tol_rel``, whichever is larger).
-``band_figure`` draws the horizontal RMS per band (one panel per scenario).
+speed errors. Whether the switched and IMM filters are as good as the better single model is a
+paired Monte Carlo over noise realizations (``vehicle_paired``). ``band_figure`` draws the
+horizontal RMS per band (one panel per scenario).
 """
 
 from __future__ import annotations
@@ -60,28 +60,6 @@ def band_table(
                          "dynamic_share": float(np.mean(res.aux))}
                     )  # fmt: skip
     return rows
-
-
-def acceptance(
-    rows: list[dict[str, Any]], *, tol_m: float = 0.02, tol_rel: float = 0.10
-) -> list[dict[str, Any]]:
-    """Per scenario and band: is each of switched / IMM within tolerance of the better model?"""
-    out = []
-    keyed = {(r["scenario"], r["subset"], r["band_lo_mps"], r["filter"]): r for r in rows}
-    for scen, subset, lo in sorted({(r["scenario"], r["subset"], r["band_lo_mps"]) for r in rows}):
-        single = [keyed[(scen, subset, lo, f)]["pos_h_rms_m"] for f in VEHICLE_FILTERS[:2]]
-        if any(v is None for v in single):
-            continue
-        best = min(single)
-        limit = best + max(tol_m, tol_rel * best)
-        for f in VEHICLE_FILTERS[2:]:
-            got = keyed[(scen, subset, lo, f)]["pos_h_rms_m"]
-            out.append(
-                {"scenario": scen, "subset": subset, "band_lo_mps": lo, "filter": f,
-                 "pos_h_rms_m": got, "best_single_m": best, "limit_m": limit,
-                 "ok": bool(got <= limit)}
-            )  # fmt: skip
-    return out
 
 
 def band_figure(rows: list[dict[str, Any]], path: Path, dpi: int = 110) -> None:

@@ -15,9 +15,10 @@ The contract, ``<name>/section.json`` (every key but ``title`` optional)::
      "figures": [{"title": "...", "file": "bands.svg", "caption": "..."}]}   .svg or .png
 
 A directory without ``section.json`` is rendered generically: each ``*.csv`` a table (the
-first ``sections.MAX_TABLE_ROWS`` rows on the page; every CSV is copied whole to
-``reports/<id>/tables/experiments/<name>/``) and each ``*.svg``/``*.png`` (also in a
-``figures/`` sub-directory; an SVG wins over a PNG of the same name) a figure, in name order.
+first ``sections.MAX_TABLE_ROWS`` rows on the page; every CSV, and the JSON of the same
+name beside it, is copied whole to ``reports/<id>/tables/experiments/<name>/``) and each
+``*.svg``/``*.png`` (also in a ``figures/`` sub-directory; an SVG wins over a PNG of the same
+name) a figure, in name order.
 Each ``*.md`` file of a generic directory is a note rendered as prose (``markdown``).
 
 The outages stage (issue 6) writes the dataset-level results the report shows in their own

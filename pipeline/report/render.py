@@ -183,6 +183,8 @@ def render_dataset(
                 dest = tmp / "tables" / "experiments" / e.name / t.path.name
                 dest.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(t.path, dest)
+                if t.path.with_suffix(".json").is_file():  # the same rows as JSON
+                    shutil.copyfile(t.path.with_suffix(".json"), dest.with_suffix(".json"))
         for table, name in ((outage.sat_reduction, SAT_REDUCTION_NAME), (outage.drift, DRIFT_NAME)):
             if table is not None:
                 shutil.copyfile(table.path, tmp / "tables" / name)

@@ -13,7 +13,9 @@ east of the run's local origin.
 road-wheel steering angle, rad (positive = right turn, FRD).
 
 **Measurements** (eq. 20): GPS speed ``v``, yaw rate, GPS course ``beta + psi`` (residual
-wrapped to (-pi, pi]), GPS ``X`` and ``Y``.
+wrapped to (-pi, pi]), GPS ``X`` and ``Y``. The dynamic model's yaw rate depends on the
+steering input directly (``yaw_rate_steer_sens``), so the steering noise is part of that
+row's measurement variance (``kernels.vehicle.epoch_values``).
 
 Both models step with ``dt`` (the actual spacing of the vehicle samples) and hold ``u``
 constant over the step:
@@ -116,6 +118,17 @@ def yaw_rate_jac(model: int, x: F64, delta: float, vp: F64, out: F64) -> None:
     _, _, c1d, c2d, _ = dyn_coefficients(x[X_V], vp)
     out[X_V] = c1d * delta + c2d * x[X_BETA]
     out[X_BETA] = x[X_V] * c2d
+
+
+@nb.njit(cache=True)
+def yaw_rate_steer_sens(model: int, x: F64, delta: float, vp: F64) -> float:
+    """d yaw_rate / d delta, (rad/s)/rad: how the steering input's own noise enters a yaw-rate
+    prediction (``v c1 / D`` for the dynamic model, whose yaw rate is set by the steering of
+    the same sample; 0 for the kinematic one, whose yaw rate follows the sideslip state)."""
+    if model == KINEMATIC:
+        return 0.0
+    _, _, c1d, _, _ = dyn_coefficients(x[X_V], vp)
+    return float(x[X_V] * c1d)
 
 
 @nb.njit(cache=True)
