@@ -36,9 +36,10 @@ first state the yaw rate and the entry ``K_R w_n^2``, as the simulator
 of eq. 14 for the actual step (``ctl_discretize``, computed with the controller's own
 ``lqr.discretize`` and cached per step length).
 
-**Noise**: ``Q`` is diagonal, Table 1's variances accumulated over ``noise_interval_s`` (the
-paper's "discretized process noise covariance" per 0.02 s step) and scaled linearly to the
-actual step; ``R`` is diagonal, Table 2's variances.
+**Noise**: ``Q`` is diagonal, Table 1's variances accumulated over ``noise_interval_s`` and
+scaled linearly to the actual step, ``Q = q dt / noise_interval_s`` (with 1 s: Table 1 as
+continuous densities discretized to first order, the reading ``config`` argues for; with
+0.02 s: Table 1 as the variance of one paper step); ``R`` is diagonal, Table 2's variances.
 """
 
 from __future__ import annotations

@@ -3,9 +3,12 @@
 Layout of ``OUT`` (``navreplay experiment tractor_cascaded --out OUT``; the dvc stage writes
 ``datasets/tractor_straight/experiments/tractor_cascaded``)::
 
+    vs_paper.md             the paper's claims beside ours, one column per reading of
+                            Table 1, with the mechanism checks (``note``)
     summary.json            every aggregate: stats and paired differences per label,
                             scenario and metric; the paper comparison; the mechanism checks
-    paper_comparison.csv    claim, paper, metric, n, mean, ci_low, ci_high, verdict, note
+    paper_comparison.csv    claim, reading (of Table 1), paper, metric, n, mean, ci_low,
+                            ci_high, verdict, note
     convergence.csv         label, bias, band, runs, converged, mean_s, ci_low_s, ci_high_s
     tracking.csv            nominal scenario: label, metric, n, mean, std, ci_low, ci_high
     outage_drift.csv        label, scenario, outage_s, metric, n, mean, std, ci_low, ci_high
@@ -34,9 +37,14 @@ from ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
 from ingest.typed import to_plain
 from pipeline.estimation.cascaded.metrics import BIASES
 from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
-from pipeline.experiments.tractor_cascaded.comparison import mechanisms, paper_comparison
+from pipeline.experiments.tractor_cascaded.comparison import (
+    mechanisms,
+    paper_comparison,
+    reading_name,
+)
 from pipeline.experiments.tractor_cascaded.config import BASELINE, NOMINAL
 from pipeline.experiments.tractor_cascaded.figures import draw_all
+from pipeline.experiments.tractor_cascaded.note import vs_paper
 from pipeline.experiments.tractor_cascaded.runs import (
     ExperimentInputs,
     RunSummary,
@@ -83,9 +91,9 @@ def write_tables(
     stats = summary["stats"]
     paths: list[Path] = []
     p = out / "paper_comparison.csv"
-    write_csv(p, ("claim", "paper", "metric", *_STAT_COLS, "verdict", "note"),
-              ([r["claim"], r["paper"], r["metric"], *_stat_row(r["ours"]), r["verdict"],
-                r["note"]] for r in comparison))  # fmt: skip
+    write_csv(p, ("claim", "reading", "paper", "metric", *_STAT_COLS, "verdict", "note"),
+              ([r["claim"], r["reading"], r["paper"], r["metric"], *_stat_row(r["ours"]),
+                r["verdict"], r["note"]] for r in comparison))  # fmt: skip
     paths.append(p)
     rows = []
     for label, by_scen in stats.items():
@@ -205,7 +213,8 @@ def write_experiment(
     summary = summarize(runs, exp)
     ukf = inputs.sections.get("cascaded_ukf")
     mech = mechanisms(summary, exp, sim, ukf)
-    comparison = paper_comparison(summary, exp, mech)
+    interval = inputs.sections[BASELINE].process_noise.interval_s
+    comparison = paper_comparison(summary, exp, mech, interval)
     scenarios = exp.scenarios()
     outage_lengths = {s: w[0][1] - w[0][0] for s, w in scenarios.items() if w}
     series: dict[str, dict[str, Any]] = {s: {} for s in scenarios}
@@ -228,6 +237,9 @@ def write_experiment(
             **summary,
         }
         write_json(tmp / "summary.json", doc)
+        atomic_write_text(tmp / "vs_paper.md", vs_paper(summary, comparison, mech, exp, interval))
         write_json(tmp / "timing.json", timing(runs, sim.steps + 1, sim.dt_s))
-        draw_all(series, summary, labels(exp), bands, tmp / "figures", dpi)
+        draw_all(
+            series, summary, labels(exp), bands, tmp / "figures", dpi, reading_name("", interval)
+        )
     return doc

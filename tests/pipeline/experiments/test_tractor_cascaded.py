@@ -56,17 +56,27 @@ def test_the_experiment_writes_its_tables_and_figures_byte_stable_for_any_worker
                      "outage_drift.csv", "paired.csv", "runs.csv", "timeseries_nominal.csv",
                      "timeseries_outage_3s.csv", "timing.json", "figures/tracking.png",
                      "figures/tracking.svg", "figures/outage_outage_3s.svg",
-                     "figures/monte_carlo.png"):  # fmt: skip
+                     "figures/monte_carlo.png", "vs_paper.md"):  # fmt: skip
         assert expected in names
     for rel in files:
         if rel.name != "timing.json":  # wall-clock, the only machine-dependent file
             assert (tmp_path / "w1" / rel).read_bytes() == (tmp_path / "w2" / rel).read_bytes()
     doc = docs[0]
     assert doc["labels"] == ["cascaded_ekf", "cascaded_ekf_psi_d", "cascaded_ukf",
-                             "cascaded_hybrid", "cascaded_ekf@q1s", "cascaded_ukf@q1s",
-                             "cascaded_hybrid@q1s"]  # fmt: skip
+                             "cascaded_hybrid", "cascaded_ekf@q0.02s", "cascaded_ukf@q0.02s",
+                             "cascaded_hybrid@q0.02s"]  # fmt: skip
     runs = list(csv.DictReader((tmp_path / "w1" / "runs.csv").open()))
-    assert len(runs) == 2 * (7 + 3)  # every label nominal, the three filters in the outage
+    assert len(runs) == 2 * (7 + 6)  # every label nominal, all but psi_d in the outage
+    readings = [r["reading"] for r in doc["paper_comparison"]]
+    assert readings[:2] == ["Table 1 per second (default)", "Table 1 per 0.02 s step (literal)"]
+    assert readings.count(readings[0]) == readings.count(readings[1]) == len(readings) // 2
+    note = (tmp_path / "w1" / "vs_paper.md").read_text()
+    assert "| Table 1 per second (default) | Table 1 per 0.02 s step (literal) |" in note
+    m = "pos_err_n_rms_m"  # a variant is paired with the EKF of its own reading
+    st = {lb: doc["stats"][lb]["nominal"][m]["mean"] for lb in doc["labels"]}
+    paired = doc["paired"]["cascaded_ukf@q0.02s"]["nominal"][m]["mean"]
+    assert paired == pytest.approx(st["cascaded_ukf@q0.02s"] - st["cascaded_ekf@q0.02s"])
+    assert st["cascaded_ekf@q0.02s"] != st["cascaded_ekf"]
     verdicts = {r["verdict"] for r in doc["paper_comparison"]}
     assert verdicts <= {"reproduced", "contradicted", "not distinguishable",
                         "no practical difference", "not measurable"}  # fmt: skip

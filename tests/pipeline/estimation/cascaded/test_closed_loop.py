@@ -1,6 +1,7 @@
-"""Closed loop (paper 000 section 9): the LQR on each filter's estimates tracks the line, the
-biases converge within the band; where the UKF's radar bias does not, the unscented
-second-order term accounts for it."""
+"""Closed loop (paper 000 section 9): the LQR on each filter's estimates tracks the line and
+every filter's four biases converge within the band (params.yaml: Table 1 read per second);
+the UKF's radar-bias offset is the unscented second-order term under either reading of
+Table 1 (with it per 0.02 s step the offset leaves the band)."""
 
 from __future__ import annotations
 
@@ -50,36 +51,55 @@ def test_the_closed_loop_brings_the_3_m_step_back_to_the_line(
 def test_each_filters_biases_converge_within_the_band_on_the_nominal_run(
     name: str, nominal: dict[str, ClosedLoopRun], sections: dict[str, CascadedFilterParams]
 ) -> None:
-    """Every bias of the EKF and the hybrid, and the UKF's gyro, heading and steer biases
-    (its radar bias: next test)."""
+    """r_b, g_b, psi_b and delta_b of every filter enter the band of its section and stay
+    there to the end, within 20 s (the paper: about 20 s for the EKF)."""
     run = nominal[name]
     conv = bias_convergence(run.t_s, run.result.x, run.truth_x, sections[name].convergence_band)
-    expected = [b for b, _ in BIASES if not (name == "cascaded_ukf" and b == "radar_bias_mps")]
-    for bias in expected:
-        t_conv = conv[bias]
+    assert set(conv) == {b for b, _ in BIASES}
+    for bias, t_conv in conv.items():
         assert t_conv is not None, bias
-        assert t_conv < 40.0, bias
+        assert t_conv < 20.0, bias
 
 
+def with_interval(section: CascadedFilterParams, interval_s: float) -> CascadedFilterParams:
+    pn = dataclasses.replace(section.process_noise, interval_s=interval_s)
+    return dataclasses.replace(section, process_noise=pn)
+
+
+@pytest.mark.parametrize("interval_s", [None, 0.02])
 def test_the_ukf_radar_bias_settles_where_the_unscented_second_order_term_puts_it(
     nominal: dict[str, ClosedLoopRun],
     sections: dict[str, CascadedFilterParams],
     sim_params: TractorStraightParams,
+    interval_s: float | None,
 ) -> None:
     """With alpha = 1e-3 the UKF's predicted North step is ``(V - r_b)(1 - P_psipsi / 2)``,
     ``P_psipsi`` the posterior heading variance its sigma points are drawn from; GPS pins
-    North, so the radar-bias estimate absorbs the factor: its error is
-    ``-V (1 / (1 - P_psipsi / 2) - 1)``, -0.25 m/s with Table 1 (outside the 0.04 m/s band:
-    the paper's claim of a faster UKF radar bias is not reproduced)."""
-    run = nominal["cascaded_ukf"]
-    settled = run.t_s >= 20.0
-    err = np.mean(run.result.x[settled, NAV_RB] - run.truth_x[settled, NAV_RB])
-    p_psi = np.mean(run.result.P[settled, 0, NAV_PSI, NAV_PSI])
+    North, so the radar-bias estimate absorbs the factor: its offset from the EKF's (same
+    seed) is ``-V (1 / (1 - P_psipsi / 2) - 1)``. With Table 1 per second (params.yaml,
+    ``interval_s`` None) that is -0.006 m/s, inside the 0.04 m/s band; with Table 1 per 0.02 s
+    step, -0.25 m/s, far outside it."""
+    if interval_s is None:
+        ukf, ekf = nominal["cascaded_ukf"], nominal["cascaded_ekf"]
+    else:
+        ukf, ekf = (
+            run_closed_loop(make_setup(n, with_interval(sections[n], interval_s)), sim_params,
+                            2026)
+            for n in ("cascaded_ukf", "cascaded_ekf")
+        )  # fmt: skip
+    settled = ukf.t_s >= 20.0
+    err_ukf, err_ekf = (
+        np.mean(r.result.x[settled, NAV_RB] - r.truth_x[settled, NAV_RB]) for r in (ukf, ekf)
+    )
+    p_psi = np.mean(ukf.result.P[settled, 0, NAV_PSI, NAV_PSI])
     predicted = -sim_params.speed_mps * (1.0 / (1.0 - p_psi / 2.0) - 1.0)
-    assert err == pytest.approx(predicted, rel=0.05)
-    assert abs(err) > 5 * sections["cascaded_ukf"].convergence_band.radar_bias_mps
-    ekf = nominal["cascaded_ekf"]
-    assert abs(np.mean(ekf.result.x[settled, NAV_RB] - ekf.truth_x[settled, NAV_RB])) < 0.04
+    assert err_ukf - err_ekf == pytest.approx(predicted, rel=0.1)
+    band = sections["cascaded_ukf"].convergence_band.radar_bias_mps
+    assert abs(err_ekf) < band
+    if interval_s is None:
+        assert abs(err_ukf) < band / 4
+    else:
+        assert abs(err_ukf) > 5 * band
 
 
 def test_scenarios_forked_after_the_common_prefix_equal_separate_runs(
