@@ -31,6 +31,22 @@ so recent measurements weigh more), NS (alpha < 1) trusts the model more when th
 mean is large without a matching covariance increase (a measurement bias, which the paper's
 controller is meant to detect). A consequent may also grow linearly with ``cov``
 (``cov_slope``: the paper's "linear combination of the input variable covariance").
+
+What is *our reading*, not the paper's text (the paper gives eq. 29-32, Table 1 and
+"Gaussian" memberships; its Fig. 3, the membership functions, is not readable in the text
+we have, and it states no window, no normalisation and no consequent values):
+
+- the residuals are normalized by the unweighted prior innovation covariance of eq. 28
+  (``S = H P- H^T + R``, R as declared), per component, position and velocity rows;
+- the two inputs are the excesses over a consistent filter defined above (the
+  ``sqrt(N)`` scaling of the mean and the ``- 1`` offsets are ours); a consequence: with
+  white residuals of scale ``s`` the mean input is about ``s - 1``, so a large white
+  residual (an optimistic receiver, fault F8) reads as a Large mean, like a bias;
+- the window (10 fixes), the centres and widths of the Zero/Small/Large sets, the
+  shoulders of the outer sets, the consequents as increments of alpha and their values,
+  and the bounds on alpha are ours (``FuzzyParams`` defaults = params.yaml
+  ``filters.fwekf.fuzzy``), chosen so that consistent residuals give alpha = 1 and never
+  tuned to reproduce the paper's curves.
 """
 
 from __future__ import annotations

@@ -3,9 +3,12 @@
 ``run_fwekf_filterpy`` takes the arguments of ``kernels.fwekf.run_fwekf``. The span
 propagation, transition, measurement front end (gating, resets, recording), residual ring and
 fuzzy system are the shared code; filterpy's ``KalmanFilter`` on the error state does the
-estimator arithmetic, including the fading memory: its ``alpha`` attribute is exactly
-paper 004 eq. 26 (``P- = alpha^2 F P F^T + Q``), set to the fuzzy alpha at the stops that
-carry a fix and to 1 elsewhere.
+estimator arithmetic of paper 004 eq. 24-27 (see ``kernels.fwekf``): its predict is given
+``F = alpha Phi``, so that ``F P F^T + Q`` is eq. 26 (``alpha^2 Phi P Phi^T + Q``; the error
+state is zero before the predict, so ``F x`` is unaffected; filterpy's own fading ``alpha``
+refuses the values below 1 that Table 1's NS rule produces), and its update (Joseph form) is
+given ``R / alpha^2``, the measurement covariance of the weighted gain of eq. 24. Both use
+the fuzzy alpha at the stops that carry a fix and 1 elsewhere.
 """
 
 from __future__ import annotations
@@ -50,8 +53,8 @@ def run_fwekf_filterpy(
         t = int(stop[me.ST_T])
         run.advance(run.span(X, t, True), t)
         ins_errors.transition(X, run.acc, noise, n, Phi, Qd)
-        kf.F, kf.Q = Phi.copy(), Qd.copy()
-        kf.alpha = alpha if stop[me.ST_FIX] >= 0 else 1.0
+        a_k = alpha if stop[me.ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
+        kf.F, kf.Q = a_k * Phi, Qd.copy()  # eq. 26: (a Phi) P (a Phi)^T + Q
         kf.x = np.zeros(n)
         kf.predict()
         m, nb_ = run.layout(stop)
@@ -68,7 +71,8 @@ def run_fwekf_filterpy(
             if ma > 0:
                 a = acc_rows[:ma]
                 kf.dim_z = ma
-                kf.update(nu[a].copy(), R=np.diag(r[a]), H=H[a, :n].copy())
+                R_w = np.diag(r[a]) / (a_k * a_k)  # eq. 24: R / alpha^2 in gain and Joseph
+                kf.update(nu[a].copy(), R=R_w, H=H[a, :n].copy())
                 ins.inject(X, np.asarray(kf.x, dtype=float).reshape(n), n)
                 kf.x = np.zeros(n)
             if stop[me.ST_FIX] >= 0:

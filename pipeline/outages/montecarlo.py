@@ -46,6 +46,8 @@ from pipeline.scenarios.windows import NS
 
 log = logging.getLogger(__name__)
 
+SKIPPED = "skipped.json"  # in a filter's Monte Carlo folder instead of windows.parquet
+
 
 @dataclass(frozen=True)
 class Case:

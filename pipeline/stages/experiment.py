@@ -10,9 +10,11 @@ Experiments (pure functions in pipeline/experiments/):
                      synth.seed + experiments.vehicle_bands.calibration_seed_offset + i);
                      params.yaml filters.vehicle_switched.switching holds its result
   fwekf_convergence  paper 004: EKF against FWEKF from the same start, noisy and noise-free
-                     (--tables: fwekf_reference, --tables-noise-free: fwekf_reference_noise_free)
+                     (--tables: fwekf_reference, --tables-noise-free: fwekf_reference_noise_free;
+                     convergence.csv/png, convergence_note.md: the paper's figures beside ours)
   fwekf_faults       paper 004 on seoul_campus: nominal, F7 multipath burst, F8 optimistic
-                     accuracy, outages (--tables: seoul_campus_cw)
+                     accuracy, outages, lc_ekf / lc_ekf_white (alpha = 1) / fwekf (--tables:
+                     seoul_campus_cw; faults.csv, faults_note.md: where the weighting helps)
   vehicle_smartloc   paper 003 on the real smartLoc drive: least-squares fixes from the
                      pseudoranges, the four vehicle filters with and without outages
                      (--tables: `navreplay ingest` of the smartLoc Input and GT files)
@@ -89,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
     from ingest.atomic import atomic_write_text
     from pipeline.experiments import (
         fwekf_faults,
+        fwekf_notes,
         fwekf_paper,
         vehicle_bands,
         vehicle_paired,
@@ -140,6 +143,8 @@ def run(args: argparse.Namespace) -> int:
                     cases[case] = runs
         write_rows(out, "convergence", rows)
         fwekf_paper.convergence_figure(cases, out / "convergence.png", dpi)
+        fz = params.filters.fwekf.fuzzy
+        atomic_write_text(out / "convergence_note.md", fwekf_notes.convergence_note(rows, fz))
         print(f"fwekf_convergence: {len(rows)} rows -> {out}")
     elif args.name == "vehicle_smartloc":
         rows = vehicle_smartloc.smartloc_rows(tables, params.filters)
@@ -148,6 +153,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         rows = fwekf_faults.fault_rows(tables, sensors, params.filters, params.synth.seed)
         write_rows(out, "faults", rows)
+        fz = params.filters.fwekf.fuzzy
+        atomic_write_text(out / "faults_note.md", fwekf_notes.faults_note(rows, fz))
         print(f"fwekf_faults: {len(rows)} rows -> {out}")
     return 0
 

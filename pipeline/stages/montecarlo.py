@@ -7,6 +7,9 @@ before the window (see pipeline/outages/montecarlo.py), spread over outages.work
 processes. Writes DIR atomically: windows.parquet (one row per window start and case: seed,
 window, start_s, length_s, sats, the window's drift metrics), plan.json (the draw and the
 parameters) and timing.json (wall and replay times; the only file that is not byte-stable).
+With --skip-unfit, a filter the tables cannot drive (a tightly coupled one on a log without
+raw observables) writes DIR/skipped.json with the reason instead, and `navreplay outages`
+leaves it, and the pairs that need it, out of the tables.
 
 examples:
   navreplay montecarlo datasets/seoul_campus_cw/tables --filter tc_ukf \\
@@ -32,6 +35,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--backend", choices=("numba", "filterpy"), help="override run.backend from the params"
     )
     parser.add_argument("--workers", type=int, help="override outages.workers")
+    parser.add_argument(
+        "--skip-unfit",
+        action="store_true",
+        help="if the tables cannot drive this filter (a tightly coupled one without raw "
+        "observables), write DIR/skipped.json with the reason and exit 0 instead of failing",
+    )
     parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output dir")
 
 
@@ -40,7 +49,13 @@ def run(args: argparse.Namespace) -> int:
 
     from ingest.atomic import atomic_directory, atomic_write_json
     from ingest.typed import to_plain
-    from pipeline.outages.montecarlo import cases_for, draw_starts, run_montecarlo, windows_table
+    from pipeline.outages.montecarlo import (
+        SKIPPED,
+        cases_for,
+        draw_starts,
+        run_montecarlo,
+        windows_table,
+    )
     from pipeline.outages.runs import Inputs
     from pipeline.params import load_params
     from pipeline.scenarios.apply import log_span
@@ -53,6 +68,18 @@ def run(args: argparse.Namespace) -> int:
         raise ParamsError(
             f"filters.{args.filter}", str(err.args[0]), source=str(args.params)
         ) from err
+    if args.skip_unfit:
+        from pipeline.analyze import plan as fit_plan
+
+        _, unfit = fit_plan(args.tables, [args.filter])
+        if unfit:
+            reason = unfit[0].reason
+            with atomic_directory(args.out) as tmp:
+                atomic_write_json(
+                    tmp / SKIPPED, {"filter": args.filter, "status": "skipped", "reason": reason}
+                )
+            print(f"{args.filter}: skipped ({reason}) -> {args.out}")
+            return 0
     inputs = Inputs.read(args.tables)
     t0, t_end = log_span(inputs.tables)
     cases = cases_for(o.sats, o.sats_window_s, o.lengths_s)

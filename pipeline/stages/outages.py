@@ -12,7 +12,9 @@ writes into DIR (each file atomically):
   sat_reduction_vs_paper.md   our tc_ukf -> tc_ukf_nhc row beside paper 001's Table 1, with
                               the measurements that explain the difference (JSON: in
                               sat_reduction.json under "paper_comparison")
-Both tables are printed, the reduction beside the paper's values.
+Both tables are printed, the reduction beside the paper's values. A filter whose Monte Carlo
+folder holds skipped.json (`navreplay montecarlo --skip-unfit`: the tables cannot drive it)
+is left out, with the pairs that need it; the JSON says which and why.
 
 examples:
   navreplay outages datasets/seoul_campus_cw/montecarlo --tables datasets/seoul_campus_cw/tables \\
@@ -22,8 +24,12 @@ examples:
 from __future__ import annotations
 
 import argparse
+import json
 import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from pipeline.errors import PipelineError
 
@@ -42,7 +48,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import pyarrow as pa
     import pyarrow.parquet as pq
 
     from ingest.atomic import atomic_write_json, atomic_write_text
@@ -62,12 +67,13 @@ def run(args: argparse.Namespace) -> int:
 
     params = load_params(args.params)
     o = params.outages
-    windows: dict[str, pa.Table] = {}
-    for name in o.filters:
-        path = args.montecarlo / name / "windows.parquet"
-        if not path.is_file():
-            raise PipelineError(f"{path}: missing; run `navreplay montecarlo ... --filter {name}`")
-        windows[name] = pq.read_table(path)
+    windows, skipped = _read_windows(args.montecarlo, o.filters)
+    # filters the tables could not drive, and the pairs that need them, are left out
+    o = replace(
+        o,
+        filters=tuple(f for f in o.filters if f in windows),
+        pairs=tuple(p for p in o.pairs if p[0] in windows and p[1] in windows),
+    )
     reduction = sat_reduction(windows, o)
     drift = drift_vs_length(windows, o)
     truth, imu_noise, dataset = None, None, args.montecarlo.parent.name
@@ -103,14 +109,53 @@ def run(args: argparse.Namespace) -> int:
             "outages": to_plain(o),
             "rows": reduction,
             "paper_comparison": cmp,
+            "skipped": skipped,
         },
     )
     atomic_write_text(out / "drift_vs_length.csv", csv_text(drift, DRIFT_COLUMNS))
     atomic_write_json(out / "drift_vs_length.json", {"dataset": dataset, "rows": drift})
-    atomic_write_text(out / "sat_reduction_vs_paper.md", paper.markdown(cmp, dataset))
+    note = paper.markdown(cmp, dataset) if reduction else _no_pairs_note(dataset, skipped)
+    atomic_write_text(out / "sat_reduction_vs_paper.md", note)
+    for name, reason in skipped.items():
+        print(f"{dataset}: {name} skipped ({reason}); its pairs are left out")
     print(f"{dataset}: error reduction per satellite count ({method})")
     print(reduction_text(reduction))
     print(f"\n{dataset}: drift against complete-outage length")
     print(drift_text(drift))
     print(f"-> {out}")
     return 0
+
+
+def _read_windows(
+    montecarlo: Path, filters: Sequence[str]
+) -> tuple[dict[str, Any], dict[str, str]]:
+    """Each filter's ``windows.parquet`` by name, and the reasons of the skipped ones."""
+    import pyarrow.parquet as pq
+
+    from pipeline.outages.montecarlo import SKIPPED
+
+    windows: dict[str, Any] = {}
+    skipped: dict[str, str] = {}
+    for name in filters:
+        path = montecarlo / name / "windows.parquet"
+        skip = montecarlo / name / SKIPPED
+        if skip.is_file():
+            skipped[name] = str(json.loads(skip.read_text())["reason"])
+        elif path.is_file():
+            windows[name] = pq.read_table(path)
+        else:
+            raise PipelineError(f"{path}: missing; run `navreplay montecarlo ... --filter {name}`")
+    return windows, skipped
+
+
+def _no_pairs_note(dataset: str, skipped: Mapping[str, str]) -> str:
+    lines = [
+        f"# {dataset}: error reduction per satellite count against paper 001",
+        "",
+        "No pair of `outages.pairs` could run on this dataset:",
+        "",
+        *(f"- {name}: {reason}" for name, reason in skipped.items()),
+        "",
+        "The drift of the other filters against outage length is in drift_vs_length.csv.",
+    ]
+    return "\n".join(lines) + "\n"

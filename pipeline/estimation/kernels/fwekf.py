@@ -1,15 +1,38 @@
 """The fuzzy-adaptive weighted EKF of paper 004 (``fwekf``), compiled whole with numba.
 
 The loosely coupled error-state EKF of ``kernels.ekf`` (same propagation, same measurement
-front end ``ekf_prepare``, same Joseph update) with exponential data weighting (paper 004
-eq. 21-27): at every stop that carries a GNSS fix the prior covariance is
+front end ``ekf_prepare``, same Joseph update) with the exponential data weighting of paper
+004 section 3.2, quoted from the paper (``../shared/papers/004_d39d0dffc633ab38.txt``)::
 
-    P- = alpha^2 Phi P Phi^T + Q                                             (eq. 26)
+    R_k = R alpha^(-2(k+1))                                                   (21)
+    Q_k = Q alpha^(-2(k+1))                                                   (22)
+    P_k^(alpha-) = P_k^- alpha^(2k)                                           (23)
+    K_k = P_k^(alpha-) H_k^T (H_k P_k^(alpha-) H_k^T + R / alpha^2)^-1         (24)
+    x_k = x_k^- + K_k (z_k - z^_k)                                            (25)
+    P_(k+1)^(alpha-) = alpha^2 Phi_k P_k^(alpha-) Phi_k^T + Q                 (26)
+    P_k^alpha = (I - K_k H_k) P_k^(alpha-)                                    (27)
 
-so the filter forgets old information at a rate set by ``alpha`` once per measurement cycle
-(alpha = 1 is the plain EKF). After each fix's update, the normalized innovations
-``nu / sqrt(S_ii)`` (prior covariance) of its position and velocity rows, accepted by the gate
-or not (the paper's fuzzy system is what judges the residuals; a gate that hid the rejected
+Eq. 21-23 make the weighted filter a plain Kalman filter whose noise covariances grow as
+``alpha^-2(k+1)`` (old data weigh ``alpha^-2`` per cycle relative to newer data); in the
+scaled covariance ``P^alpha`` that filter has the faded prior of eq. 26 *and* the measurement
+covariance ``R / alpha^2`` in its gain (eq. 24). Both are applied here, once per measurement
+cycle (a stop that carries a GNSS fix; ``alpha = 1`` is the plain EKF, and the stops without
+a fix use ``alpha = 1``):
+
+- ``fade_prior``: ``P- = alpha^2 Phi P Phi^T + Qd`` (eq. 26);
+- ``weighted_update``: the gain with ``R / alpha^2`` (eq. 24) and the covariance update in
+  Joseph form with the same ``R / alpha^2``, ``P = (I - K H) P- (I - K H)^T + K (R / alpha^2)
+  K^T``, which equals eq. 27 for that gain and stays symmetric positive definite.
+
+A constant alpha thus inflates the prior relative to R by ``alpha^4`` per cycle, not
+``alpha^2`` (``tests/.../test_fwekf.py`` proves the equivalence with eq. 21-23 by hand).
+
+Gating and the fuzzy inputs use the unweighted innovation covariance ``S = H P- H^T + R``
+(eq. 28: the residual covariance the fuzzy system compares against has ``R`` unscaled), so
+the chi-square gate keeps its meaning and the residual statistics judge the receiver's
+declared accuracy, not the weighting. Our reading: after each fix's update, the normalized
+innovations ``nu / sqrt(S_ii)`` of its position and velocity rows, accepted by the gate or
+not (the paper's fuzzy system is what judges the residuals; a gate that hid the rejected
 ones would blind it to exactly the faults it is meant to detect), enter a ring of the last
 ``window`` epochs; the fuzzy system (``estimation.fuzzy``: eq. 29-32, Table 1) turns the
 ring's mean and covariance into the alpha of the next cycle.
@@ -45,6 +68,42 @@ from pipeline.estimation.models.measurement import K_PR, ST_FIX, ST_OUT, ST_T, e
 from pipeline.nav.earth import F64, I64
 
 RING_COLS = 6  # north, east, down position; north, east, down velocity
+
+
+@nb.njit(cache=True)
+def fade_prior(P: F64, Phi: F64, Qd: F64, alpha: float) -> None:
+    """Paper 004 eq. 26 in place: ``P <- alpha^2 Phi P Phi^T + Qd``."""
+    P[:, :] = (alpha * alpha) * (Phi @ P @ Phi.T) + Qd
+
+
+@nb.njit(cache=True, error_model="numpy")
+def weighted_update(
+    P: F64, n: int, H: F64, S: F64, r: F64, nu: F64, acc_rows: I64, ma: int, alpha: float
+) -> tuple[F64, bool]:
+    """The weighted-EKF update (paper 004 eq. 24, 25, 27) of the accepted rows.
+
+    Args:
+        P: (n, n) weighted prior ``P^(alpha-)``, updated in place.
+        H, nu: (m_max, n) Jacobian and (m_max,) innovations (``ekf_prepare``).
+        S: (m_max, m_max) unweighted innovation covariance ``H P H^T + diag(r)``.
+        r: (m_max,) measurement variances ``R`` as declared.
+        acc_rows, ma: the accepted rows.
+        alpha: the fading factor of this cycle (> 0).
+
+    Returns:
+        (dx, ok) as ``kernels.ekf.joseph_update``, whose Joseph form is used with ``R / alpha^2``
+        both in the gain ``K = P H^T (H P H^T + R / alpha^2)^-1`` and in ``K R K^T / alpha^2``.
+    """
+    inv2 = 1.0 / (alpha * alpha)
+    m = r.shape[0]
+    r_w = np.empty(m)
+    S_w = S.copy()
+    for k in range(m):
+        r_w[k] = r[k] * inv2
+    for i in range(ma):
+        k = acc_rows[i]
+        S_w[k, k] += r_w[k] - r[k]
+    return joseph_update(P, n, H, S_w, r_w, nu, acc_rows, ma)
 
 
 @nb.njit(cache=True)
@@ -112,8 +171,8 @@ def run_fwekf(
         u[:] = u_end
         t_cur = t
         transition(X, acc, noise, n, Phi, Qd)
-        fading = alpha * alpha if stop[ST_FIX] >= 0 else 1.0
-        P[:, :] = fading * (Phi @ P @ Phi.T) + Qd
+        a_k = alpha if stop[ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
+        fade_prior(P, Phi, Qd, a_k)
         m, nb_ = epoch_layout(stop, fix, obs, obs_start, nhc_on, rows, blocks)
         if m > 0:
             ma = ekf_prepare(
@@ -121,7 +180,7 @@ def run_fwekf(
                 cfg, reject_since, z, r, nu, H, S, acc_rows, inn_i, inn_f, ev_i, ev_f, counts,
             )  # fmt: skip
             if ma > 0:
-                dx, ok = joseph_update(P, n, H, S, r, nu, acc_rows, ma)
+                dx, ok = weighted_update(P, n, H, S, r, nu, acc_rows, ma, a_k)
                 if ok:
                     inject(X, dx, n)
             if stop[ST_FIX] >= 0:

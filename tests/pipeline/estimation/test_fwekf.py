@@ -1,15 +1,23 @@
-"""The FWEKF of paper 004 on its reference motion: convergence, the paper's setting, faults."""
+"""The FWEKF of paper 004: the weighted update (eq. 21-27), both backends, the reference motion."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 import pytest
 
+from ingest.meta import SensorMeta
+from pipeline.estimation.config import FiltersParams
+from pipeline.estimation.kernels.fwekf import fade_prior, weighted_update
+from pipeline.estimation.models import ins
+from pipeline.estimation.replay import run_filter
+from pipeline.experiments.fwekf_faults import optimistic_accuracy
 from pipeline.experiments.fwekf_paper import convergence_rows, run_case
 from pipeline.params import Params, load_params
 from pipeline.synth import fwekf
+from tests.pipeline.estimation.conftest import seoul
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -17,6 +25,81 @@ REPO = Path(__file__).resolve().parents[3]
 @pytest.fixture(scope="module")
 def params() -> Params:
     return load_params(REPO / "params.yaml")
+
+
+def _weighted_step(P: np.ndarray, H: np.ndarray, r: float, nu: float, alpha: float) -> np.ndarray:
+    """The kernel's update of one scalar measurement: returns dx, updates P in place."""
+    n = P.shape[0]
+    S = np.array([[H @ P @ H + r]])  # the unweighted S the front end computes
+    dx, ok = weighted_update(
+        P, n, H.reshape(1, n), S, np.array([r]), np.array([nu]), np.zeros(1, np.int64), 1, alpha
+    )
+    assert ok
+    return dx
+
+
+def test_scalar_fwekf_is_a_kalman_filter_with_r_over_alpha2_and_a_faded_prior() -> None:
+    """x_k = phi x + w, z = x + v, constant alpha, computed by hand (eq. 24, 26, 27)."""
+    phi, q, r, alpha = 0.95, 0.04, 0.5, 1.2
+    rng = np.random.default_rng(3)
+    P, x, P_h, x_h = np.array([[2.0]]), np.zeros(1), 2.0, 0.0
+    for z in rng.normal(1.0, 0.7, 30):
+        fade_prior(P, np.array([[phi]]), np.array([[q]]), alpha)
+        x = phi * x
+        x = x + _weighted_step(P, np.ones(1), r, float(z - x[0]), alpha)
+        p_prior = alpha**2 * phi * P_h * phi + q
+        gain = p_prior / (p_prior + r / alpha**2)
+        x_h = phi * x_h + gain * (z - phi * x_h)
+        P_h = (1 - gain) * p_prior
+        assert x[0] == pytest.approx(x_h, rel=1e-12, abs=1e-12)
+        assert P[0, 0] == pytest.approx(P_h, rel=1e-12)
+    # the weighted gain is not the plain EKF's with only the faded prior (the audit's bug)
+    p_prior = alpha**2 * phi * P_h * phi + q
+    assert p_prior / (p_prior + r / alpha**2) > p_prior / (p_prior + r) + 0.01
+
+
+def test_weighted_filter_equals_the_kalman_filter_of_eq_21_to_23() -> None:
+    """A plain Kalman filter with R_k = R alpha^-2(k+1) and Q_k = Q alpha^-2(k+1) (eq. 21-22)
+    has the weighted filter's estimates, and its covariance is P^alpha alpha^-2k (eq. 23)."""
+    dt, alpha = 0.1, 1.05
+    Phi = np.array([[1.0, dt], [0.0, 1.0]])
+    Q = np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]]) * 0.3
+    H, r = np.array([1.0, 0.0]), 0.8
+    rng = np.random.default_rng(11)
+    P_w, x_w = np.diag([4.0, 1.0]), np.zeros(2)
+    P, x = P_w.copy(), x_w.copy()
+    for k in range(60):
+        z = 0.5 * (k * dt) ** 2 + rng.normal(0.0, 0.9)
+        x_w = x_w + _weighted_step(P_w, H, r, float(z - H @ x_w), alpha)
+        gain = P @ H / (H @ P @ H + r * alpha ** (-2 * (k + 1)))
+        x = x + gain * (z - H @ x)
+        P = (np.eye(2) - np.outer(gain, H)) @ P
+        np.testing.assert_allclose(x_w, x, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(P_w * alpha ** (-2 * k), P, rtol=1e-9)
+        fade_prior(P_w, Phi, Q, alpha)
+        x_w, x = Phi @ x_w, Phi @ x
+        P = Phi @ P @ Phi.T + Q * alpha ** (-2 * (k + 1))
+
+
+def test_numba_and_filterpy_fwekf_agree_while_alpha_moves(
+    filters: FiltersParams, drive60: tuple[dict[str, pa.Table], SensorMeta]
+) -> None:
+    """Under F8 (5 m errors, 0.5 m reported) the fuzzy alpha departs from 1 and both backends
+    still give the same states, covariances, gating decisions and alphas."""
+    tables, sensors = drive60
+    tables = optimistic_accuracy(tables, np.random.default_rng(5))
+    fast = run_filter(tables, sensors, "fwekf", filters.get("fwekf"), backend="numba")
+    ref = run_filter(tables, sensors, "fwekf", filters.get("fwekf"), backend="filterpy")
+    assert fast.status == ref.status == "ok"
+    alpha = fast.extra["alpha"]
+    assert np.ptp(alpha) > 0.01
+    np.testing.assert_allclose(ref.extra["alpha"], alpha, rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(fast.t_ns, ref.t_ns)
+    sigma = np.sqrt(np.diagonal(fast.P, axis1=1, axis2=2))
+    dx = np.array([ins.difference(ref.x[k], fast.x[k], fast.n) for k in range(fast.t_ns.size)])
+    assert np.max(np.abs(dx) / sigma) < 1e-6
+    np.testing.assert_allclose(np.sqrt(np.diagonal(ref.P, axis1=1, axis2=2)), sigma, rtol=1e-6)
+    np.testing.assert_array_equal(fast.inn_i, ref.inn_i)
 
 
 def test_fwekf_and_ekf_converge_on_the_noise_free_reference_motion(params: Params) -> None:
@@ -44,3 +127,19 @@ def test_ekf_reaches_the_papers_half_metre_on_the_noisy_reference_motion(params:
     assert rows["lc_ekf"]["pos_err_at_20s_m"] < 0.7
     assert rows["lc_ekf"]["pos_rms_after_20s_m"] < 0.7
     assert rows["fwekf"]["pos_rms_after_20s_m"] < 1.0
+
+
+def test_alpha_stays_at_one_on_white_fixes_and_rises_on_time_correlated_ones(
+    filters: FiltersParams,
+) -> None:
+    """The mechanism the fwekf_faults note gives for the FWEKF doing worse than alpha = 1 on
+    seoul_campus: consistent white residuals keep every rule at Z, while fix errors
+    correlated over 30 s move the windowed residual mean off Zero and alpha above 1."""
+    share = {}
+    for white in (True, False):
+        tables, sensors = seoul(300.0, seed=3, white_fixes=white)
+        res = run_filter(tables, sensors, "fwekf", filters.get("fwekf"))
+        assert res.status == "ok"
+        share[white] = float(np.mean(res.extra["alpha"] > 1.01))
+    assert share[True] < 0.03
+    assert share[False] > 0.1

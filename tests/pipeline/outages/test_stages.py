@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 import csv
 import json
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +14,7 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
-from ingest.meta import DatasetMeta, write_meta
+from ingest.meta import DatasetMeta, read_meta, write_meta
 from ingest.tables import Provenance, read_table, write_table
 from pipeline.cli import main
 from pipeline.outages.tables import SAT_REDUCTION_COLUMNS
@@ -189,3 +190,41 @@ def test_montecarlo_and_outages_write_the_reduction_and_drift_tables(
     assert f"| 0 | {k0['ours_pct']:.1f} |" in md
     inside = [str(r["sats"]) for r in cmp if r["paper_inside_ci"]]
     assert f"interval for k = {', '.join(inside) or 'none'} " in md
+
+
+def test_outage_experiments_on_a_log_without_raw_observables(
+    tables_dir: Path, params_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """With --skip-unfit the tightly coupled filters' Monte Carlo cells record why they did
+    not run, and the outage tables keep what loose coupling can say (its drift), leaving the
+    pairs that need a skipped filter out, with the reason in the JSON."""
+    fixes_only = tmp_path / "tables"
+    fixes_only.mkdir()
+    rows = {}
+    meta = read_meta(tables_dir)
+    for name in ("imu", "gnss", "truth"):
+        shutil.copy2(tables_dir / f"{name}.parquet", fixes_only / f"{name}.parquet")
+        rows[name] = meta.tables[name]
+    write_meta(fixes_only, DatasetMeta("drive90_fixes", "gps", (), rows, sensors=meta.sensors))
+    mc = tmp_path / "montecarlo"
+    for name in ("lc_ekf", "tc_ekf", "tc_ukf", "tc_ukf_nhc"):
+        args = ["montecarlo", str(fixes_only), "--filter", name, "--params", str(params_file)]
+        assert main([*args, "--out", str(mc / name), "--skip-unfit"]) == 0
+    assert (mc / "lc_ekf" / "windows.parquet").is_file()
+    skipped = json.loads((mc / "tc_ukf" / "skipped.json").read_text())
+    assert skipped["status"] == "skipped"
+    assert "gnss_obs" in skipped["reason"] or "pseudoranges" in skipped["reason"]
+    assert not (mc / "tc_ukf" / "windows.parquet").exists()
+    out = tmp_path / "experiments"
+    args = ["outages", str(mc), "--tables", str(fixes_only), "--params", str(params_file)]
+    assert main([*args, "--out", str(out)]) == 0
+    assert "tc_ukf skipped" in capsys.readouterr().out
+    doc = json.loads((out / "sat_reduction.json").read_text())
+    assert doc["rows"] == []  # every default pair needs a tightly coupled filter
+    assert set(doc["skipped"]) == {"tc_ekf", "tc_ukf", "tc_ukf_nhc"}
+    drift = json.loads((out / "drift_vs_length.json").read_text())["rows"]
+    assert {r["filter"] for r in drift} == {"lc_ekf"}
+    assert all(r["windows"] == 6 for r in drift)
+    note = (out / "sat_reduction_vs_paper.md").read_text()
+    assert "No pair of `outages.pairs` could run" in note
+    assert f"- tc_ukf: {skipped['reason']}" in note
