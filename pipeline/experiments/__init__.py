@@ -10,6 +10,10 @@ reports under ``datasets/<id>/experiments/<NAME>/``:
   ``speed_rms_mps``, ``pos_h_max_m``, ``samples``, ``dynamic_share``;
   ``acceptance.{json,csv}`` (switched and IMM against the better single model per band,
   ``all_ok``); ``bands.png``.
+- ``vehicle_switch_speed`` (paper 003, no tables: held-out realizations of car_speed_ramp):
+  ``calibration.{json,csv}`` dynamic - kinematic horizontal RMS per scenario and speed band
+  with its interval, ``dynamic_ok``, and the chosen ``speed_up_mps`` / ``speed_down_mps``;
+  ``calibration_seeds.{json,csv}`` the per-seed band rows; ``switch_note.md``.
 - ``fwekf_convergence`` (paper 004, fwekf_reference + fwekf_reference_noise_free):
   ``convergence.{json,csv}`` one row per case (``noisy``, ``noise_free``), tuning
   (``declared``, ``paper_r``) and filter (``lc_ekf``, ``fwekf``): errors at 5/10/20/40 s,

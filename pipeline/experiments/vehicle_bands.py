@@ -33,6 +33,7 @@ def band_table(
     edges: tuple[float, ...] = SPEED_EDGES_MPS,
     outage: tuple[float, float, float] = (20.0, 30.0, 10.0),
     backend: Backend = "numba",
+    names: tuple[str, ...] = VEHICLE_FILTERS,
 ) -> list[dict[str, Any]]:
     """Rows (scenario, filter, band, RMS errors) for the nominal and outage runs.
 
@@ -41,13 +42,14 @@ def band_table(
         filters: the ``filters`` params (the four vehicle sections).
         edges: speed band edges, m/s (true speed).
         outage: (start, period, length) of the periodic outages, s.
+        names: the vehicle filters to run (default all four).
     """
     g = np.asarray(tables["gnss"].column("t_ns").to_numpy(), dtype=np.int64)
     windows = periodic_windows(g, *outage)
     scenarios = {"nominal": (dict(tables), []), "outages": (drop_fixes(tables, windows), windows)}
     rows: list[dict[str, Any]] = []
     for scen, (tabs, win) in scenarios.items():
-        for name in VEHICLE_FILTERS:
+        for name in names:
             res = run_vehicle_filter(tabs, name, filters.vehicle(name), backend=backend)
             err = errors(res, tables["truth"])
             masks: dict[str, np.ndarray | None] = {"all": None}

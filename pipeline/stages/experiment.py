@@ -5,6 +5,10 @@ Experiments (pure functions in pipeline/experiments/):
                      periodic GNSS outages (--tables: car_speed_ramp), and the switched/IMM
                      acceptance as paired differences over experiments.vehicle_bands.seeds
                      synthesized realizations of car_speed_ramp (paired.csv, paired_note.md)
+  vehicle_switch_speed  paper 003: the switching speed of vehicle_switched, calibrated on
+                     held-out realizations of car_speed_ramp (no --tables; seeds
+                     synth.seed + experiments.vehicle_bands.calibration_seed_offset + i);
+                     params.yaml filters.vehicle_switched.switching holds its result
   fwekf_convergence  paper 004: EKF against FWEKF from the same start, noisy and noise-free
                      (--tables: fwekf_reference, --tables-noise-free: fwekf_reference_noise_free;
                      convergence.csv/png, convergence_note.md: the paper's figures beside ours)
@@ -45,13 +49,14 @@ log = logging.getLogger(__name__)
 
 EXPERIMENTS = (
     "vehicle_bands",
+    "vehicle_switch_speed",
     "fwekf_convergence",
     "fwekf_faults",
     "vehicle_smartloc",
     "tractor_cascaded",
 )
 #: experiments that simulate instead of reading ingested tables
-NO_TABLES = ("tractor_cascaded",)
+NO_TABLES = ("tractor_cascaded", "vehicle_switch_speed")
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -100,6 +105,8 @@ def run(args: argparse.Namespace) -> int:
     dpi = params.report.figure_dpi
     if args.name == "tractor_cascaded":
         return _tractor_cascaded(params, out)
+    if args.name == "vehicle_switch_speed":
+        return _vehicle_switch_speed(params, out)
     if args.tables is None:
         raise ParamsError("--tables", f"experiment {args.name} needs --tables DIR")
     tables, sensors = _read(args.tables)
@@ -115,7 +122,10 @@ def run(args: argparse.Namespace) -> int:
         write_rows(out, "paired", paired, all_ok=all(c["ok"] for c in paired),
                    seeds=exp.seeds, confidence=exp.confidence,
                    equivalence_rel=exp.equivalence_rel)  # fmt: skip
-        atomic_write_text(out / "paired_note.md", vehicle_paired.note(paired, exp))
+        atomic_write_text(
+            out / "paired_note.md",
+            vehicle_paired.note(paired, exp, params.filters.vehicle("vehicle_switched").switching),
+        )
         ok = sum(c["ok"] for c in paired)
         print(f"vehicle_bands: {ok}/{len(paired)} paired checks pass ({exp.seeds} seeds) -> {out}")
     elif args.name == "fwekf_convergence":
@@ -146,6 +156,25 @@ def run(args: argparse.Namespace) -> int:
         fz = params.filters.fwekf.fuzzy
         atomic_write_text(out / "faults_note.md", fwekf_notes.faults_note(rows, fz))
         print(f"fwekf_faults: {len(rows)} rows -> {out}")
+    return 0
+
+
+def _vehicle_switch_speed(params: Params, out: Path) -> int:
+    from ingest.atomic import atomic_write_text
+    from pipeline.experiments import vehicle_switch_speed
+    from pipeline.experiments.outputs import write_rows
+
+    exp = params.experiments.vehicle_bands
+    seeds = vehicle_switch_speed.calibration_seeds(params.synth.seed, exp)
+    cal_rows = vehicle_switch_speed.calibration_rows(
+        params.synth.car_speed_ramp, params.filters, seeds
+    )
+    cal = vehicle_switch_speed.dynamic_vs_kinematic(cal_rows, exp.confidence, exp.equivalence_rel)
+    up, down = vehicle_switch_speed.switch_speeds(cal)
+    write_rows(out, "calibration_seeds", cal_rows)
+    write_rows(out, "calibration", cal, speed_up_mps=up, speed_down_mps=down, seeds=seeds)
+    atomic_write_text(out / "switch_note.md", vehicle_switch_speed.note(cal, up, down))
+    print(f"vehicle_switch_speed: dynamic above {up:g} m/s, back below {down:g} -> {out}")
     return 0
 
 

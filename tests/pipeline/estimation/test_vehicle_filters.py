@@ -19,7 +19,7 @@ from pipeline.estimation.kernels import vehicle as kv
 from pipeline.estimation.vehicle_config import VEHICLE_FILTERS
 from pipeline.estimation.vehicle_replay import run_vehicle_filter
 from pipeline.experiments.vehicle_bands_config import VehicleBandsParams
-from pipeline.experiments.vehicle_paired import monte_carlo, paired_table
+from pipeline.experiments.vehicle_paired import monte_carlo, note, paired_table
 from pipeline.params import load_params
 from pipeline.synth import car
 
@@ -72,20 +72,27 @@ def test_switching_and_imm_are_as_good_as_the_better_model_in_every_band_over_se
     params_all: tuple[FiltersParams, car.CarSpeedRampParams, int],
 ) -> None:
     """Paired over 16 noise realizations (dvc: experiments.vehicle_bands.seeds): in every
-    band and scenario the 95 % interval of candidate - better model is <= 0 or within 5 %."""
+    band and scenario the 95 % interval of candidate - better model is <= 0 or within 5 %,
+    or at worst spans both (inconclusive) where the single models are within millimetres."""
     filters, cp, seed = params_all
     exp = VehicleBandsParams(seeds=16)
     rows, table = monte_carlo(cp, filters, seed, exp)
     assert len(table) == 2 * 2 * 7
     assert {r["seeds"] for r in table} == {16}
     assert not [r for r in table if r["verdict"] == "worse"]
-    assert all(r["ok"] for r in table if r["filter"] == "vehicle_imm")
-    # the one band where neither single model is resolved as the better one (outages,
-    # 2.5-5 m/s: kinematic - dynamic spans several cm either way) is inconclusive for a hard
-    # switch; every other band passes
-    failed = {(r["scenario"], r["band_lo_mps"]) for r in table if not r["ok"]}
-    assert failed <= {("outages", 2.5)}, failed
+    assert all(r["ok"] for r in table)
+    assert all(r["verdict"] in ("not worse", "equivalent") for r in table
+               if r["filter"] == "vehicle_imm" or r["scenario"] == "outages")  # fmt: skip
+    # with the switch calibrated on held-out seeds (2.5 m/s, params.yaml), only nominal
+    # bands below 10 m/s, where the two single models are within millimetres, may stay
+    # inconclusive for the switched filter at 16 seeds (at 60 seeds they are equivalent)
+    unsure = {(r["scenario"], r["band_lo_mps"]) for r in table if r["verdict"] == "inconclusive"}
+    assert unsure <= {("nominal", 0.0), ("nominal", 2.5), ("nominal", 5.0)}, unsure
     by = {(r["scenario"], r["band_lo_mps"], r["filter"]): r for r in table}
+    # the case a 5 m/s switch lost: the kinematic model run through 2.5-5 m/s with outages
+    slow = by[("outages", 2.5, "vehicle_switched")]
+    assert slow["best_single"] == "vehicle_dynamic"
+    assert slow["diff_ci_high_m"] < 0
     # the paper's premise: the kinematic model fails at speed, and outages show it
     fast = by[("outages", 25.0, "vehicle_imm")]
     assert fast["best_single"] == "vehicle_dynamic"
@@ -112,6 +119,11 @@ def test_paired_table_flags_a_candidate_worse_than_the_margin() -> None:
     assert table["vehicle_switched"]["verdict"] == "equivalent"  # within 1 cm of 0.20 m
     assert table["vehicle_imm"]["verdict"] == "worse"  # 3 cm behind
     assert table["vehicle_imm"]["diff_ci_low_m"] > 0.02
+    text = note(paired_table(rows, 0.95, 0.05), VehicleBandsParams(seeds=5))
+    assert "1/2 band cases are shown not worse or equivalent" in text
+    assert "worse: vehicle_imm nominal 5-10 m/s (+29.9 [" in text
+    assert "inconclusive (interval spans 0 and the margin: too few seeds): none" in text
+    assert "5-10 m/s +100.0 [+100.0, +100.0] mm (dynamic better)" in text
 
 
 def test_dynamic_yaw_rate_nis_is_consistent_at_speed(
