@@ -44,6 +44,8 @@ from pipeline.experiments.vehicle_bands_config import VehicleBandsParams
 from pipeline.nav.earth import F64
 from pipeline.synth import car
 
+PASSING = ("not worse", "equivalent")  # verdicts that meet the acceptance
+
 SINGLE = VEHICLE_FILTERS[:2]
 CANDIDATES = VEHICLE_FILTERS[2:]
 
@@ -111,7 +113,7 @@ def paired_table(
         kd = mean_ci(vals[SINGLE[0]] - vals[SINGLE[1]], confidence)
         for f in CANDIDATES:
             d_mean, d_lo, d_hi = mean_ci(vals[f] - b, confidence)
-            verdict = (
+            verdict = (  # only PASSING verdicts pass; inconclusive does not
                 "not worse" if d_hi <= 0 else "equivalent" if d_hi <= margin
                 else "worse" if d_lo > 0 else "inconclusive"
             )  # fmt: skip
@@ -122,7 +124,7 @@ def paired_table(
                  "best_cv": float(b.std(ddof=1) / b.mean()),
                  "rms_mean_m": float(vals[f].mean()),
                  "diff_mean_m": d_mean, "diff_ci_low_m": d_lo, "diff_ci_high_m": d_hi,
-                 "margin_m": margin, "verdict": verdict, "ok": verdict != "worse",
+                 "margin_m": margin, "verdict": verdict, "ok": verdict in PASSING,
                  "kin_minus_dyn_mean_m": kd[0], "kin_minus_dyn_ci_low_m": kd[1],
                  "kin_minus_dyn_ci_high_m": kd[2]}
             )  # fmt: skip
