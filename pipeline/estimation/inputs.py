@@ -71,7 +71,7 @@ class ObsData:
     masked: int = 0
 
 
-def _col(table: pa.Table, name: str, default: float = math.nan) -> F64:
+def float_column(table: pa.Table, name: str, default: float = math.nan) -> F64:
     """A float column as float64 numpy (null -> ``default``; absent -> all ``default``)."""
     if name not in table.column_names:
         return np.full(table.num_rows, default)
@@ -93,7 +93,7 @@ def _is_null(table: pa.Table, name: str) -> B8:
 def prepare_imu(table: pa.Table, step: StepParams) -> ImuData:
     """Drop invalid, duplicated and backwards samples; find gaps and segments."""
     t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)
-    data = np.column_stack([_col(table, c) for c in IMU_COLUMNS])
+    data = np.column_stack([float_column(table, c) for c in IMU_COLUMNS])
     return clean_imu(t, data, step)
 
 
@@ -167,7 +167,7 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
     """
     n = table.num_rows
     t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)
-    latency = _col(table, "latency_s", 0.0)
+    latency = float_column(table, "latency_s", 0.0)
     if gnss.use_fix_latency and np.isfinite(latency).all() and np.any(latency != 0.0):
         # the fix describes its own epoch, not its arrival (bad-inputs F10)
         t = t - np.round(latency * 1e9).astype(np.int64)
@@ -175,11 +175,15 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
         if np.any(order != np.arange(n)):
             table, t = table.take(pa.array(order)), t[order]
     fix = np.zeros((n, me.FIX_COLS))
-    lat, lon, alt = _col(table, "lat_deg"), _col(table, "lon_deg"), _col(table, "alt_m")
+    lat, lon, alt = (
+        float_column(table, "lat_deg"),
+        float_column(table, "lon_deg"),
+        float_column(table, "alt_m"),
+    )
     fix[:, me.FX_LAT], fix[:, me.FX_LON], fix[:, me.FX_ALT] = np.radians(lat), np.radians(lon), alt
     fix_type = np.asarray(table.column("fix_type").to_numpy(), dtype=np.int64)
-    h_acc = _col(table, "h_acc_m")
-    v_acc = _col(table, "v_acc_m")
+    h_acc = float_column(table, "h_acc_m")
+    v_acc = float_column(table, "v_acc_m")
     fix[:, me.FX_SIG_H] = np.maximum(
         np.where(np.isfinite(h_acc), h_acc, gnss.pos_sigma_default_m), gnss.pos_sigma_floor_m
     )
@@ -196,7 +200,7 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
         fix[:, me.FX_SIG_H] *= math.sqrt(inflate)
         fix[:, me.FX_SIG_V] *= math.sqrt(inflate)
         fix[:, me.FX_POS_INFL] = inflate  # gated against the marginal variance
-    s_acc = _col(table, "speed_acc_mps")
+    s_acc = float_column(table, "speed_acc_mps")
     fix[:, me.FX_SIG_VEL] = np.maximum(
         np.where(np.isfinite(s_acc), s_acc, gnss.vel_sigma_default_mps), gnss.vel_sigma_floor_mps
     )
@@ -208,7 +212,7 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
         events.append(Event(int(t[k]), "skip_no_fix", "gnss_pos", value=float(fix_type[k])))
     for k in np.flatnonzero(has_fix & ~pos_finite):
         events.append(Event(int(t[k]), "skip_invalid", "gnss_pos"))
-    vel = np.column_stack([_col(table, c) for c in ("vel_n_mps", "vel_e_mps", "vel_d_mps")])
+    vel = np.column_stack([float_column(table, c) for c in ("vel_n_mps", "vel_e_mps", "vel_d_mps")])
     fix[:, me.FX_VN : me.FX_VN + 3] = vel
     given_h = ~(_is_null(table, "vel_n_mps") | _is_null(table, "vel_e_mps"))
     given_d = ~_is_null(table, "vel_d_mps")
@@ -225,6 +229,20 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
     return FixData(t, fix, usable, tuple(events))
 
 
+def corrected_observables(table: pa.Table) -> tuple[F64, F64]:
+    """``gnss_obs`` -> (pseudorange + sat_clock - iono - tropo, m; rate + sat_clock_drift,
+    m/s): the satellite clock and atmosphere corrections applied, absent ones as zero (the
+    table's conventions); NaN where the observable itself is NaN."""
+    pr = (
+        float_column(table, "pseudorange_m")
+        + float_column(table, "sat_clock_m", 0.0)
+        - float_column(table, "iono_delay_m", 0.0)
+        - float_column(table, "tropo_delay_m", 0.0)
+    )
+    rate = float_column(table, "pseudorange_rate_mps")
+    return pr, rate + float_column(table, "sat_clock_drift_mps", 0.0)
+
+
 def prepare_obs(table: pa.Table, gnss: GnssNoiseParams) -> ObsData:
     """Satellite observations -> corrected pseudoranges and rates grouped by epoch.
 
@@ -236,18 +254,12 @@ def prepare_obs(table: pa.Table, gnss: GnssNoiseParams) -> ObsData:
     k = table.num_rows
     obs = np.zeros((k, me.OBS_COLS))
     for j, c in enumerate(("sat_x_m", "sat_y_m", "sat_z_m", "sat_vx_mps", "sat_vy_mps")):
-        obs[:, me.OB_SAT + j] = _col(table, c)
-    obs[:, me.OB_SAT + 5] = _col(table, "sat_vz_mps")
-    pr = (
-        _col(table, "pseudorange_m")
-        + _col(table, "sat_clock_m", 0.0)
-        - _col(table, "iono_delay_m", 0.0)
-        - _col(table, "tropo_delay_m", 0.0)
-    )
-    prr = _col(table, "pseudorange_rate_mps") + _col(table, "sat_clock_drift_mps", 0.0)
+        obs[:, me.OB_SAT + j] = float_column(table, c)
+    obs[:, me.OB_SAT + 5] = float_column(table, "sat_vz_mps")
+    pr, prr = corrected_observables(table)
     obs[:, me.OB_PR], obs[:, me.OB_PRR] = pr, prr
-    sig_pr = _col(table, "pseudorange_std_m")
-    sig_prr = _col(table, "pseudorange_rate_std_mps")
+    sig_pr = float_column(table, "pseudorange_std_m")
+    sig_prr = float_column(table, "pseudorange_rate_std_mps")
     obs[:, me.OB_SIG_PR] = np.maximum(
         np.where(np.isfinite(sig_pr), sig_pr, gnss.pseudorange_sigma_default_m),
         gnss.pseudorange_sigma_floor_m,
@@ -263,7 +275,7 @@ def prepare_obs(table: pa.Table, gnss: GnssNoiseParams) -> ObsData:
     pr_ok = pos_ok & np.isfinite(pr)
     prr_ok = pos_ok & vel_ok & np.isfinite(prr)
     rate_provided = ~_is_null(table, "pseudorange_rate_mps")
-    elev = _col(table, "elevation_deg")
+    elev = float_column(table, "elevation_deg")
     masked = np.isfinite(elev) & (elev < gnss.elevation_mask_deg)
     events = [Event(int(t[j]), "skip_invalid", "gnss_obs", svs[j]) for j in np.flatnonzero(~pr_ok)]
     events += [

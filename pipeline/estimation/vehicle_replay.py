@@ -123,9 +123,9 @@ def prepare(tables: Mapping[str, pa.Table], params: VehicleFilterParams, name: s
             raise ReplayInputError(f"filter {name} needs the {need!r} table, which is absent")
     vt = tables["vehicle"]
     t = np.asarray(vt.column("t_ns").to_numpy(), dtype=np.int64)
-    speed = inp._col(vt, "speed_mps")
-    steer = inp._col(vt, "steer_rad")
-    yaw = inp._col(vt, "yaw_rate_radps")
+    speed = inp.float_column(vt, "speed_mps")
+    steer = inp.float_column(vt, "steer_rad")
+    yaw = inp.float_column(vt, "yaw_rate_radps")
     events: list[inp.Event] = []
     ok = np.isfinite(speed) & (np.isfinite(steer) | np.isfinite(yaw))
     for k in np.flatnonzero(~ok):
@@ -153,20 +153,20 @@ def prepare(tables: Mapping[str, pa.Table], params: VehicleFilterParams, name: s
 def _fixes(table: pa.Table, params: VehicleFilterParams) -> tuple[I64, F64, LocalFrame]:
     g = params.gnss
     t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)
-    lat, lon = inp._col(table, "lat_deg"), inp._col(table, "lon_deg")
-    fix_type = inp._col(table, "fix_type", 0.0)
+    lat, lon = inp.float_column(table, "lat_deg"), inp.float_column(table, "lon_deg")
+    fix_type = inp.float_column(table, "fix_type", 0.0)
     pos_ok = np.isfinite(lat) & np.isfinite(lon) & (fix_type >= 2)
-    vn, ve = inp._col(table, "vel_n_mps"), inp._col(table, "vel_e_mps")
+    vn, ve = inp.float_column(table, "vel_n_mps"), inp.float_column(table, "vel_e_mps")
     vel_ok = np.isfinite(vn) & np.isfinite(ve) & (fix_type >= 2)
     if not pos_ok.any():
         raise ReplayInputError("the gnss table has no usable position fix")
     k0 = int(np.flatnonzero(pos_ok)[0])
-    alt = inp._col(table, "alt_m")
+    alt = inp.float_column(table, "alt_m")
     origin = LocalFrame(
         float(lat[k0]), float(lon[k0]), float(alt[k0]) if np.isfinite(alt[k0]) else 0.0
     )
     n, e, _ = origin.to_ned(lat, lon, origin.alt_m)
-    h_acc, s_acc = inp._col(table, "h_acc_m"), inp._col(table, "speed_acc_mps")
+    h_acc, s_acc = inp.float_column(table, "h_acc_m"), inp.float_column(table, "speed_acc_mps")
     sig_pos = np.maximum(
         np.where(np.isfinite(h_acc), h_acc, g.pos_sigma_default_m), g.pos_sigma_floor_m
     )

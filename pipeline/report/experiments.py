@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pipeline.outages.tables import SAT_REDUCTION_COLUMNS
 from pipeline.report.inputs import ReportInputError, read_json
 
 SECTION_NAME = "section.json"
@@ -46,15 +47,6 @@ SAT_REDUCTION_NAME = "sat_reduction.csv"
 SAT_REDUCTION_NOTE = "sat_reduction_vs_paper.md"
 DRIFT_NAME = "drift_vs_length.csv"
 _OUTAGE_FILES = {SAT_REDUCTION_NAME, SAT_REDUCTION_NOTE, DRIFT_NAME}
-SAT_REDUCTION_COLUMNS = (
-    "pair",
-    "sats",
-    "err_baseline_m",
-    "err_candidate_m",
-    "reduction_pct",
-    "ci_low_pct",
-    "ci_high_pct",
-)
 _KEYS = {"title", "order", "summary", "claims", "tables", "figures"}
 _CLAIM_KEYS = {"claim", "paper", "ours", "verdict"}
 _VERDICTS = {"agrees", "differs", "partly", "n/a"}

@@ -108,14 +108,6 @@ def ranking(cells: dict[tuple[str, str], dict[str, float]]) -> list[Row]:
     return sorted(rows, key=lambda r: (r["mean_rank"], -r["cells"], r["filter"]))
 
 
-def _interval(x: np.ndarray) -> tuple[float, float, float]:
-    m = float(x.mean())
-    if x.size < 2:
-        return m, math.nan, math.nan
-    half = float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
-    return m, m - half, m + half
-
-
 def paired(cells: dict[tuple[str, str], dict[str, float]], order: Sequence[str]) -> list[Row]:
     """Every pair (A better-ranked, B) with common cells: ratio and difference intervals."""
     rows = []
@@ -125,8 +117,8 @@ def paired(cells: dict[tuple[str, str], dict[str, float]], order: Sequence[str])
             continue
         ea = np.array([e[a] for e in common])
         eb = np.array([e[b] for e in common])
-        lm, llo, lhi = _interval(np.log(eb / ea))
-        dm, dlo, dhi = _interval(eb - ea)
+        lm, llo, lhi = tb.t_interval(np.log(eb / ea))
+        dm, dlo, dhi = tb.t_interval(eb - ea)
         rows.append(
             {
                 "a": a,

@@ -183,7 +183,8 @@ def window_rows(data: DatasetInputs, series: dict[tuple[str, str], ErrorSeries])
     return rows
 
 
-def _t_interval(x: np.ndarray) -> tuple[float, float, float]:
+def t_interval(x: np.ndarray) -> tuple[float, float, float]:
+    """(mean, low, high) of the mean with a 95 % t interval (NaN bounds below 2 values)."""
     mean = float(x.mean())
     if x.size < 2:
         return mean, math.nan, math.nan
@@ -203,7 +204,7 @@ def drift_by_length(windows: Sequence[Row]) -> list[Row]:
         groups.setdefault(key, []).append(float(w["err_end_m"]))
     rows = []
     for (filt, length), errs in sorted(groups.items()):
-        mean, lo, hi = _t_interval(np.asarray(errs))
+        mean, lo, hi = t_interval(np.asarray(errs))
         rows.append(
             {
                 "filter": filt,

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
+from pipeline.estimation.inputs import corrected_observables, float_column
 from pipeline.nav import earth, spp
 from pipeline.nav.earth import F64, I64
 from pipeline.scenarios.config import Policy
@@ -164,15 +165,6 @@ def select(
     return keep, selections
 
 
-def _col(table: pa.Table, name: str, default: float = math.nan) -> F64:
-    if name not in table.column_names:
-        return np.full(table.num_rows, default)
-    col = table.column(name)
-    out = np.asarray(col.to_numpy(zero_copy_only=False), dtype=np.float64).copy()
-    out[np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool)] = default
-    return out
-
-
 def refix(fix_t_ns: I64, obs: pa.Table, x0_ecef: F64) -> tuple[np.ndarray, dict[str, F64]]:
     """Single-point fixes at ``fix_t_ns`` from the observations of the same epochs.
 
@@ -186,17 +178,11 @@ def refix(fix_t_ns: I64, obs: pa.Table, x0_ecef: F64) -> tuple[np.ndarray, dict[
         vel_{n,e,d}_mps, h_acc_m, v_acc_m, speed_acc_mps, num_sats).
     """
     t = np.asarray(obs.column("t_ns").to_numpy(), dtype=np.int64)
-    sat = np.column_stack([_col(obs, f"sat_{a}_m") for a in "xyz"])
-    sat_v = np.column_stack([_col(obs, f"sat_v{a}_mps") for a in "xyz"])
-    pr = (
-        _col(obs, "pseudorange_m")
-        + _col(obs, "sat_clock_m", 0.0)
-        - _col(obs, "iono_delay_m", 0.0)
-        - _col(obs, "tropo_delay_m", 0.0)
-    )
-    prr = _col(obs, "pseudorange_rate_mps") + _col(obs, "sat_clock_drift_mps", 0.0)
-    sig = _col(obs, "pseudorange_std_m", 3.0)
-    sig_r = _col(obs, "pseudorange_rate_std_mps", 0.1)
+    sat = np.column_stack([float_column(obs, f"sat_{a}_m") for a in "xyz"])
+    sat_v = np.column_stack([float_column(obs, f"sat_v{a}_mps") for a in "xyz"])
+    pr, prr = corrected_observables(obs)
+    sig = float_column(obs, "pseudorange_std_m", 3.0)
+    sig_r = float_column(obs, "pseudorange_rate_std_mps", 0.1)
     n = fix_t_ns.size
     cols = {
         c: np.full(n, math.nan)
