@@ -27,11 +27,36 @@ from pipeline.nav.earth import F64, I64
 
 
 def run_fwekf_filterpy(
-    x0: F64, P0: F64, n: int, t0: int, i0: int, u0: F64, imu_t: I64, imu: F64, stops: I64,
-    fix: F64, obs: F64, obs_start: I64, cfg: F64, noise: F64, lever_b: F64, nhc_sigma: F64,
-    gate: F64, fz: F64, rules: I64, out_alpha: F64, m_max: int, out_t: I64, out_x: F64,
-    out_P: F64, inn_i: I64, inn_f: F64, ev_i: I64, ev_f: F64, counts: I64,
-) -> int:  # fmt: skip
+    x0: F64,
+    P0: F64,
+    n: int,
+    t0: int,
+    i0: int,
+    u0: F64,
+    imu_t: I64,
+    imu: F64,
+    stops: I64,
+    fix: F64 | None,
+    obs: F64 | None,
+    obs_start: I64,
+    cfg: F64,
+    noise: F64,
+    lever_b: F64,
+    nhc_sigma: F64,
+    gate: F64,
+    fz: F64,
+    rules: I64,
+    out_alpha: F64,
+    m_max: int,
+    out_t: I64,
+    out_x: F64,
+    out_P: F64,
+    inn_i: I64,
+    inn_f: F64,
+    ev_i: I64,
+    ev_f: F64,
+    counts: I64,
+) -> int:
     """``kernels.fwekf.run_fwekf`` with filterpy's fading-memory ``KalmanFilter``."""
     run = _run((imu_t, imu, fix, obs, obs_start, cfg, noise, lever_b, nhc_sigma, gate), n, t0,
                i0, u0, m_max, (out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts))  # fmt: skip

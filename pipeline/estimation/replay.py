@@ -325,6 +325,30 @@ def resolve_imu_noise(
     return floored, "params, floored by the log"
 
 
+def _measurements(
+    coupling: str, fixes: inp.FixData | None, obs: inp.ObsData | None
+) -> tuple[F64 | None, I64 | None, F64 | None, I64, I64 | None]:
+    """(fix rows, fix times, obs rows, obs epoch starts, obs epoch times) for a kernel.
+
+    The table a filter does not read is passed as None: the kernel compiled for it then
+    carries no code for it (``models.measurement``).
+    """
+    if coupling == "loose":
+        if fixes is None:
+            return np.zeros((0, me.FIX_COLS)), None, None, np.zeros(1, np.int64), None
+        fix_t = fixes.t_ns[fixes.usable]
+        return (
+            np.ascontiguousarray(fixes.fix[fixes.usable]),
+            fix_t,
+            None,
+            np.zeros(1, np.int64),
+            None,
+        )
+    if obs is None:
+        return None, None, np.zeros((0, me.OBS_COLS)), np.zeros(1, np.int64), None
+    return None, None, obs.obs, obs.start, obs.epoch_t_ns
+
+
 def _run_segment(
     kernel: KernelFn,
     setup: FilterSetup,
@@ -341,14 +365,7 @@ def _run_segment(
     imu_t = imu.t_ns[lo:hi]
     imu_d = imu.data[lo:hi]
     t_end = int(imu_t[-1])
-    empty_fix = np.zeros((0, me.FIX_COLS))
-    fix_arr, fix_t = empty_fix, None
-    obs_arr, obs_start, obs_t = np.zeros((0, me.OBS_COLS)), np.zeros(1, np.int64), None
-    if coupling == "loose" and fixes is not None:
-        fix_arr = np.ascontiguousarray(fixes.fix[fixes.usable])
-        fix_t = fixes.t_ns[fixes.usable]
-    if coupling == "tight" and obs is not None:
-        obs_arr, obs_start, obs_t = obs.obs, obs.start, obs.epoch_t_ns
+    fix_arr, fix_t, obs_arr, obs_start, obs_t = _measurements(coupling, fixes, obs)
     nhc_rate = params.nhc.rate_hz if nhc and params.nhc is not None else None
     stops = inp.build_schedule(al.t_ns, t_end, params.step.step_s, fix_t, obs_t, nhc_rate)
     m_max = inp.max_rows(stops, obs_start, coupling == "tight")

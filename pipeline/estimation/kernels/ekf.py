@@ -9,7 +9,9 @@ resets, Joseph-form covariance update, injection of the error estimate into the 
 the NaN barrier (``common.check_state``) ends the run on divergence.
 
 ``ekf_prepare`` is also the filterpy backend's update front end (same gating, same resets);
-only the Joseph update itself is done by filterpy there.
+only the Joseph update itself is done by filterpy there. ``ekf_prepare`` and
+``joseph_update`` are inlined into the loop at compile time (see "Compile time" in
+``kernels.ukf``).
 """
 
 from __future__ import annotations
@@ -59,7 +61,7 @@ from pipeline.estimation.models.measurement import (
 from pipeline.nav.earth import F64, I64
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def ekf_prepare(
     t_ns: int,
     X: F64,
@@ -69,8 +71,8 @@ def ekf_prepare(
     m: int,
     blocks: I64,
     nb_: int,
-    fix: F64,
-    obs: F64,
+    fix: F64 | None,
+    obs: F64 | None,
     w_ib_b: F64,
     lever_b: F64,
     nhc_sigma: F64,
@@ -133,7 +135,7 @@ def ekf_prepare(
     return accepted_rows(blocks, nb_, accepted, acc_rows)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def joseph_update(
     P: F64, n: int, H: F64, S: F64, r: F64, nu: F64, acc_rows: I64, ma: int
 ) -> tuple[F64, bool]:
@@ -203,8 +205,8 @@ def run_ekf(
     imu_t: I64,
     imu: F64,
     stops: I64,
-    fix: F64,
-    obs: F64,
+    fix: F64 | None,
+    obs: F64 | None,
     obs_start: I64,
     cfg: F64,
     noise: F64,

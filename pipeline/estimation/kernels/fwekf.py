@@ -121,11 +121,36 @@ def push_residuals(ring: F64, count: int, rows: I64, nu: F64, S: F64, m: int) ->
 
 @nb.njit(cache=True)
 def run_fwekf(
-    x0: F64, P0: F64, n: int, t0: int, i0: int, u0: F64, imu_t: I64, imu: F64, stops: I64,
-    fix: F64, obs: F64, obs_start: I64, cfg: F64, noise: F64, lever_b: F64, nhc_sigma: F64,
-    gate: F64, fz: F64, rules: I64, out_alpha: F64, m_max: int, out_t: I64, out_x: F64,
-    out_P: F64, inn_i: I64, inn_f: F64, ev_i: I64, ev_f: F64, counts: I64,
-) -> int:  # fmt: skip
+    x0: F64,
+    P0: F64,
+    n: int,
+    t0: int,
+    i0: int,
+    u0: F64,
+    imu_t: I64,
+    imu: F64,
+    stops: I64,
+    fix: F64 | None,
+    obs: F64 | None,
+    obs_start: I64,
+    cfg: F64,
+    noise: F64,
+    lever_b: F64,
+    nhc_sigma: F64,
+    gate: F64,
+    fz: F64,
+    rules: I64,
+    out_alpha: F64,
+    m_max: int,
+    out_t: I64,
+    out_x: F64,
+    out_P: F64,
+    inn_i: I64,
+    inn_f: F64,
+    ev_i: I64,
+    ev_f: F64,
+    counts: I64,
+) -> int:
     """Replay the FWEKF: ``kernels.ekf.run_ekf``'s arguments plus the fuzzy system.
 
     Args:

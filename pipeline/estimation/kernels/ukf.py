@@ -24,6 +24,14 @@ Between stops the sigma points are not redrawn: the process noise enters once pe
 (``step_s``, default 0.1 s) instead of at every IMU sample. This is what filterpy's
 ``UnscentedKalmanFilter`` does when its ``fx`` integrates a whole span, which the reference
 backend uses; the accuracy cost is measured in ``benchmarks/bench_estimation.py``.
+
+**Compile time.** numba finalizes every jitted function as its own module holding a copy of
+everything it calls, so each level of calls re-optimizes and re-emits the levels below it. The
+stages of the loop (here and in ``ekf``: predict, update, gain; in ``unscented``
+and ``models.measurement``: the sigma-point and epoch helpers) are therefore
+``inline="always"``: inlined into the loop while numba builds it, they add no level. A cold
+first run compiles about 3 s sooner for it (``benchmarks/bench_estimation.py``); the code is
+the same. Inlining the small common helpers as well measured slower, and is not done.
 """
 
 from __future__ import annotations
@@ -97,7 +105,7 @@ def _clock_only(L: F64, c: int) -> bool:
     return True
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def ukf_predict(
     s: F64,
     P: F64,
@@ -172,7 +180,7 @@ def ukf_predict(
     return i_next
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def ukf_update(
     t_ns: int,
     s: F64,
@@ -186,8 +194,8 @@ def ukf_update(
     m: int,
     blocks: I64,
     nb_: int,
-    fix: F64,
-    obs: F64,
+    fix: F64 | None,
+    obs: F64 | None,
     w_ib_b: F64,
     lever_b: F64,
     nhc_sigma: F64,
@@ -254,7 +262,7 @@ def ukf_update(
     return True
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _reset_streams(
     t_ns: int,
     P: F64,
@@ -279,7 +287,7 @@ def _reset_streams(
     return bool(reset.sum() > 0)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _apply_gain(s: F64, P: F64, n: int, Pxz: F64, S: F64, nu: F64, a: I64, ma: int) -> None:
     """``s += K nu``, ``P -= K S K^T`` with ``K = Pxz S^-1`` over the accepted rows ``a``."""
     Sa = np.empty((ma, ma))
@@ -308,7 +316,7 @@ def _apply_gain(s: F64, P: F64, n: int, Pxz: F64, S: F64, nu: F64, a: I64, ma: i
                 P[c, r] = P[r, c]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _error_cov(P: F64, sc: F64, n: int, out: F64) -> None:
     for r in range(n):
         for c in range(n):
@@ -326,8 +334,8 @@ def run_ukf(
     imu_t: I64,
     imu: F64,
     stops: I64,
-    fix: F64,
-    obs: F64,
+    fix: F64 | None,
+    obs: F64 | None,
     obs_start: I64,
     cfg: F64,
     noise: F64,

@@ -184,20 +184,27 @@ def position_jac(ant: F64, axis: int, n: int, H_row: F64) -> None:
         H_row[E_ATT + c] = -sk(cl0, cl1, cl2, axis, c)
 
 
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _cross(
+    a0: float, a1: float, a2: float, b0: float, b1: float, b2: float
+) -> tuple[float, float, float]:
+    """``a x b``; note ``a^T [b x] = (a x b)^T`` for the Jacobian rows below."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
 @nb.njit(cache=True, error_model="numpy")
 def velocity_jac(ant: F64, lever_b: F64, axis: int, n: int, H_row: F64) -> None:
     """Jacobian row of the antenna NED velocity: ``H_v = I``, ``H_phi = -[u x]``,
-    ``H_bg = C [l x]``."""
+    ``H_bg = C [l x]`` (its row ``axis``: ``(C_axis x l)^T``)."""
     for c in range(n):
         H_row[c] = 0.0
     H_row[E_VEL + axis] = 1.0
     u0, u1, u2 = ant[AN_U], ant[AN_U + 1], ant[AN_U + 2]
+    row = AN_C + 3 * axis
+    bg = _cross(ant[row], ant[row + 1], ant[row + 2], lever_b[0], lever_b[1], lever_b[2])
     for c in range(3):
         H_row[E_ATT + c] = -sk(u0, u1, u2, axis, c)
-        a = 0.0
-        for k in range(3):
-            a += ant[AN_C + 3 * axis + k] * sk(lever_b[0], lever_b[1], lever_b[2], k, c)
-        H_row[E_BG + c] = a
+        H_row[E_BG + c] = bg[c]
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -208,14 +215,10 @@ def pseudorange_jac(ant: F64, sat: F64, n: int, H_row: F64) -> None:
     e = _los_ned(ant, ex, ey, ez)
     for c in range(n):
         H_row[c] = 0.0
-    cl0, cl1, cl2 = ant[AN_CL], ant[AN_CL + 1], ant[AN_CL + 2]
+    att = _cross(e[0], e[1], e[2], ant[AN_CL], ant[AN_CL + 1], ant[AN_CL + 2])
     for c in range(3):
         H_row[E_POS + c] = -e[c]
-        H_row[E_ATT + c] = (
-            e[0] * sk(cl0, cl1, cl2, 0, c)
-            + e[1] * sk(cl0, cl1, cl2, 1, c)
-            + e[2] * sk(cl0, cl1, cl2, 2, c)
-        )
+        H_row[E_ATT + c] = att[c]
     H_row[E_CB] = 1.0
 
 
@@ -229,18 +232,16 @@ def pseudorange_rate_jac(ant: F64, lever_b: F64, sat: F64, n: int, H_row: F64) -
     edv = e[0] * dv[0] + e[1] * dv[1] + e[2] * dv[2]
     for c in range(n):
         H_row[c] = 0.0
-    u0, u1, u2 = ant[AN_U], ant[AN_U + 1], ant[AN_U + 2]
+    att = _cross(e[0], e[1], e[2], ant[AN_U], ant[AN_U + 1], ant[AN_U + 2])
+    ce = (  # C^T e: e^T C [l x] = (C^T e x l)^T
+        ant[AN_C] * e[0] + ant[AN_C + 3] * e[1] + ant[AN_C + 6] * e[2],
+        ant[AN_C + 1] * e[0] + ant[AN_C + 4] * e[1] + ant[AN_C + 7] * e[2],
+        ant[AN_C + 2] * e[0] + ant[AN_C + 5] * e[1] + ant[AN_C + 8] * e[2],
+    )
+    bg = _cross(ce[0], ce[1], ce[2], lever_b[0], lever_b[1], lever_b[2])
     for c in range(3):
         H_row[E_POS + c] = -(dv[c] - e[c] * edv) / rng
         H_row[E_VEL + c] = -e[c]
-        att = 0.0
-        bg = 0.0
-        for r in range(3):
-            att += e[r] * sk(u0, u1, u2, r, c)
-            ecl = 0.0
-            for k in range(3):
-                ecl += ant[AN_C + 3 * r + k] * sk(lever_b[0], lever_b[1], lever_b[2], k, c)
-            bg -= e[r] * ecl
-        H_row[E_ATT + c] = att
-        H_row[E_BG + c] = bg
+        H_row[E_ATT + c] = att[c]
+        H_row[E_BG + c] = -bg[c]
     H_row[E_CD] = 1.0

@@ -113,19 +113,11 @@ def error_jacobian(X: F64, f_n: F64, C: F64, n: int, F: F64) -> None:
     en = (ve / rnh, -vn / rmh, -ve * tl / rnh)
     win = (ie[0] + en[0], ie[1] + en[1], ie[2] + en[2])
     cor = (2.0 * ie[0] + en[0], 2.0 * ie[1] + en[1], 2.0 * ie[2] + en[2])
-    # m_ie = d w_ie / d dr, m_en = d w_en / d dr, m_ev = d w_en / d dv (row-major 3x3)
-    m_ie = np.zeros((3, 3))
-    m_ie[0, 0] = -OMEGA_IE * sl / rmh
-    m_ie[2, 0] = -OMEGA_IE * cl / rmh
-    m_en = np.zeros((3, 3))
-    m_en[0, 2] = ve / (rnh * rnh)
-    m_en[1, 2] = -vn / (rmh * rmh)
-    m_en[2, 0] = -ve / (cl * cl * rnh * rmh)
-    m_en[2, 2] = -ve * tl / (rnh * rnh)
-    m_ev = np.zeros((3, 3))
-    m_ev[0, 1] = 1.0 / rnh
-    m_ev[1, 0] = -1.0 / rmh
-    m_ev[2, 1] = -tl / rnh
+    # m_ie = d w_ie / d dr, m_en = d w_en / d dr, m_ev = d w_en / d dv: their nonzero entries
+    ie00, ie20 = -OMEGA_IE * sl / rmh, -OMEGA_IE * cl / rmh
+    en02, en12 = ve / (rnh * rnh), -vn / (rmh * rmh)
+    en20, en22 = -ve / (cl * cl * rnh * rmh), -ve * tl / (rnh * rnh)
+    ev01, ev10, ev21 = 1.0 / rnh, -1.0 / rmh, -tl / rnh
     for r in range(n):
         for c in range(n):
             F[r, c] = 0.0
@@ -137,24 +129,36 @@ def error_jacobian(X: F64, f_n: F64, C: F64, n: int, F: F64) -> None:
     F[1, 2] = ve / rnh
     for j in range(3):
         F[E_POS + j, E_VEL + j] = 1.0
-    # velocity rows: -(2 dw_ie + dw_en) x v = [v x] (2 m_ie dr + m_en dr + m_ev dv)
-    vx = np.zeros((3, 3))
-    vx[0, 1], vx[0, 2], vx[1, 0] = -vd, ve, vd
-    vx[1, 2], vx[2, 0], vx[2, 1] = -vn, -ve, vn
+    # velocity rows: -(2 dw_ie + dw_en) x v = [v x] (M dr + m_ev dv), M = 2 m_ie + m_en,
+    # [v x] = [[0, -vd, ve], [vd, 0, -vn], [-ve, vn, 0]]; columns 1 of M and 2 of m_ev are 0
+    m00, m20 = 2.0 * ie00, 2.0 * ie20 + en20
+    F[E_VEL, E_POS] = ve * m20
+    F[E_VEL, E_POS + 2] = -vd * en12 + ve * en22
+    F[E_VEL + 1, E_POS] = vd * m00 - vn * m20
+    F[E_VEL + 1, E_POS + 2] = vd * en02 - vn * en22
+    F[E_VEL + 2, E_POS] = -ve * m00
+    F[E_VEL + 2, E_POS + 2] = -ve * en02 + vn * en12
+    F[E_VEL, E_VEL] = -vd * ev10
+    F[E_VEL, E_VEL + 1] = ve * ev21
+    F[E_VEL + 1, E_VEL + 1] = vd * ev01 - vn * ev21
+    F[E_VEL + 2, E_VEL] = vn * ev10
+    F[E_VEL + 2, E_VEL + 1] = -ve * ev01
+    # attitude rows: -(dw_ie + dw_en) = -(m_ie + m_en) dr - m_ev dv
+    F[E_ATT, E_POS] = -ie00
+    F[E_ATT, E_POS + 2] = -en02
+    F[E_ATT + 1, E_POS + 2] = -en12
+    F[E_ATT + 2, E_POS] = -(ie20 + en20)
+    F[E_ATT + 2, E_POS + 2] = -en22
+    F[E_ATT, E_VEL + 1] = -ev01
+    F[E_ATT + 1, E_VEL] = -ev10
+    F[E_ATT + 2, E_VEL + 1] = -ev21
+    # the cross-product blocks (Coriolis, specific force, w_in) and the bias couplings
     fx = (f_n[0], f_n[1], f_n[2])
     for r in range(3):
         for c in range(3):
-            a_r = 0.0
-            a_v = 0.0
-            for k in range(3):
-                a_r += vx[r, k] * (2.0 * m_ie[k, c] + m_en[k, c])
-                a_v += vx[r, k] * m_ev[k, c]
-            F[E_VEL + r, E_POS + c] = a_r
-            F[E_VEL + r, E_VEL + c] = a_v - _cross_entry(cor, r, c)
+            F[E_VEL + r, E_VEL + c] -= _cross_entry(cor, r, c)
             F[E_VEL + r, E_ATT + c] = -_cross_entry(fx, r, c)
             F[E_VEL + r, E_BA + c] = -C[r, c]
-            F[E_ATT + r, E_POS + c] = -(m_ie[r, c] + m_en[r, c])
-            F[E_ATT + r, E_VEL + c] = -m_ev[r, c]
             F[E_ATT + r, E_ATT + c] = -_cross_entry(win, r, c)
             F[E_ATT + r, E_BG + c] = -C[r, c]
     # gravity: g grows downwards as the height drops (dh = -dr_d)

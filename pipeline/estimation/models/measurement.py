@@ -21,6 +21,11 @@ Array layouts shared with ``pipeline.estimation.inputs`` (which fills them) and 
   NHC flag, output flag.
 - ``rows`` (m, 2): kind (``K_*``) and the fix or obs row it reads.
 - ``blocks`` (b, 4): first row, dimension, stream (``S_*``) and satellite code (-1 = none).
+
+A filter that reads no fixes (tight coupling) passes ``fix=None`` and one that reads no
+pseudoranges (loose coupling) ``obs=None``: numba then prunes the ``is not None`` branches
+while compiling, so a loosely coupled kernel carries no pseudorange code and compiles
+seconds faster (issue 5's cold-compile budget); the arithmetic is the same either way.
 """
 
 from __future__ import annotations
@@ -76,13 +81,19 @@ def sv_name(code: int) -> str:
 
 @nb.njit(cache=True, error_model="numpy")
 def epoch_layout(
-    stop: I64, fix: F64, obs: F64, obs_start: I64, nhc_on: bool, rows: I64, blocks: I64
+    stop: I64,
+    fix: F64 | None,
+    obs: F64 | None,
+    obs_start: I64,
+    nhc_on: bool,
+    rows: I64,
+    blocks: I64,
 ) -> tuple[int, int]:
     """Lay out the rows and blocks of the epoch at ``stop``; returns (rows, blocks) used."""
     m = 0
     nb_ = 0
     fi = stop[ST_FIX]
-    if fi >= 0:
+    if fix is not None and fi >= 0:
         pdim = int(fix[fi, FX_POS_DIM])
         if pdim > 0:
             blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, pdim, S_POS, -1
@@ -98,7 +109,7 @@ def epoch_layout(
                 rows[m, 0], rows[m, 1] = K_VEL + a, fi
                 m += 1
     oi = stop[ST_OBS]
-    if oi >= 0:
+    if obs is not None and oi >= 0:
         for k in range(obs_start[oi], obs_start[oi + 1]):
             start = m
             if obs[k, OB_PR_OK] > 0.0:
@@ -122,33 +133,42 @@ def epoch_layout(
 
 @nb.njit(cache=True, error_model="numpy")
 def epoch_z(
-    rows: I64, m: int, fix: F64, obs: F64, ref: F64, nhc_sigma: F64, z: F64, r: F64
+    rows: I64,
+    m: int,
+    fix: F64 | None,
+    obs: F64 | None,
+    ref: F64,
+    nhc_sigma: F64,
+    z: F64,
+    r: F64,
 ) -> None:
     """Measured values ``z`` and noise variances ``r`` of the rows (positions as NED offsets
     from ``ref`` = (lat, lon, h) in metres; NHC pseudo-measurements are zero)."""
     for k in range(m):
         kind, src = rows[k, 0], rows[k, 1]
-        if kind < K_VEL:
-            off = ned_offset(fix[src, FX_LAT], fix[src, FX_LON], fix[src, FX_ALT], ref)
-            z[k] = off[0] if kind == K_POS else off[1] if kind == K_POS + 1 else off[2]
-            sig = fix[src, FX_SIG_V] if kind == K_POS + 2 else fix[src, FX_SIG_H]
-            r[k] = sig * sig
-        elif kind < K_PR:
-            z[k] = fix[src, FX_VN + kind - K_VEL]
-            r[k] = fix[src, FX_SIG_VEL] ** 2
-        elif kind == K_PR:
-            z[k] = obs[src, OB_PR]
-            r[k] = obs[src, OB_SIG_PR] ** 2
-        elif kind == K_PRR:
-            z[k] = obs[src, OB_PRR]
-            r[k] = obs[src, OB_SIG_PRR] ** 2
+        if kind < K_PR:
+            if fix is not None:
+                if kind < K_VEL:
+                    off = ned_offset(fix[src, FX_LAT], fix[src, FX_LON], fix[src, FX_ALT], ref)
+                    z[k] = off[0] if kind == K_POS else off[1] if kind == K_POS + 1 else off[2]
+                    sig = fix[src, FX_SIG_V] if kind == K_POS + 2 else fix[src, FX_SIG_H]
+                    r[k] = sig * sig
+                else:
+                    z[k] = fix[src, FX_VN + kind - K_VEL]
+                    r[k] = fix[src, FX_SIG_VEL] ** 2
+        elif kind < K_NHC:
+            if obs is not None:
+                pr = kind == K_PR
+                z[k] = obs[src, OB_PR] if pr else obs[src, OB_PRR]
+                sig = obs[src, OB_SIG_PR] if pr else obs[src, OB_SIG_PRR]
+                r[k] = sig * sig
         else:
             z[k] = 0.0
             r[k] = nhc_sigma[kind - K_NHC] ** 2
 
 
 @nb.njit(cache=True, error_model="numpy")
-def gate_shift(rows: I64, m: int, fix: F64, r: F64, dr: F64) -> None:
+def gate_shift(rows: I64, m: int, fix: F64 | None, r: F64, dr: F64) -> None:
     """Per row, the gating variance minus the update variance ``r`` (``dr[:m]``, <= 0).
 
     A fix position whose variance was inflated by ``1 + 2 tau / dt`` for time-correlated
@@ -162,15 +182,17 @@ def gate_shift(rows: I64, m: int, fix: F64, r: F64, dr: F64) -> None:
     for k in range(m):
         kind, src = rows[k, 0], rows[k, 1]
         dr[k] = 0.0
+        if fix is None:
+            continue
         if kind < K_VEL:
             infl = fix[src, FX_POS_INFL]
             if infl > 1.0:
                 dr[k] = r[k] * (1.0 / infl - 1.0)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def epoch_h(
-    X: F64, rows: I64, m: int, obs: F64, ref: F64, w_ib_b: F64, lever_b: F64, out: F64
+    X: F64, rows: I64, m: int, obs: F64 | None, ref: F64, w_ib_b: F64, lever_b: F64, out: F64
 ) -> None:
     """Predicted values of the rows for the full state ``X`` (``out[:m]``)."""
     ant = np.empty(AN_DIM)
@@ -182,17 +204,20 @@ def epoch_h(
             out[k] = pos[0] if kind == K_POS else pos[1] if kind == K_POS + 1 else pos[2]
         elif kind < K_PR:
             out[k] = ant[AN_VN + kind - K_VEL]
-        elif kind == K_PR:
-            out[k] = pseudorange_h(ant, X, obs[src, OB_SAT : OB_SAT + 6])
-        elif kind == K_PRR:
-            out[k] = pseudorange_rate_h(ant, X, obs[src, OB_SAT : OB_SAT + 6])
+        elif kind < K_NHC:
+            if obs is not None:
+                sat = obs[src, OB_SAT : OB_SAT + 6]
+                if kind == K_PR:
+                    out[k] = pseudorange_h(ant, X, sat)
+                else:
+                    out[k] = pseudorange_rate_h(ant, X, sat)
         else:
             out[k] = body_velocity(X, ant, 1 + kind - K_NHC)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def epoch_jac(
-    X: F64, rows: I64, m: int, obs: F64, w_ib_b: F64, lever_b: F64, n: int, H: F64
+    X: F64, rows: I64, m: int, obs: F64 | None, w_ib_b: F64, lever_b: F64, n: int, H: F64
 ) -> None:
     """Jacobian rows w.r.t. the error state (``H[:m, :n]``)."""
     ant = np.empty(AN_DIM)
@@ -203,9 +228,12 @@ def epoch_jac(
             position_jac(ant, kind - K_POS, n, H[k])
         elif kind < K_PR:
             velocity_jac(ant, lever_b, kind - K_VEL, n, H[k])
-        elif kind == K_PR:
-            pseudorange_jac(ant, obs[src, OB_SAT : OB_SAT + 6], n, H[k])
-        elif kind == K_PRR:
-            pseudorange_rate_jac(ant, lever_b, obs[src, OB_SAT : OB_SAT + 6], n, H[k])
+        elif kind < K_NHC:
+            if obs is not None:
+                sat = obs[src, OB_SAT : OB_SAT + 6]
+                if kind == K_PR:
+                    pseudorange_jac(ant, sat, n, H[k])
+                else:
+                    pseudorange_rate_jac(ant, lever_b, sat, n, H[k])
         else:
             nhc_jac(X, ant, 1 + kind - K_NHC, n, H[k])
