@@ -10,7 +10,7 @@ antenna offset ``d`` (NED) moves the fix by ``d`` and changes every pseudorange 
 by ``-e . d`` (``e`` the receiver-to-satellite unit vector from ``elevation_deg`` and
 ``azimuth_deg``; F2); a velocity offset changes the pseudorange rates the same way (F9).
 F1's observation fault is one bad pseudorange (see ``_jump``); F7's outliers hit fixes and
-pseudoranges independently.
+observation epochs independently.
 """
 
 from __future__ import annotations
@@ -204,6 +204,9 @@ def _stuck_receiver(f: _Fault) -> None:
 def _burst(f: _Fault) -> None:
     """F7: ``fraction`` of the samples in the interval get N(0, magnitude) errors.
 
+    A sample is what the receiver outputs at one instant: a fix (each NED component its own
+    draw) or an observation epoch (each pseudorange of a hit epoch its own draw), so both
+    couplings see outliers at the same fraction of instants, like a multipath burst.
     The record keeps the rows hit and their errors (fixes: NED metres; pseudoranges: m).
     """
     rng = np.random.default_rng(f.seed)
@@ -218,7 +221,10 @@ def _burst(f: _Fault) -> None:
     if "gnss_obs" in f.out:
         obs = f.out["gnss_obs"]
         rows = f.rows("gnss_obs")
-        hit = np.sort(rng.choice(rows, size=round(f.fraction * rows.size), replace=False))
+        t_rows = times(obs)[rows]
+        epochs = np.unique(t_rows)
+        hit_t = np.sort(rng.choice(epochs, size=round(f.fraction * epochs.size), replace=False))
+        hit = rows[np.isin(t_rows, hit_t)]
         err = rng.normal(0.0, f.magnitude, hit.size)
         pr = column(obs, "pseudorange_m")
         pr[hit] += err
@@ -227,6 +233,7 @@ def _burst(f: _Fault) -> None:
         f.rec["gnss_obs_hit_t_ns"] = times(obs)[hit].tolist()
         f.rec["gnss_obs_hit_sv"] = [str(obs.column("sv")[int(j)].as_py()) for j in hit]
         f.rec["gnss_obs_hit_err_m"] = err.tolist()
+        f.rec["gnss_obs_epochs"], f.rec["gnss_obs_hit_epochs"] = int(epochs.size), hit_t.tolist()
 
 
 def _velocity_glitch(f: _Fault) -> None:

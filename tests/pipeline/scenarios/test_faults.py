@@ -100,9 +100,13 @@ def test_f7_puts_outliers_on_the_catalogue_fraction_of_samples(tables: Tables) -
     assert rec["gnss_rows"] == 30
     assert len(rec["gnss_hit_t_ns"]) == 3
     t_obs = tables["gnss_obs"].column("t_ns").to_numpy()
-    in_burst = int(np.sum((t_obs >= t0(tables) + 20 * NS) & (t_obs < t0(tables) + 50 * NS)))
-    assert rec["gnss_obs_rows"] == in_burst
-    assert len(rec["gnss_obs_hit"]) == round(0.1 * in_burst)
+    burst = (t_obs >= t0(tables) + 20 * NS) & (t_obs < t0(tables) + 50 * NS)
+    assert rec["gnss_obs_rows"] == int(burst.sum())
+    assert rec["gnss_obs_epochs"] == 30
+    assert len(rec["gnss_obs_hit_epochs"]) == 3  # every pseudorange of 10 % of the epochs
+    assert (
+        rec["gnss_obs_hit"] == np.flatnonzero(np.isin(t_obs, rec["gnss_obs_hit_epochs"])).tolist()
+    )
     d = column(applied.tables["gnss_obs"], "pseudorange_m") - column(
         tables["gnss_obs"], "pseudorange_m"
     )
