@@ -29,6 +29,7 @@ import json
 import os
 import resource
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -63,6 +64,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--estimation-no-cold", action="store_true", help="skip the cold-compile measurement"
+    )
+    parser.add_argument(
+        "--estimation-cold-reps",
+        type=int,
+        default=3,
+        help="cold runs per filter, each with an empty cache; min/median/max shown (default 3)",
     )
 
 
@@ -155,6 +162,7 @@ def _python_reference(tables_dir: Path, name: str) -> float:
 def _cold(tables_dir: Path, name: str, tmp: Path) -> tuple[float, float, float, float]:
     """(cold cpu, cold wall, warm cpu, warm wall) of ``navreplay run`` in a fresh process,
     first with an empty numba cache, then with the cache the first run left."""
+    tmp.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp / f"cache-{name}"))
     cmd = [sys.executable, "-m", "pipeline.cli", "-q", "run", str(tables_dir), "--filter", name]
     out: list[float] = []
@@ -211,16 +219,22 @@ def run(options: argparse.Namespace) -> None:
         if not options.estimation_no_cold:
             small = _write_tables(warm, sensors, tmp / "cold")
             cold_rows = []
+            reps = max(1, options.estimation_cold_reps)
             for n in COLD_FILTERS:
-                c_cpu, c_wall, w_cpu, w_wall = _cold(small, n, tmp)
-                cold_rows.append([n, c_cpu, c_wall, w_cpu, w_wall, c_cpu - w_cpu,
-                                  c_wall - w_wall, COLD_BUDGET_S])  # fmt: skip
+                runs = [_cold(small, n, tmp / f"rep{k}") for k in range(reps)]
+                comp = sorted(c[0] - c[2] for c in runs)
+                wall = statistics.median(c[1] - c[3] for c in runs)
+                cold_rows.append([n, statistics.median(c[0] for c in runs),
+                                  statistics.median(c[2] for c in runs), comp[0],
+                                  statistics.median(comp), comp[-1], wall,
+                                  COLD_BUDGET_S])  # fmt: skip
             print("   navreplay run (fresh process) on 90 s of data: first with an empty numba")
             print("   cache, then with the cache it left; compile = cold - warm (imports, data and")
-            print(f"   the replay itself cancel), against the issue's {COLD_BUDGET_S:g} s budget")
+            print(f"   the replay itself cancel), {reps} times each (median, and the spread this")
+            print(f"   shared machine adds), against the issue's {COLD_BUDGET_S:g} s budget")
             print_table(
-                ["filter", "cold cpu s", "cold wall s", "warm cpu s", "warm wall s",
-                 "compile cpu s", "compile wall s", "budget s"],
+                ["filter", "cold cpu s", "warm cpu s", "compile cpu min", "median", "max",
+                 "compile wall s", "budget s"],
                 cold_rows,
             )  # fmt: skip
         _accuracy_cost()
