@@ -241,6 +241,129 @@ def propagate_into(
     out[5], out[6], out[7], out[8], out[9] = y5, y6, y7, y8, y9
 
 
+# The lane workspace of ``propagate_lanes_into``: a flat float64 array of ``LN_DIM`` rows of
+# ``LANES`` values, row r of lane b at ``r * LANES + b`` (a constant row stride is what lets the
+# compiler prove the rows apart and vectorize over lanes).
+LANES = 40  # at most this many lanes (a UKF with 17 states has 35 sigma points)
+LN_X = 0  # rows 0..9: the navigation state
+LN_K = 10  # rows 10..19: the derivative of the current RK4 stage
+LN_S = 20  # rows 20..29: the weighted sum of the stage derivatives
+LN_F0, LN_W0 = 30, 33  # specific force and angular rate at the interval start (3 rows each)
+LN_DF, LN_DW = 36, 39  # their change over the interval (3 rows each)
+LN_SIN, LN_COS, LN_LAT = 42, 43, 44  # the reference latitude, its sine and cosine
+LN_DIM = 45
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _lane_point(Y: F64, b: int, c: float) -> tuple[float, ...]:
+    """The RK4 stage point ``y + c k`` of lane ``b`` (lat, h, v, q: longitude is not needed)."""
+    L, K = LANES, LN_K * LANES
+    return (
+        Y[b] + c * Y[K + b],
+        Y[2 * L + b] + c * Y[K + 2 * L + b],
+        Y[3 * L + b] + c * Y[K + 3 * L + b],
+        Y[4 * L + b] + c * Y[K + 4 * L + b],
+        Y[5 * L + b] + c * Y[K + 5 * L + b],
+        Y[6 * L + b] + c * Y[K + 6 * L + b],
+        Y[7 * L + b] + c * Y[K + 7 * L + b],
+        Y[8 * L + b] + c * Y[K + 8 * L + b],
+        Y[9 * L + b] + c * Y[K + 9 * L + b],
+    )
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _lane_rates(Y: F64, b: int, a: float, p: tuple[float, ...], sl: float, cl: float) -> None:
+    """``_rates`` at stage point ``p`` and input fraction ``a`` into lane ``b``'s K rows."""
+    L = LANES
+    f0, w0, df, dw = LN_F0 * L + b, LN_W0 * L + b, LN_DF * L + b, LN_DW * L + b
+    r = _rates(
+        p[1], p[2], p[3], p[4], p[5], p[6], p[7], p[8], sl, cl,
+        Y[f0] + a * Y[df], Y[f0 + L] + a * Y[df + L], Y[f0 + 2 * L] + a * Y[df + 2 * L],
+        Y[w0] + a * Y[dw], Y[w0 + L] + a * Y[dw + L], Y[w0 + 2 * L] + a * Y[dw + 2 * L],
+    )  # fmt: skip
+    K = LN_K * L + b
+    Y[K], Y[K + L], Y[K + 2 * L], Y[K + 3 * L], Y[K + 4 * L] = r[0], r[1], r[2], r[3], r[4]
+    Y[K + 5 * L], Y[K + 6 * L], Y[K + 7 * L] = r[5], r[6], r[7]
+    Y[K + 8 * L], Y[K + 9 * L] = r[8], r[9]
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _lane_stage(Y: F64, b: int, a: float, c: float) -> None:
+    """Lane ``b``'s stage with the sine and cosine of its latitude chosen as in
+    ``_derivative_into`` (``math.sin``/``cos`` once it moved 1e-3 rad or more)."""
+    p = _lane_point(Y, b, c)
+    lr = Y[LN_LAT * LANES + b]
+    if abs(p[0] - lr) < 1e-3:
+        sl, cl = _sincos_near(p[0], lr, Y[LN_SIN * LANES + b], Y[LN_COS * LANES + b])
+    else:
+        sl, cl = math.sin(p[0]), math.cos(p[0])
+    _lane_rates(Y, b, a, p, sl, cl)
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _lanes_step_end(Y: F64, m: int, w6: float) -> None:
+    """The end of an RK4 step in every lane: ``y += h/6 sum``, the quaternion renormalized."""
+    L = LANES
+    for j in range(NAV_DIM * L):
+        Y[j] = Y[j] + w6 * Y[LN_S * L + j]
+    for b in range(m):
+        y6, y7, y8, y9 = Y[6 * L + b], Y[7 * L + b], Y[8 * L + b], Y[9 * L + b]
+        n = math.sqrt(y6 * y6 + y7 * y7 + y8 * y8 + y9 * y9)
+        sc = 1.0 / n if y6 >= 0.0 else -1.0 / n
+        Y[6 * L + b], Y[7 * L + b] = y6 * sc, y7 * sc
+        Y[8 * L + b], Y[9 * L + b] = y8 * sc, y9 * sc
+
+
+@nb.njit(cache=True, error_model="numpy")
+def propagate_lanes_into(Y: F64, m: int, dt: float, substeps: int) -> None:
+    """``propagate_into`` for ``m`` (<= ``LANES``) independent states at once, in place.
+
+    ``Y`` (``LN_DIM * LANES``, flat; see ``LANES``) holds one state per lane: the navigation
+    state in rows ``LN_X``, the interval's inputs in rows ``LN_F0`` ... ``LN_DW`` (the start
+    value and the change over the interval: the input at fraction ``a`` is ``f0 + a df``),
+    the reference latitude with its sine and cosine in rows ``LN_SIN``/``LN_COS``/``LN_LAT``,
+    and rows ``LN_K`` finite (zeros, or the previous interval's values); the others are
+    workspace.
+
+    Every lane undergoes the operations of ``propagate_into`` in the same order, so with
+    finite states the results are bitwise equal (tested). The loop order differs: each RK4
+    stage runs over all lanes before the next, and the lanes vectorize (SIMD) instead of each
+    evaluation waiting on the previous one. The first stage's point is written ``y + 0 k``,
+    which is ``y`` exactly for finite ``k``, so all four stages share one branch-free loop in
+    which the latitude's sine and cosine come from the reference by ``_sincos_near``; a
+    stage in which some lane's latitude moved 1e-3 rad or more runs lane by lane through
+    ``_lane_stage`` instead, which takes ``math.sin``/``cos`` there as ``_derivative_into``.
+    """
+    L = LANES
+    h = dt / substeps
+    w6 = h / 6.0
+    for k in range(substeps):
+        for j in range(LN_S * L, (LN_S + NAV_DIM) * L):
+            Y[j] = 0.0
+        for st in range(4):
+            if st == 0:
+                a, c = k / substeps, 0.0
+            else:
+                a = (k + 0.5) / substeps if st < 3 else (k + 1.0) / substeps
+                c = 0.5 * h if st < 3 else h
+            wgt = 2.0 if 0 < st < 3 else 1.0
+            far = 0  # lanes whose latitude moved 1e-3 rad or more (integer: vectorizes)
+            for b in range(m):
+                far += 0 if abs(Y[b] + c * Y[LN_K * L + b] - Y[LN_LAT * L + b]) < 1e-3 else 1
+            if far == 0:
+                for b in range(m):  # the vectorized loop: no calls, no branches
+                    p = _lane_point(Y, b, c)
+                    lr = Y[LN_LAT * L + b]
+                    sl, cl = _sincos_near(p[0], lr, Y[LN_SIN * L + b], Y[LN_COS * L + b])
+                    _lane_rates(Y, b, a, p, sl, cl)
+            else:
+                for b in range(m):
+                    _lane_stage(Y, b, a, c)
+            for j in range(NAV_DIM * L):
+                Y[LN_S * L + j] += wgt * Y[LN_K * L + j]
+        _lanes_step_end(Y, m, w6)
+
+
 @nb.njit(cache=True)
 def propagate(x: F64, f0: F64, w0: F64, f1: F64, w1: F64, dt: float, substeps: int) -> F64:
     """Integrate the navigation state over ``dt`` seconds from IMU sample 0 to sample 1.

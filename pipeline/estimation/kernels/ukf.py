@@ -9,7 +9,8 @@ Per stop (every ``step_s`` and every update epoch):
 1. draw the 2n+1 scaled sigma points (Van der Merwe; ``alpha``, ``beta``, ``kappa``) from
    ``(s, P)`` and materialize each as a full state (``q = Exp(a) q_ref``);
 2. integrate every sigma point through the IMU samples of the span with RK4 (its own biases
-   correct the input);
+   correct the input), all of them together (``ins.propagate_sigmas``: each RK4 stage
+   vectorized over the sigma points, bitwise what one-at-a-time integration gives);
 3. re-reference the attitude to the propagated central sigma point (``q_ref``), convert back
    to coordinates, and take the unscented mean and covariance, adding the process noise
    accumulated over the span, ``Qd`` of ``ins.transition`` along the central trajectory
@@ -81,7 +82,7 @@ from pipeline.estimation.models.ins import (
     X_Q,
     coords_scale,
     from_full,
-    propagate_span,
+    propagate_sigmas,
     to_full,
 )
 from pipeline.estimation.models.ins_errors import transition
@@ -94,6 +95,7 @@ from pipeline.estimation.models.measurement import (
     gate_shift,
 )
 from pipeline.nav.earth import F64, I64
+from pipeline.nav.mechanization import LANES, LN_DIM
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -131,42 +133,50 @@ def ukf_predict(
     Phi: F64,
     Qd: F64,
     sc: F64,
+    lanes: I64,
+    Y: F64,
 ) -> int:
     """Steps 1-3 of the module docstring over one span; ``s``, ``P``, ``q_ref`` updated in
-    place (the other arrays are workspace). Returns the next IMU index, or -1 if ``P`` is not
-    positive definite."""
+    place (the other arrays are workspace; ``lanes`` and ``Y`` those of
+    ``ins.propagate_sigmas``, which integrates the span's sigma points together). Returns the
+    next IMU index, or -1 if ``P`` is not positive definite."""
     if not draw_sigmas(s, P, n, gamma, L, sig):
         return -1
     ns = 2 * n + 1
-    substeps = int(cfg[CFG_SUBSTEPS])
     T = (t_end - t_start) * 1e-9
-    i_next = i
+    m = np.int64(0)  # not the literal 0: one compile of propagate_sigmas, not two
     for j in range(ns):
         to_full(sig[j], q_ref, n, sigX[j])
         c = (j - 1) % n  # the Cholesky column that made sigma point j
-        if j > 0 and c >= E_CB and _clock_only(L, c):
+        if j == 0 or c < E_CB or not _clock_only(L, c):
+            lanes[m] = j
+            m += 1
+    i_next = propagate_sigmas(
+        sigX,
+        lanes,
+        int(m),
+        imu_t,
+        imu,
+        i,
+        t_start,
+        u,
+        t_end,
+        int(cfg[CFG_SUBSTEPS]),
+        cfg[CFG_MAX_STEP],
+        cfg[CFG_GAP_S],
+        u_end,
+        work,
+        acc,
+        Y,
+    )
+    for j in range(1, ns):
+        c = (j - 1) % n
+        if c >= E_CB and _clock_only(L, c):
             # lower-triangular factor: this point equals the mean except for the clock, so
             # its navigation solution is the central point's (bitwise); integrate its clock
             for r in range(X_CB):
                 sigX[j, r] = sigX[0, r]
             sigX[j, X_CB] += sigX[j, X_CD] * T
-            continue
-        i_next = propagate_span(
-            sigX[j],
-            imu_t,
-            imu,
-            i,
-            t_start,
-            u,
-            t_end,
-            substeps,
-            cfg[CFG_MAX_STEP],
-            cfg[CFG_GAP_S],
-            u_end,
-            work,
-            acc,
-            j == 0,
-        )
     transition(sigX[0], acc, noise, n, Phi, Qd)
     coords_scale(sigX[0], n, sc)
     for j in range(4):
@@ -383,6 +393,8 @@ def run_ukf(
     Phi = np.empty((n, n))
     Qd = np.empty((n, n))
     sc_q = np.empty(n)
+    lanes = np.empty(ns, np.int64)
+    Y = np.zeros(LN_DIM * LANES)
     rows = np.empty((m_max, 2), np.int64)
     blocks = np.empty((m_max, 4), np.int64)
     reject_since = -np.ones(N_STREAMS, np.int64)
@@ -418,6 +430,8 @@ def run_ukf(
             Phi,
             Qd,
             sc_q,
+            lanes,
+            Y,
         )
         ok = i_next >= 0
         if ok:

@@ -26,8 +26,10 @@ USQUE-style attitude parametrisation: the sigma-point arithmetic never touches a
 
 **Propagation.** ``propagate_span`` integrates a full state through the IMU samples between two
 stop times with the mechanization's allocation-free RK4 (inputs interpolated linearly, bias
-corrected with the state's own biases, so each UKF sigma point sees its own bias). The error
-dynamics over a span are in ``models.ins_errors``.
+corrected with the state's own biases, so each UKF sigma point sees its own bias);
+``propagate_sigmas`` does the same for a stack of states at once (the UKF's sigma points),
+vectorized over the states, with bitwise the same result. The error dynamics over a span are
+in ``models.ins_errors``.
 """
 
 from __future__ import annotations
@@ -38,7 +40,20 @@ import numba as nb
 import numpy as np
 
 from pipeline.nav.earth import F64, I64, radii
-from pipeline.nav.mechanization import NAV_DIM, propagate_into
+from pipeline.nav.mechanization import (
+    LANES,
+    LN_COS,
+    LN_DF,
+    LN_DW,
+    LN_F0,
+    LN_K,
+    LN_LAT,
+    LN_SIN,
+    LN_W0,
+    NAV_DIM,
+    propagate_into,
+    propagate_lanes_into,
+)
 
 FULL_DIM = 18
 X_LAT, X_LON, X_H, X_VEL, X_Q, X_BA, X_BG, X_CB, X_CD = 0, 1, 2, 3, 6, 10, 13, 16, 17
@@ -266,26 +281,7 @@ def _accumulate(nav: F64, f0: F64, f1: F64, dt: float, acc: F64) -> None:
     acc[ACC_C + 8] += dt * c22
 
 
-@nb.njit(
-    nb.int64(
-        nb.float64[::1],
-        nb.int64[::1],
-        nb.float64[:, ::1],
-        nb.int64,
-        nb.int64,
-        nb.float64[::1],
-        nb.int64,
-        nb.int64,
-        nb.float64,
-        nb.float64,
-        nb.float64[::1],
-        nb.float64[:, ::1],
-        nb.float64[::1],
-        nb.boolean,
-    ),
-    cache=True,
-    error_model="numpy",
-)  # one signature: the EKF (literal True) and the UKF (a runtime flag) share one compile
+@nb.njit(cache=True, error_model="numpy")
 def propagate_span(
     X: F64,
     imu_t: I64,
@@ -365,4 +361,111 @@ def propagate_span(
         if advance:
             i += 1
     X[X_CB] += X[X_CD] * ((t_end - t_start) * 1e-9)
+    return i
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _lane_inputs(X: F64, lanes: I64, m: int, u0: F64, f1: F64, w1: F64, Y: F64) -> None:
+    """Each lane's interval inputs, corrected with its own biases, as ``propagate_span``
+    forms them (raw input ``u0`` at the start, ``f1``/``w1`` at the end), and its reference
+    latitude (the interval start's) with sine and cosine."""
+    L = LANES
+    for b in range(m):
+        xb = X[lanes[b]]
+        for j in range(3):
+            f0 = u0[j] - xb[X_BA + j]
+            w0 = u0[3 + j] - xb[X_BG + j]
+            Y[(LN_F0 + j) * L + b] = f0
+            Y[(LN_W0 + j) * L + b] = w0
+            Y[(LN_DF + j) * L + b] = (f1[j] - xb[X_BA + j]) - f0
+            Y[(LN_DW + j) * L + b] = (w1[j] - xb[X_BG + j]) - w0
+        Y[LN_SIN * L + b] = math.sin(Y[b])
+        Y[LN_COS * L + b] = math.cos(Y[b])
+        Y[LN_LAT * L + b] = Y[b]
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _accumulate_lane0(X0: F64, Y: F64, u0: F64, f1: F64, dt: float, work: F64, acc: F64) -> None:
+    """``propagate_span``'s accumulation over one interval for lane 0 (state ``X0`` at the
+    span start for its biases, its current navigation state in ``Y``)."""
+    f0c, f1c, nav0 = work[5, :3], work[6, :3], work[4]
+    for j in range(3):
+        f0c[j] = u0[j] - X0[X_BA + j]
+        f1c[j] = f1[j] - X0[X_BA + j]
+    for d in range(NAV_DIM):
+        nav0[d] = Y[d * LANES]
+    _accumulate(nav0, f0c, f1c, dt, acc)
+    acc[ACC_T] += dt
+
+
+@nb.njit(cache=True, error_model="numpy")
+def propagate_sigmas(
+    X: F64,
+    lanes: I64,
+    m: int,
+    imu_t: I64,
+    imu: F64,
+    i: int,
+    t_start: int,
+    u_start: F64,
+    t_end: int,
+    substeps: int,
+    max_step_s: float,
+    gap_s: float,
+    u_end: F64,
+    work: F64,
+    acc: F64,
+    Y: F64,
+) -> int:
+    """``propagate_span`` for the rows ``X[lanes[:m]]`` of a stack of full states at once.
+
+    Each row ends bitwise where ``propagate_span`` would take it (the same inputs, bias
+    corrections and RK4 operations; ``mechanization.propagate_lanes_into`` integrates all rows
+    of an interval together, which is what makes this faster). ``acc`` is filled along row
+    ``lanes[0]`` (the UKF's central sigma point), as ``propagate_span(..., accumulate=True)``
+    does. ``Y`` is workspace, (``mechanization.LN_DIM * mechanization.LANES``,); ``m`` is 1
+    to ``LANES``.
+
+    Returns:
+        The index of the first sample later than ``t_end``.
+    """
+    n_imu = imu_t.shape[0]
+    L = LANES
+    f1, w1 = work[7, :3], work[8, :3]
+    if not 0 < m <= L:
+        raise ValueError("propagate_sigmas: needs 1 to mechanization.LANES states")
+    for b in range(m):
+        for d in range(NAV_DIM):
+            Y[d * L + b] = X[lanes[b], d]
+            Y[(LN_K + d) * L + b] = 0.0
+    for j in range(ACC_DIM):
+        acc[j] = 0.0
+    for j in range(6):
+        u_end[j] = u_start[j]
+    t_cur = t_start
+    while t_cur < t_end:
+        advance = i < n_imu and imu_t[i] <= t_end
+        t_next = imu_t[i] if advance else t_end
+        _target_input(imu_t, imu, i, t_cur, t_end, advance, u_end, f1, w1)
+        _lane_inputs(X, lanes, m, u_end, f1, w1, Y)
+        dt = (t_next - t_cur) * 1e-9
+        ns = substeps
+        if dt > max_step_s * substeps:
+            ns = math.ceil(dt / max_step_s)
+        _accumulate_lane0(X[lanes[0]], Y, u_end, f1, dt, work, acc)
+        if 0 < i < n_imu and (imu_t[i] - imu_t[i - 1]) * 1e-9 > gap_s:
+            acc[ACC_GAP] += dt
+        for j in range(3):
+            u_end[j] = f1[j]
+            u_end[3 + j] = w1[j]
+        propagate_lanes_into(Y, m, dt, ns)
+        t_cur = t_next
+        if advance:
+            i += 1
+    T = (t_end - t_start) * 1e-9
+    for b in range(m):
+        xb = X[lanes[b]]
+        for d in range(NAV_DIM):
+            xb[d] = Y[d * L + b]
+        xb[X_CB] += xb[X_CD] * T
     return i
