@@ -64,9 +64,13 @@ browser:
 	  fi; \
 	fi
 
+# The suite runs on PYTEST_WORKERS processes (pytest-xdist), each taking whole test files so
+# that a module's cached drives and runs are built once; PYTEST_WORKERS=0 runs it in one.
+PYTEST_WORKERS ?= 2
+
 pytest: dev browser
 	NAVREPLAY_REQUIRE_BROWSER=$$(test -x $(CHROMIUM) && test -x $(CHROMEDRIVER) && echo 1) \
-	  $(BIN)/pytest
+	  $(BIN)/pytest -n $(PYTEST_WORKERS) --dist loadfile
 
 bench: dev
 	$(BIN)/python -m benchmarks
