@@ -224,6 +224,21 @@ def coords_scale(X: F64, n: int, out: F64) -> None:
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
+def _next_interval(
+    imu_t: I64, i: int, t_cur: int, t_end: int, substeps: int, max_step_s: float
+) -> tuple[bool, int, float, int]:
+    """The interval from ``t_cur``: (ends at sample ``i``, its end time, its length in s, RK4
+    steps: ``substeps``, more if a step would exceed ``max_step_s``)."""
+    advance = i < imu_t.shape[0] and imu_t[i] <= t_end
+    t_next = imu_t[i] if advance else t_end
+    dt = (t_next - t_cur) * 1e-9
+    ns = substeps
+    if dt > max_step_s * substeps:
+        ns = math.ceil(dt / max_step_s)
+    return advance, t_next, dt, ns
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
 def _target_input(
     imu_t: I64,
     imu: F64,
@@ -336,8 +351,7 @@ def propagate_span(
         u_end[j] = u_start[j]
     t_cur = t_start
     while t_cur < t_end:
-        advance = i < n_imu and imu_t[i] <= t_end
-        t_next = imu_t[i] if advance else t_end
+        advance, t_next, dt, ns = _next_interval(imu_t, i, t_cur, t_end, substeps, max_step_s)
         _target_input(imu_t, imu, i, t_cur, t_end, advance, u_end, f1, w1)
         for j in range(3):
             f0[j] = u_end[j] - X[X_BA + j]
@@ -346,10 +360,6 @@ def propagate_span(
             u_end[3 + j] = w1[j]
             f1[j] -= X[X_BA + j]
             w1[j] -= X[X_BG + j]
-        dt = (t_next - t_cur) * 1e-9
-        ns = substeps
-        if dt > max_step_s * substeps:
-            ns = math.ceil(dt / max_step_s)
         if accumulate:
             _accumulate(nav, f0, f1, dt, acc)
             acc[ACC_T] += dt
@@ -444,14 +454,9 @@ def propagate_sigmas(
         u_end[j] = u_start[j]
     t_cur = t_start
     while t_cur < t_end:
-        advance = i < n_imu and imu_t[i] <= t_end
-        t_next = imu_t[i] if advance else t_end
+        advance, t_next, dt, ns = _next_interval(imu_t, i, t_cur, t_end, substeps, max_step_s)
         _target_input(imu_t, imu, i, t_cur, t_end, advance, u_end, f1, w1)
         _lane_inputs(X, lanes, m, u_end, f1, w1, Y)
-        dt = (t_next - t_cur) * 1e-9
-        ns = substeps
-        if dt > max_step_s * substeps:
-            ns = math.ceil(dt / max_step_s)
         _accumulate_lane0(X[lanes[0]], Y, u_end, f1, dt, work, acc)
         if 0 < i < n_imu and (imu_t[i] - imu_t[i - 1]) * 1e-9 > gap_s:
             acc[ACC_GAP] += dt
