@@ -169,14 +169,16 @@ def ukf_predict(
         acc,
         Y,
     )
-    for j in range(1, ns):
-        c = (j - 1) % n
-        if c >= E_CB and _clock_only(L, c):
-            # lower-triangular factor: this point equals the mean except for the clock, so
-            # its navigation solution is the central point's (bitwise); integrate its clock
-            for r in range(X_CB):
-                sigX[j, r] = sigX[0, r]
-            sigX[j, X_CB] += sigX[j, X_CD] * T
+    q = 0
+    for j in range(ns):  # the points left out of lanes (ascending): clock-only columns
+        if q < m and lanes[q] == j:
+            q += 1
+            continue
+        # lower-triangular factor: this point equals the mean except for the clock, so its
+        # navigation solution is the central point's (bitwise); integrate its clock
+        for r in range(X_CB):
+            sigX[j, r] = sigX[0, r]
+        sigX[j, X_CB] += sigX[j, X_CD] * T
     transition(sigX[0], acc, noise, n, Phi, Qd)
     coords_scale(sigX[0], n, sc)
     for j in range(4):

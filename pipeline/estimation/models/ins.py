@@ -296,6 +296,18 @@ def _accumulate(nav: F64, f0: F64, f1: F64, dt: float, acc: F64) -> None:
     acc[ACC_C + 8] += dt * c22
 
 
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _accumulate_interval(
+    nav: F64, f0: F64, f1: F64, dt: float, imu_t: I64, i: int, gap_s: float, acc: F64
+) -> None:
+    """One interval into the span accumulator: ``_accumulate``, its duration, and the part of
+    an IMU gap it covers (a piece of a gap between two samples, however the stops cut it)."""
+    _accumulate(nav, f0, f1, dt, acc)
+    acc[ACC_T] += dt
+    if 0 < i < imu_t.shape[0] and (imu_t[i] - imu_t[i - 1]) * 1e-9 > gap_s:
+        acc[ACC_GAP] += dt
+
+
 @nb.njit(cache=True, error_model="numpy")
 def propagate_span(
     X: F64,
@@ -341,7 +353,6 @@ def propagate_span(
     Returns:
         The index of the first sample later than ``t_end``.
     """
-    n_imu = imu_t.shape[0]
     nav = X[:NAV_DIM]
     f0, w0, f1, w1 = work[5, :3], work[6, :3], work[7, :3], work[8, :3]
     if accumulate:
@@ -361,11 +372,7 @@ def propagate_span(
             f1[j] -= X[X_BA + j]
             w1[j] -= X[X_BG + j]
         if accumulate:
-            _accumulate(nav, f0, f1, dt, acc)
-            acc[ACC_T] += dt
-            # a piece of a gap between two samples, however the stops cut that gap
-            if 0 < i < n_imu and (imu_t[i] - imu_t[i - 1]) * 1e-9 > gap_s:
-                acc[ACC_GAP] += dt
+            _accumulate_interval(nav, f0, f1, dt, imu_t, i, gap_s, acc)
         propagate_into(nav, f0, w0, f1, w1, dt, ns, nav)
         t_cur = t_next
         if advance:
@@ -395,7 +402,10 @@ def _lane_inputs(X: F64, lanes: I64, m: int, u0: F64, f1: F64, w1: F64, Y: F64) 
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def _accumulate_lane0(X0: F64, Y: F64, u0: F64, f1: F64, dt: float, work: F64, acc: F64) -> None:
+def _accumulate_lane0(
+    X0: F64, Y: F64, u0: F64, f1: F64, dt: float, imu_t: I64, i: int, gap_s: float, work: F64,
+    acc: F64,
+) -> None:  # fmt: skip
     """``propagate_span``'s accumulation over one interval for lane 0 (state ``X0`` at the
     span start for its biases, its current navigation state in ``Y``)."""
     f0c, f1c, nav0 = work[5, :3], work[6, :3], work[4]
@@ -404,8 +414,7 @@ def _accumulate_lane0(X0: F64, Y: F64, u0: F64, f1: F64, dt: float, work: F64, a
         f1c[j] = f1[j] - X0[X_BA + j]
     for d in range(NAV_DIM):
         nav0[d] = Y[d * LANES]
-    _accumulate(nav0, f0c, f1c, dt, acc)
-    acc[ACC_T] += dt
+    _accumulate_interval(nav0, f0c, f1c, dt, imu_t, i, gap_s, acc)
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -439,7 +448,6 @@ def propagate_sigmas(
     Returns:
         The index of the first sample later than ``t_end``.
     """
-    n_imu = imu_t.shape[0]
     L = LANES
     f1, w1 = work[7, :3], work[8, :3]
     if not 0 < m <= L:
@@ -457,9 +465,7 @@ def propagate_sigmas(
         advance, t_next, dt, ns = _next_interval(imu_t, i, t_cur, t_end, substeps, max_step_s)
         _target_input(imu_t, imu, i, t_cur, t_end, advance, u_end, f1, w1)
         _lane_inputs(X, lanes, m, u_end, f1, w1, Y)
-        _accumulate_lane0(X[lanes[0]], Y, u_end, f1, dt, work, acc)
-        if 0 < i < n_imu and (imu_t[i] - imu_t[i - 1]) * 1e-9 > gap_s:
-            acc[ACC_GAP] += dt
+        _accumulate_lane0(X[lanes[0]], Y, u_end, f1, dt, imu_t, i, gap_s, work, acc)
         for j in range(3):
             u_end[j] = f1[j]
             u_end[3 + j] = w1[j]
