@@ -7,6 +7,12 @@ physics. Before any numba function is defined, ``configure()`` points ``NUMBA_CA
 ``<user cache>/navreplay/numba-<sha256 of every pipeline/*.py>``, so any source change starts
 a fresh cache while unchanged code keeps loading its compiled functions. An explicit
 ``NUMBA_CACHE_DIR`` in the environment is respected.
+
+``configure()`` also sets ``NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING`` (unless set): with
+colorama installed (dvc brings it), numba otherwise wraps the terminal streams anew for every
+error object it builds, and typing builds tens of thousands of them (one per overload it tries
+and rejects at each call site: about a second of a cold kernel compile). Numba's own error
+messages then come without colour.
 """
 
 from __future__ import annotations
@@ -27,12 +33,14 @@ def source_digest(package: Path) -> str:
 
 
 def configure() -> None:
-    """Set ``NUMBA_CACHE_DIR`` for this source tree unless the user set it.
+    """Set ``NUMBA_CACHE_DIR`` for this source tree unless the user set it (and plain error
+    messages, see the module docstring).
 
     Numba reads the variable when it is imported; if it already was (by other code imported
     before ``pipeline``), its live configuration is updated too. Either way this runs before
     any ``pipeline`` module defines a cached function.
     """
+    os.environ.setdefault("NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING", "1")
     if "NUMBA_CACHE_DIR" in os.environ:
         return
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")

@@ -251,7 +251,8 @@ LN_S = 20  # rows 20..29: the weighted sum of the stage derivatives
 LN_F0, LN_W0 = 30, 33  # specific force and angular rate at the interval start (3 rows each)
 LN_DF, LN_DW = 36, 39  # their change over the interval (3 rows each)
 LN_SIN, LN_COS, LN_LAT = 42, 43, 44  # the reference latitude, its sine and cosine
-LN_DIM = 45
+LN_SL, LN_CL = 45, 46  # the sine and cosine of the current stage point's latitude
+LN_DIM = 47
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
@@ -287,17 +288,23 @@ def _lane_rates(Y: F64, b: int, a: float, p: tuple[float, ...], sl: float, cl: f
     Y[K + 8 * L], Y[K + 9 * L] = r[8], r[9]
 
 
-@nb.njit(cache=True, error_model="numpy")
-def _lane_stage(Y: F64, b: int, a: float, c: float) -> None:
-    """Lane ``b``'s stage with the sine and cosine of its latitude chosen as in
-    ``_derivative_into`` (``math.sin``/``cos`` once it moved 1e-3 rad or more)."""
-    p = _lane_point(Y, b, c)
-    lr = Y[LN_LAT * LANES + b]
-    if abs(p[0] - lr) < 1e-3:
-        sl, cl = _sincos_near(p[0], lr, Y[LN_SIN * LANES + b], Y[LN_COS * LANES + b])
-    else:
-        sl, cl = math.sin(p[0]), math.cos(p[0])
-    _lane_rates(Y, b, a, p, sl, cl)
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _lanes_sincos(Y: F64, m: int, c: float) -> None:
+    """The sine and cosine of every lane's stage-point latitude into rows ``LN_SL``/``LN_CL``,
+    chosen as in ``_derivative_into``: by ``_sincos_near`` from the reference latitude, or by
+    ``math.sin``/``cos`` where it moved 1e-3 rad or more (or is not finite)."""
+    L, K = LANES, LN_K * LANES
+    far = 0  # an integer count keeps the first loop branch-free: it vectorizes
+    for b in range(m):
+        lat, lr = Y[b] + c * Y[K + b], Y[LN_LAT * L + b]
+        sl, cl = _sincos_near(lat, lr, Y[LN_SIN * L + b], Y[LN_COS * L + b])
+        Y[LN_SL * L + b], Y[LN_CL * L + b] = sl, cl
+        far += 0 if abs(lat - lr) < 1e-3 else 1
+    if far > 0:
+        for b in range(m):
+            lat = Y[b] + c * Y[K + b]
+            if not abs(lat - Y[LN_LAT * L + b]) < 1e-3:
+                Y[LN_SL * L + b], Y[LN_CL * L + b] = math.sin(lat), math.cos(lat)
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
@@ -329,10 +336,10 @@ def propagate_lanes_into(Y: F64, m: int, dt: float, substeps: int) -> None:
     finite states the results are bitwise equal (tested). The loop order differs: each RK4
     stage runs over all lanes before the next, and the lanes vectorize (SIMD) instead of each
     evaluation waiting on the previous one. The first stage's point is written ``y + 0 k``,
-    which is ``y`` exactly for finite ``k``, so all four stages share one branch-free loop in
-    which the latitude's sine and cosine come from the reference by ``_sincos_near``; a
-    stage in which some lane's latitude moved 1e-3 rad or more runs lane by lane through
-    ``_lane_stage`` instead, which takes ``math.sin``/``cos`` there as ``_derivative_into``.
+    which is ``y`` exactly for finite ``k``, so all four stages share one branch-free loop.
+    The sine and cosine of each lane's latitude are taken before it (``_lanes_sincos``), as
+    ``_derivative_into`` takes them: from the reference by ``_sincos_near``, exactly where
+    the latitude moved 1e-3 rad or more.
     """
     L = LANES
     h = dt / substeps
@@ -347,18 +354,10 @@ def propagate_lanes_into(Y: F64, m: int, dt: float, substeps: int) -> None:
                 a = (k + 0.5) / substeps if st < 3 else (k + 1.0) / substeps
                 c = 0.5 * h if st < 3 else h
             wgt = 2.0 if 0 < st < 3 else 1.0
-            far = 0  # lanes whose latitude moved 1e-3 rad or more (integer: vectorizes)
-            for b in range(m):
-                far += 0 if abs(Y[b] + c * Y[LN_K * L + b] - Y[LN_LAT * L + b]) < 1e-3 else 1
-            if far == 0:
-                for b in range(m):  # the vectorized loop: no calls, no branches
-                    p = _lane_point(Y, b, c)
-                    lr = Y[LN_LAT * L + b]
-                    sl, cl = _sincos_near(p[0], lr, Y[LN_SIN * L + b], Y[LN_COS * L + b])
-                    _lane_rates(Y, b, a, p, sl, cl)
-            else:
-                for b in range(m):
-                    _lane_stage(Y, b, a, c)
+            _lanes_sincos(Y, m, c)
+            for b in range(m):  # the vectorized loop: no calls, no branches
+                p = _lane_point(Y, b, c)
+                _lane_rates(Y, b, a, p, Y[LN_SL * L + b], Y[LN_CL * L + b])
             for j in range(NAV_DIM * L):
                 Y[LN_S * L + j] += wgt * Y[LN_K * L + j]
         _lanes_step_end(Y, m, w6)

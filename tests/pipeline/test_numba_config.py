@@ -1,0 +1,73 @@
+"""pipeline._numba_cache: the cache directory keyed by the source, and plain numba errors."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from pipeline._numba_cache import source_digest
+
+REPO = Path(__file__).resolve().parents[2]
+
+PROBE = """
+import json, os
+import pipeline
+import numba
+from numba.core import errors
+print(json.dumps({
+    "cache_dir": numba.core.config.CACHE_DIR,
+    "env_cache_dir": os.environ.get("NUMBA_CACHE_DIR"),
+    "scheme": type(errors.termcolor()).__name__,
+}))
+"""
+
+
+def _probe(env_extra: dict[str, str], drop: tuple[str, ...] = ()) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k not in drop}
+    env.update(env_extra)
+    env["PYTHONPATH"] = str(REPO)
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, check=True
+    )
+    result: dict[str, str] = json.loads(out.stdout.strip().splitlines()[-1])
+    return result
+
+
+def test_cache_dir_is_keyed_by_the_package_source(tmp_path: Path) -> None:
+    got = _probe(
+        {"XDG_CACHE_HOME": str(tmp_path)},
+        drop=("NUMBA_CACHE_DIR", "NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING"),
+    )
+    digest = source_digest(REPO / "pipeline")
+    expected = str(tmp_path / "navreplay" / f"numba-{digest}")
+    assert got["cache_dir"] == expected
+    assert got["env_cache_dir"] == expected
+    # typing builds an error object per rejected overload: no colour scheme (no colorama
+    # stream wrapping) for each of them
+    assert got["scheme"] == "NOPColorScheme"
+
+
+def test_explicit_cache_dir_and_highlighting_are_respected(tmp_path: Path) -> None:
+    got = _probe(
+        {"NUMBA_CACHE_DIR": str(tmp_path / "mine"), "NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING": ""}
+    )
+    assert got["cache_dir"] == str(tmp_path / "mine")
+    assert got["scheme"] != "NOPColorScheme"  # the user's (empty) setting kept highlighting on
+
+
+def test_source_digest_changes_with_any_file(tmp_path: Path) -> None:
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "a.py").write_text("x = 1\n")
+    (pkg / "sub" / "b.py").write_text("y = 2\n")
+    first = source_digest(pkg)
+    assert source_digest(pkg) == first
+    (pkg / "sub" / "b.py").write_text("y = 3\n")
+    assert source_digest(pkg) != first
+    (pkg / "sub" / "b.py").write_text("y = 2\n")
+    assert source_digest(pkg) == first
+    (pkg / "sub" / "b.py").rename(pkg / "b.py")  # same bytes, another path
+    assert source_digest(pkg) != first
