@@ -30,6 +30,7 @@ from scipy.stats import chi2
 
 from ingest.config import ImuNoise
 from ingest.meta import SensorMeta
+from pipeline._numba_cache import fewer_gc_passes
 from pipeline.errors import DivergenceError, PipelineError
 from pipeline.estimation import inputs as inp
 from pipeline.estimation.alignment import Alignment, align
@@ -414,7 +415,8 @@ def _run_segment(
     compile_s = 0.0
     if hasattr(kernel, "compile"):  # a numba dispatcher: compile or load it outside the timing
         t0 = time.perf_counter()
-        kernel.compile(tuple(_typeof(a) for a in args))
+        with fewer_gc_passes():
+            kernel.compile(tuple(_typeof(a) for a in args))
         compile_s = time.perf_counter() - t0
     code = kernel(*args)
     k_out, k_inn, k_ev = (int(counts[c]) for c in (cm.CNT_OUT, cm.CNT_INN, cm.CNT_EV))

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import subprocess
 import sys
+import weakref
 from pathlib import Path
 
-from pipeline._numba_cache import source_digest
+import pytest
+
+from pipeline._numba_cache import fewer_gc_passes, source_digest
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -71,3 +75,39 @@ def test_source_digest_changes_with_any_file(tmp_path: Path) -> None:
     assert source_digest(pkg) == first
     (pkg / "sub" / "b.py").rename(pkg / "b.py")  # same bytes, another path
     assert source_digest(pkg) != first
+
+
+class _Node:
+    def __init__(self) -> None:
+        self.other: _Node | None = None
+
+
+def test_fewer_gc_passes_restores_the_collector_and_frees_the_garbage() -> None:
+    before = gc.get_threshold()
+    assert gc.get_freeze_count() == 0
+    with fewer_gc_passes(young=123_456):
+        assert gc.get_threshold()[0] == max(before[0], 123_456)
+        assert gc.get_freeze_count() > 0  # what was alive at entry is not scanned
+        a, b = _Node(), _Node()
+        a.other, b.other = b, a  # a reference cycle: only the cyclic collector frees it
+        dead = weakref.ref(a)
+        del a, b
+    assert gc.get_threshold() == before
+    assert gc.get_freeze_count() == 0
+    gc.collect()
+    assert dead() is None
+
+
+def test_fewer_gc_passes_restores_on_error_and_leaves_a_disabled_collector_alone() -> None:
+    before = gc.get_threshold()
+    with pytest.raises(RuntimeError), fewer_gc_passes():
+        raise RuntimeError("compile failed")
+    assert gc.get_threshold() == before
+    assert gc.get_freeze_count() == 0
+    gc.disable()
+    try:
+        with fewer_gc_passes():
+            assert gc.get_threshold() == before
+            assert gc.get_freeze_count() == 0
+    finally:
+        gc.enable()
