@@ -14,7 +14,9 @@ error object it builds, and typing builds tens of thousands of them (one per ove
 and rejects at each call site: about a second of a cold kernel compile). Numba's own error
 messages then come without colour.
 
-``fewer_gc_passes()`` is the setting for a compile: see there.
+``fewer_gc_passes()`` is the collector's setting for a compile, used around every ``navreplay``
+command (the stage's imports compile the kernels' explicitly typed helpers) and around a
+kernel compile; see there.
 """
 
 from __future__ import annotations

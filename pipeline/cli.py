@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from typing import Protocol, cast
 
 from ingest.errors import IngestError
+from pipeline._numba_cache import fewer_gc_passes
 from pipeline.errors import NotBuiltError, PipelineError
 
 log = logging.getLogger("navreplay")
@@ -100,7 +101,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         format="%(levelname)s %(name)s: %(message)s",
     )
     try:
-        return _stage(args.command).run(args)
+        with fewer_gc_passes():  # the stages' imports and kernel compiles: see there
+            return _stage(args.command).run(args)
     except NotBuiltError as err:
         print(f"navreplay {args.command}: not built yet: {err}", file=sys.stderr)
         return EXIT_NOT_BUILT

@@ -111,3 +111,13 @@ def test_fewer_gc_passes_restores_on_error_and_leaves_a_disabled_collector_alone
             assert gc.get_freeze_count() == 0
     finally:
         gc.enable()
+
+
+def test_a_failing_command_leaves_the_collector_as_it_was(tmp_path: Path) -> None:
+    from pipeline.cli import EXIT_ERROR, main
+
+    before = gc.get_threshold()
+    code = main(["run", str(tmp_path / "missing"), "--filter", "lc_ekf", "--out", str(tmp_path)])
+    assert code == EXIT_ERROR
+    assert gc.get_threshold() == before
+    assert gc.get_freeze_count() == 0
