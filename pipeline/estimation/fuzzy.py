@@ -54,10 +54,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba as nb
 import numpy as np
 
 from ingest.typed import FieldError
+from pipeline._jit import njit
 from pipeline.nav.earth import F64, I64
 
 Z, S, L, NS = 0, 1, 2, 3
@@ -121,14 +121,14 @@ class FuzzyParams:
         return v
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def membership(x: float, center: float, sigma: float) -> float:
     """Gaussian membership ``exp(-(x - c)^2 / (2 sigma^2))``."""
     d = (x - center) / sigma
     return math.exp(-0.5 * d * d)
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def memberships(x: float, fz: F64, first_c: int, first_s: int) -> F64:
     """Zero, Small, Large memberships of one input; the outer sets are shoulders (an input
     beyond the Large centre is fully Large, below the Zero centre fully Zero)."""
@@ -142,7 +142,7 @@ def memberships(x: float, fz: F64, first_c: int, first_s: int) -> F64:
     return out
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def infer_alpha(mean_in: float, cov_in: float, fz: F64, rules: I64) -> float:
     """alpha from the two inputs: the nine rules, product firing, weighted average, bounds."""
     mu_m = memberships(mean_in, fz, FZ_MEAN_C, FZ_MEAN_S)
@@ -159,7 +159,7 @@ def infer_alpha(mean_in: float, cov_in: float, fz: F64, rules: I64) -> float:
     return float(min(max(a, fz[FZ_AMIN]), fz[FZ_AMAX]))
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def residual_inputs(ring: F64, count: int) -> tuple[float, float]:
     """(mean input, cov input) from the ring of normalized residuals (window, k); NaN entries
     (components absent at an epoch) are skipped. Returns (0, 0) before any data.

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 import numpy.typing as npt
+
+from pipeline._jit import njit
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -29,7 +30,7 @@ K_SOMIGLIANA = 0.00193185265241
 M_GRAV = OMEGA_IE**2 * A**2 * B / GM
 
 
-@nb.njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False)
 def radii(lat: float) -> tuple[float, float]:
     """Meridian (R_M, north-south) and transverse (R_N, east-west) radii of curvature, m."""
     s = math.sin(lat)
@@ -38,7 +39,7 @@ def radii(lat: float) -> tuple[float, float]:
     return A * (1.0 - E2) / (w2 * w), A / w
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def gravity(lat: float, h: float) -> float:
     """Normal gravity magnitude (gravitation plus centrifugal), m/s^2, positive down.
 
@@ -50,20 +51,20 @@ def gravity(lat: float, h: float) -> float:
     return g0 * (1.0 - 2.0 / A * (1.0 + F + M_GRAV - 2.0 * F * s2) * h + 3.0 * h * h / (A * A))
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def omega_ie_n(lat: float) -> F64:
     """Earth rotation rate resolved in NED, rad/s."""
     return np.array([OMEGA_IE * math.cos(lat), 0.0, -OMEGA_IE * math.sin(lat)])
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def omega_en_n(lat: float, h: float, vn: float, ve: float) -> F64:
     """Transport rate (rotation of NED w.r.t. ECEF) resolved in NED, rad/s."""
     rm, rn = radii(lat)
     return np.array([ve / (rn + h), -vn / (rm + h), -ve * math.tan(lat) / (rn + h)])
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def geodetic_to_ecef(lat: float, lon: float, h: float) -> F64:
     """Geodetic latitude, longitude (rad) and ellipsoidal height (m) to ECEF x, y, z (m)."""
     _, rn = radii(lat)
@@ -77,7 +78,7 @@ def geodetic_to_ecef(lat: float, lon: float, h: float) -> F64:
     )
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def ecef_to_geodetic(x: float, y: float, z: float) -> tuple[float, float, float]:
     """ECEF (m) to geodetic latitude, longitude (rad) and height (m).
 
@@ -102,7 +103,7 @@ def ecef_to_geodetic(x: float, y: float, z: float) -> tuple[float, float, float]
     return lat, lon, h
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def dcm_ecef_to_ned(lat: float, lon: float) -> F64:
     """Rotation matrix C_e^n taking ECEF vectors to NED at (lat, lon)."""
     sl, cl = math.sin(lat), math.cos(lat)
@@ -116,7 +117,7 @@ def dcm_ecef_to_ned(lat: float, lon: float) -> F64:
     )
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def ned_to_geodetic_offset(lat: float, h: float, dn: float, de: float) -> tuple[float, float]:
     """Small north/east displacement (m) to latitude/longitude increments (rad) at (lat, h)."""
     rm, rn = radii(lat)

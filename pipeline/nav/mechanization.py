@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.nav.earth import (
     E2,
     F64,
@@ -48,7 +48,7 @@ I_QW = 6
 NAV_DIM = 10
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _sincos_near(lat: float, lat_ref: float, sin_ref: float, cos_ref: float) -> tuple[float, float]:
     """sin and cos of ``lat`` from those of a nearby ``lat_ref`` (angle-sum formula with the
     Taylor series of the difference; exact to d^7/5040, below 1e-20 for d < 1e-3 rad)."""
@@ -59,7 +59,7 @@ def _sincos_near(lat: float, lat_ref: float, sin_ref: float, cos_ref: float) -> 
     return sin_ref * cd + cos_ref * sd, cos_ref * cd - sin_ref * sd
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _rates(
     h: float,
     vn: float,
@@ -124,7 +124,7 @@ def _rates(
     )
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _derivative_into(
     x: F64,
     fx: float,
@@ -155,7 +155,7 @@ def _derivative_into(
         out[j] = r[j]
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def nav_derivative(x: F64, f_b: F64, w_ib_b: F64) -> F64:
     """Time derivative of the navigation state (paper 001 eq. 1-3).
 
@@ -176,7 +176,7 @@ def nav_derivative(x: F64, f_b: F64, w_ib_b: F64) -> F64:
     return out
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def propagate_into(
     x: F64, f0: F64, w0: F64, f1: F64, w1: F64, dt: float, substeps: int, out: F64
 ) -> None:
@@ -255,7 +255,7 @@ LN_SL, LN_CL = 45, 46  # the sine and cosine of the current stage point's latitu
 LN_DIM = 47
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _lane_point(Y: F64, b: int, c: float) -> tuple[float, ...]:
     """The RK4 stage point ``y + c k`` of lane ``b`` (lat, h, v, q: longitude is not needed)."""
     L, K = LANES, LN_K * LANES
@@ -272,7 +272,7 @@ def _lane_point(Y: F64, b: int, c: float) -> tuple[float, ...]:
     )
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _lane_rates(Y: F64, b: int, a: float, p: tuple[float, ...], sl: float, cl: float) -> None:
     """``_rates`` at stage point ``p`` and input fraction ``a`` into lane ``b``'s K rows."""
     L = LANES
@@ -288,7 +288,7 @@ def _lane_rates(Y: F64, b: int, a: float, p: tuple[float, ...], sl: float, cl: f
     Y[K + 8 * L], Y[K + 9 * L] = r[8], r[9]
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _lanes_sincos(Y: F64, m: int, c: float) -> None:
     """The sine and cosine of every lane's stage-point latitude into rows ``LN_SL``/``LN_CL``,
     chosen as in ``_derivative_into``: by ``_sincos_near`` from the reference latitude, or by
@@ -307,7 +307,7 @@ def _lanes_sincos(Y: F64, m: int, c: float) -> None:
                 Y[LN_SL * L + b], Y[LN_CL * L + b] = math.sin(lat), math.cos(lat)
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _lanes_step_end(Y: F64, m: int, w6: float) -> None:
     """The end of an RK4 step in every lane: ``y += h/6 sum``, the quaternion renormalized."""
     L = LANES
@@ -321,7 +321,7 @@ def _lanes_step_end(Y: F64, m: int, w6: float) -> None:
         Y[8 * L + b], Y[9 * L + b] = y8 * sc, y9 * sc
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def propagate_lanes_into(Y: F64, m: int, dt: float, substeps: int) -> None:
     """``propagate_into`` for ``m`` (<= ``LANES``) independent states at once, in place.
 
@@ -363,7 +363,7 @@ def propagate_lanes_into(Y: F64, m: int, dt: float, substeps: int) -> None:
         _lanes_step_end(Y, m, w6)
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def propagate(x: F64, f0: F64, w0: F64, f1: F64, w1: F64, dt: float, substeps: int) -> F64:
     """Integrate the navigation state over ``dt`` seconds from IMU sample 0 to sample 1.
 
@@ -378,7 +378,7 @@ def propagate(x: F64, f0: F64, w0: F64, f1: F64, w1: F64, dt: float, substeps: i
     return out
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def integrate(x0: F64, t_ns: I64, acc: F64, gyro: F64, substeps: int) -> F64:
     """Free-inertial navigation: integrate IMU samples from the state ``x0`` at ``t_ns[0]``.
 
@@ -401,7 +401,7 @@ def integrate(x0: F64, t_ns: I64, acc: F64, gyro: F64, substeps: int) -> F64:
     return out
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def imu_from_motion(x: F64, vdot_n: F64, w_nb_b: F64) -> tuple[F64, F64]:
     """Exact IMU readings of a body moving with the given state and derivatives.
 

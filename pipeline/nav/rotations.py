@@ -9,19 +9,19 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.nav.earth import F64
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def skew(v: F64) -> F64:
     """The cross-product matrix [v x] such that skew(v) @ w == cross(v, w)."""
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def quat_mul(p: F64, q: F64) -> F64:
     """Hamilton product p * q (scalar first)."""
     return np.array(
@@ -34,7 +34,7 @@ def quat_mul(p: F64, q: F64) -> F64:
     )
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def quat_normalize(q: F64) -> F64:
     """Unit quaternion with non-negative scalar part (q and -q are the same rotation)."""
     n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
@@ -42,7 +42,7 @@ def quat_normalize(q: F64) -> F64:
     return q * s
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def quat_to_dcm(q: F64) -> F64:
     """C_b^n from a unit quaternion q_wxyz."""
     w, x, y, z = q[0], q[1], q[2], q[3]
@@ -55,7 +55,7 @@ def quat_to_dcm(q: F64) -> F64:
     )
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def dcm_to_quat(c: F64) -> F64:
     """Unit quaternion (scalar part >= 0) from a rotation matrix (Shepperd's method)."""
     tr = c[0, 0] + c[1, 1] + c[2, 2]
@@ -87,7 +87,7 @@ def dcm_to_quat(c: F64) -> F64:
     return quat_normalize(q)
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def euler_to_dcm(roll: float, pitch: float, yaw: float) -> F64:
     """C_b^n = Rz(yaw) Ry(pitch) Rx(roll)."""
     cr, sr = math.cos(roll), math.sin(roll)
@@ -102,7 +102,7 @@ def euler_to_dcm(roll: float, pitch: float, yaw: float) -> F64:
     )
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def dcm_to_euler(c: F64) -> tuple[float, float, float]:
     """(roll, pitch, yaw) of C_b^n; yaw in (-pi, pi]."""
     pitch = -math.asin(min(1.0, max(-1.0, c[2, 0])))
@@ -111,19 +111,19 @@ def dcm_to_euler(c: F64) -> tuple[float, float, float]:
     return roll, pitch, yaw
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def euler_to_quat(roll: float, pitch: float, yaw: float) -> F64:
     """q_wxyz of C_b^n = Rz(yaw) Ry(pitch) Rx(roll)."""
     return dcm_to_quat(euler_to_dcm(roll, pitch, yaw))
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def quat_to_euler(q: F64) -> tuple[float, float, float]:
     """(roll, pitch, yaw) of a unit quaternion q_wxyz."""
     return dcm_to_euler(quat_to_dcm(q))
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def rotvec_to_quat(v: F64) -> F64:
     """Quaternion of the rotation by angle |v| about axis v/|v| (exact; small-angle safe)."""
     angle = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
@@ -135,7 +135,7 @@ def rotvec_to_quat(v: F64) -> F64:
     return np.array([math.cos(0.5 * angle), v[0] * k, v[1] * k, v[2] * k])
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def quat_to_rotvec(q: F64) -> F64:
     """Rotation vector (axis times angle, angle in [0, pi]) of a unit quaternion."""
     qq = quat_normalize(q)
@@ -146,7 +146,7 @@ def quat_to_rotvec(q: F64) -> F64:
     return qq[1:4] * (angle / s)
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def wrap_angle(a: float) -> float:
     """Angle wrapped to (-pi, pi]."""
     return a - 2.0 * math.pi * math.ceil((a - math.pi) / (2.0 * math.pi))

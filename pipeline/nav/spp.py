@@ -13,16 +13,16 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 import numpy.typing as npt
 
+from pipeline._jit import njit
 from pipeline.nav.earth import F64, I64, dcm_ecef_to_ned, ecef_to_geodetic
 
 STATE_DIM = 4
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def solve_position(
     sat_pos: F64, pr_corr: F64, weight: F64, x0: F64, max_iter: int, tol_m: float
 ) -> tuple[F64, F64, int, bool]:
@@ -67,7 +67,7 @@ def solve_position(
     return x, cov, max_iter, False
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def solve_velocity(
     sat_pos: F64, sat_vel: F64, rate_corr: F64, weight: F64, rx_pos: F64
 ) -> tuple[F64, F64]:
@@ -95,7 +95,7 @@ def solve_velocity(
     return cov @ (HtW @ y), cov
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def dop_enu(sat_pos: F64, rx_pos: F64) -> F64:
     """Unit-weight covariance diagonal [east, north, up, clock] of the geometry (DOP^2 each).
 
@@ -119,7 +119,7 @@ def dop_enu(sat_pos: F64, rx_pos: F64) -> F64:
     return np.array([Q[0, 0], Q[1, 1], Q[2, 2], Q[3, 3]])
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def solve_epochs(
     starts: I64, sat_pos: F64, pr_corr: F64, weight: F64, max_iter: int, tol_m: float
 ) -> tuple[F64, npt.NDArray[np.bool_]]:

@@ -26,11 +26,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba as nb
 import numpy as np
 import numpy.typing as npt
 
 from ingest.typed import FieldError
+from pipeline._jit import njit
 from pipeline.nav.earth import radii
 
 F64 = npt.NDArray[np.float64]
@@ -105,7 +105,7 @@ class VehicleParams:
         )
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def _lateral(
     vy: float, r: float, u: float, delta: float, p: tuple[float, float, float, float, float, float]
 ) -> tuple[float, float, float, float]:
@@ -118,7 +118,7 @@ def _lateral(
     return (ff + fr) / m - u * r, (lf * ff - lr * fr) / iz, af, ar
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def _derivative(
     s: F64,
     u: float,
@@ -139,7 +139,7 @@ def _derivative(
     out[4] = ve / ((rn + h) * math.cos(lat))
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def simulate(
     u_half: F64,
     delta_half: F64,

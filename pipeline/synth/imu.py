@@ -12,16 +12,16 @@ walk of density ``rw`` (increments N(0, rw^2 dt)) and ``w`` white noise of densi
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.nav.earth import F64
 from pipeline.nav.mechanization import I_QW, I_VN, NAV_DIM, imu_from_motion
 from pipeline.synth.seoul_params import ImuErrors
 from pipeline.synth.trajectory import Motion
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def _ideal(lat: F64, h: F64, vel: F64, q: F64, vdot: F64, w_nb: F64) -> tuple[F64, F64]:
     n = lat.shape[0]
     acc, gyro = np.empty((n, 3)), np.empty((n, 3))

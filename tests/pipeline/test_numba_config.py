@@ -121,3 +121,25 @@ def test_a_failing_command_leaves_the_collector_as_it_was(tmp_path: Path) -> Non
     assert code == EXIT_ERROR
     assert gc.get_threshold() == before
     assert gc.get_freeze_count() == 0
+
+
+def test_every_compiled_pipeline_function_skips_the_c_callback_wrapper() -> None:
+    """None is a C callback or a first-class function value, so none needs numba's cfunc
+    wrapper (``pipeline._jit``); building it costs every compiled function time in a cold
+    compile."""
+    import importlib
+    import pkgutil
+
+    from numba.core.dispatcher import Dispatcher
+
+    import pipeline
+
+    found = []
+    for info in pkgutil.walk_packages(pipeline.__path__, "pipeline."):
+        module = importlib.import_module(info.name)
+        for name, value in vars(module).items():
+            if isinstance(value, Dispatcher) and value.py_func.__module__ == info.name:
+                found.append((info.name, name, value.targetoptions.get("no_cfunc_wrapper")))
+    assert len(found) > 100
+    missing = [f"{m}.{n}" for m, n, flag in found if flag is not True]
+    assert not missing, f"compiled without pipeline._jit.njit: {missing}"

@@ -35,9 +35,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.estimation.cascaded.filters import (
     EST_EKF,
     EST_UKF,
@@ -99,7 +99,7 @@ CTL_BLOCK_OF_ROW = np.array([0, 1, 2], np.int64)  # each vehicle sensor its own 
 CTL_STREAMS = np.array([S_YAW_RATE, S_SPEED, S_STEER], np.int64)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _nav_predict(
     t_ns: int, x1: F64, P1: F64, mem: F64, imem: I64, cfg: F64, q: F64, par: F64, wm: F64,
     wc: F64, ekf_mean: I64, ev_i: I64, ev_f: F64, counts: I64,
@@ -127,7 +127,7 @@ def _nav_predict(
     return True
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _ctl_predict(
     t_ns: int, x2: F64, P2: F64, mem: F64, imem: I64, cfg: F64, q: F64, par: F64, wm: F64,
     wc: F64,
@@ -152,7 +152,7 @@ def _ctl_predict(
     return True
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def finish(t_ns: int, x: F64, P: F64, cfg: F64, ev_i: I64, ev_f: F64, counts: I64) -> int:
     """Positive definiteness of both covariances and the NaN barrier; a status code."""
     L = np.empty((NX, NX))
@@ -166,7 +166,7 @@ def finish(t_ns: int, x: F64, P: F64, cfg: F64, ev_i: I64, ev_f: F64, counts: I6
     return STATUS_OK
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _update(
     model: int, est: int, t_ns: int, x: F64, P: F64, z: F64, r: F64, block_of_row: I64,
     streams: I64, gate: F64, cfg: F64, rej: I64, wm: F64, wc: F64, inn_i: I64, inn_f: F64,
@@ -183,7 +183,7 @@ def _update(
     return True
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def cascade_sample(
     t_ns: int, veh: F64, gps: F64, nav_only: bool, x: F64, P: F64, mem: F64, imem: I64,
     cfg: F64, q: F64, r: F64, par: F64, wm: F64, wc: F64, gate: F64, ekf_mean: I64,
@@ -238,7 +238,7 @@ def cascade_sample(
     return status
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _record(t_ns: int, x: F64, P: F64, out_t: I64, out_x: F64, out_P: F64, counts: I64) -> None:
     """Append the output row of a sample (counted past the capacity)."""
     k = counts[CNT_OUT]

@@ -53,9 +53,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.estimation.cascaded.model import (
     NX,
     NZ,
@@ -91,7 +91,7 @@ EST_EKF, EST_UKF, EST_HYBRID = 0, 1, 2
 NSIG = 2 * NX + 1
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def ekf_predict(model: int, x: F64, P: F64, u: F64, dt: float, par: F64, disc: F64, Q: F64) -> None:
     """EKF time update (eq. 22-23): ``F`` at the prior, ``x <- f(x)``, ``P <- F P F^T + Q``."""
     F = np.empty((NX, NX))
@@ -103,7 +103,7 @@ def ekf_predict(model: int, x: F64, P: F64, u: F64, dt: float, par: F64, disc: F
     propagate_cov(P, F, Q, NX, np.empty((NX, NX)))
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def ukf_predict(
     model: int,
     x: F64,
@@ -141,7 +141,7 @@ def ukf_predict(
     return True
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def measurement_layout(z: F64, block_of_row: I64, stream_of_block: I64, rows: I64, blocks: I64
                        ) -> tuple[int, int]:  # fmt: skip
     """The available rows of ``z`` (finite entries) and their gating blocks.
@@ -175,7 +175,7 @@ def measurement_layout(z: F64, block_of_row: I64, stream_of_block: I64, rows: I6
     return m, nb_
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _prior_rows(
     model: int, est: int, x: F64, P: F64, z: F64, rows: I64, m: int, Hm: F64, rm: F64, wm: F64,
     wc: F64, gamma: float, nu: F64, S: F64, Pxz: F64,
@@ -210,7 +210,7 @@ def _prior_rows(
     return True
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def prepare_update(
     model: int,
     est: int,
@@ -297,7 +297,7 @@ def prepare_update(
     return m, rows, Hm, rm, nu, S, Pxz, acc, ma
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def apply_update(
     est: int, x: F64, P: F64, Hm: F64, rm: F64, nu: F64, S: F64, Pxz: F64, acc: I64, ma: int
 ) -> None:
@@ -314,7 +314,7 @@ def apply_update(
     _ukf_apply(x, P, Pxz, S, nu, acc, ma)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _ukf_apply(x: F64, P: F64, Pxz: F64, S: F64, nu: F64, acc: I64, ma: int) -> None:
     """``K = P_xz P_y^-1``, ``x += K nu``, ``P -= K P_y K^T`` on the accepted rows (eq. 27)."""
     Sa = np.empty((ma, ma))

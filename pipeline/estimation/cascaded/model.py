@@ -46,9 +46,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.control.lqr import discretize
 from pipeline.nav.earth import F64
 
@@ -99,13 +99,13 @@ def model_params(
     return par
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def wrap_pi(a: float) -> float:
     """Wrap an angle to [-pi, pi)."""
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _zero(M: F64) -> None:
     for i in range(M.shape[0]):
         for j in range(M.shape[1]):
@@ -115,7 +115,7 @@ def _zero(M: F64) -> None:
 # --- navigation filter (eq. 15-17) -------------------------------------------------------
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def nav_f(x: F64, u: F64, dt: float, out: F64) -> None:
     """Euler time update of eq. 16/22: ``out = x + dt * x_dot(x, u1)``, shape (6,)."""
     v = u[U_RADAR] - x[NAV_RB]
@@ -127,7 +127,7 @@ def nav_f(x: F64, u: F64, dt: float, out: F64) -> None:
     out[NAV_PSI] += dt * (u[U_GYRO] - x[NAV_GB])
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def nav_jacobian(x: F64, u: F64, dt: float, par: F64, F: F64) -> None:
     """``F1 = I + dt J1`` (eq. 17, 22), (6, 6): the Jacobian of ``nav_f`` at ``x``, or with
     ``par[P_JAC] == JAC_DESIRED`` the paper's linearization about ``psi_d = par[P_PSID]``."""
@@ -144,7 +144,7 @@ def nav_jacobian(x: F64, u: F64, dt: float, par: F64, F: F64) -> None:
     F[NAV_PSI, NAV_GB] = -dt
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def nav_h(x: F64, out: F64) -> None:
     """``Y1 = C1 X1`` (3,): East, North, and the GPS heading ``psi + psi_b`` (unwrapped)."""
     out[Z_E] = x[NAV_E]
@@ -152,7 +152,7 @@ def nav_h(x: F64, out: F64) -> None:
     out[Z_PSI] = x[NAV_PSI] + x[NAV_PSIB]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def nav_meas_jacobian(H: F64) -> None:
     """``C1`` (3, 6), the Jacobian of ``nav_h`` (constant)."""
     _zero(H)
@@ -165,7 +165,7 @@ def nav_meas_jacobian(H: F64) -> None:
 # --- control filter (eq. 18-19) ----------------------------------------------------------
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def ctl_continuous(par: F64, A: F64, B: F64) -> None:
     """Continuous ``J2`` (6, 6) and ``B2`` (6,) of eq. 19 (with eq. 3's ``K_R w_n^2``)."""
     wn = par[P_WN]
@@ -197,7 +197,7 @@ def ctl_discretize(par: F64, dt: float) -> F64:
     return disc
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def ctl_f(x: F64, u: F64, disc: F64, out: F64) -> None:
     """Time update of eq. 23: ``out = Phi x + Gamma u`` (``disc`` from ``ctl_discretize``
     for this step)."""
@@ -208,7 +208,7 @@ def ctl_f(x: F64, u: F64, disc: F64, out: F64) -> None:
         out[i] = a
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def ctl_jacobian(disc: F64, F: F64) -> None:
     """``Phi`` (6, 6) of the cached discretization, the Jacobian of ``ctl_f``."""
     for i in range(NX):
@@ -216,7 +216,7 @@ def ctl_jacobian(disc: F64, F: F64) -> None:
             F[i, j] = disc[1 + i * NX + j]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def ctl_h(x: F64, out: F64) -> None:
     """``Y2 = C2 X2`` (3,): yaw rate, speed, potentiometer ``delta + delta_b``."""
     out[Z_RATE] = x[CTL_PD]
@@ -224,7 +224,7 @@ def ctl_h(x: F64, out: F64) -> None:
     out[Z_STEER] = x[CTL_DEL] + x[CTL_DELB]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def ctl_meas_jacobian(H: F64) -> None:
     """``C2`` (3, 6), the Jacobian of ``ctl_h`` (constant)."""
     _zero(H)
@@ -237,7 +237,7 @@ def ctl_meas_jacobian(H: F64) -> None:
 # --- one interface over both models ------------------------------------------------------
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def model_f(model: int, x: F64, u: F64, dt: float, par: F64, disc: F64, out: F64) -> None:
     """Time update ``f`` of ``model`` (``MODEL_NAV``, or ``MODEL_CTL`` with ``disc`` from
     ``ctl_discretize(par, dt)``)."""
@@ -247,7 +247,7 @@ def model_f(model: int, x: F64, u: F64, dt: float, par: F64, disc: F64, out: F64
         ctl_f(x, u, disc, out)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def model_jacobian(model: int, x: F64, u: F64, dt: float, par: F64, disc: F64, F: F64) -> None:
     """Transition matrix ``F`` (6, 6) of ``model`` at ``x``."""
     if model == MODEL_NAV:
@@ -256,7 +256,7 @@ def model_jacobian(model: int, x: F64, u: F64, dt: float, par: F64, disc: F64, F
         ctl_jacobian(disc, F)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def model_h(model: int, x: F64, out: F64) -> None:
     """All three measurement rows ``h(x)`` of ``model``."""
     if model == MODEL_NAV:
@@ -265,7 +265,7 @@ def model_h(model: int, x: F64, out: F64) -> None:
         ctl_h(x, out)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def model_meas_jacobian(model: int, H: F64) -> None:
     """Measurement Jacobian ``H`` (3, 6) of ``model``."""
     if model == MODEL_NAV:
@@ -274,13 +274,13 @@ def model_meas_jacobian(model: int, H: F64) -> None:
         ctl_meas_jacobian(H)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def is_angle_row(model: int, row: int) -> bool:
     """Whether residuals of this measurement row wrap to [-pi, pi) (the GPS heading)."""
     return model == MODEL_NAV and row == Z_PSI
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def model_noise(q_diag: F64, dt: float, noise_interval_s: float, Q: F64) -> None:
     """Diagonal process noise over ``dt``: Table 1 variances per ``noise_interval_s``."""
     _zero(Q)

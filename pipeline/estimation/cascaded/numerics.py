@@ -24,13 +24,13 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.nav.earth import F64, I64
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def centered_mean_cov(Y: F64, wm: F64, wc: F64, n: int, mean: F64, cov: F64) -> None:
     """Unscented mean and covariance of the rows of ``Y[:, :n]`` (see the module docstring).
 
@@ -54,7 +54,7 @@ def centered_mean_cov(Y: F64, wm: F64, wc: F64, n: int, mean: F64, cov: F64) -> 
             cov[c, r] = a
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def stream_resets(
     t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64, timeout_s: float
 ) -> I64:
@@ -76,7 +76,7 @@ def stream_resets(
     return out
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def advance_stream_clocks(
     t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64
 ) -> None:
@@ -99,7 +99,7 @@ def advance_stream_clocks(
             reject_since[s] = t_ns
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def reset_observed(P: F64, n: int, H: F64, blocks: I64, nb_: int, stream: int, nu: F64) -> float:
     """Decorrelate and inflate every state observed by ``stream``'s rows (``H[row, j] != 0``)
     to a variance of at least the largest squared innovation of the stream; returns that
@@ -124,7 +124,7 @@ def reset_observed(P: F64, n: int, H: F64, blocks: I64, nb_: int, stream: int, n
     return big
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def check_filter(x: F64, P: F64, n: int, i_east: int, i_north: int, max_pos_sigma: float) -> bool:
     """False if the state or covariance diagonal is non-finite, a variance is not positive,
     or (``i_east >= 0``) the horizontal position 1-sigma exceeds ``max_pos_sigma``."""

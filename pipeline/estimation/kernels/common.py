@@ -17,6 +17,7 @@ import math
 import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.estimation.models.ins import E_CB, E_POS, E_VEL, N_LOOSE, X_VEL
 from pipeline.estimation.models.measurement import S_NHC, S_OBS, S_VEL
 from pipeline.nav.earth import F64, I64
@@ -55,7 +56,7 @@ INN_I_COLS = 5  # t_ns, stream, sv, dim, accepted
 INN_F_COLS = 8  # nis, gate, innovation[3], innovation sigma[3]
 
 
-@nb.njit(nb.boolean(_F2, nb.int64, _F2), cache=True, error_model="numpy")
+@njit(nb.boolean(_F2, nb.int64, _F2), cache=True, error_model="numpy")
 def cholesky(A: F64, n: int, L: F64) -> bool:
     """Lower Cholesky factor of ``A[:n, :n]`` into ``L``; False if not positive definite."""
     for j in range(n):
@@ -76,7 +77,7 @@ def cholesky(A: F64, n: int, L: F64) -> bool:
     return True
 
 
-@nb.njit(nb.void(_F2, nb.int64, _F2, nb.int64), cache=True, error_model="numpy")
+@njit(nb.void(_F2, nb.int64, _F2, nb.int64), cache=True, error_model="numpy")
 def cho_solve(L: F64, n: int, B: F64, k: int) -> None:
     """Solve ``(L L^T) X = B[:n, :k]`` in place (``L`` from ``cholesky``)."""
     for c in range(k):
@@ -92,7 +93,7 @@ def cho_solve(L: F64, n: int, B: F64, k: int) -> None:
             B[i, c] = s / L[i, i]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def symmetrize(P: F64, n: int) -> None:
     """P <- (P + P^T) / 2 on ``P[:n, :n]``."""
     for i in range(n):
@@ -102,7 +103,7 @@ def symmetrize(P: F64, n: int) -> None:
             P[j, i] = a
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def ensure_pd(P: F64, n: int, L: F64) -> tuple[bool, bool, float]:
     """Keep ``P[:n, :n]`` symmetric positive definite; ``L`` receives its Cholesky factor.
 
@@ -135,7 +136,7 @@ def ensure_pd(P: F64, n: int, L: F64) -> tuple[bool, bool, float]:
     return False, True, total
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def propagate_cov(P: F64, Phi: F64, Qd: F64, n: int, tmp: F64) -> None:
     """``P <- Phi P Phi^T + Qd`` in place (``tmp``: scratch (n, n))."""
     for r in range(n):
@@ -153,7 +154,7 @@ def propagate_cov(P: F64, Phi: F64, Qd: F64, n: int, tmp: F64) -> None:
             P[c, r] = a
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def innovation_cov(H: F64, P: F64, r: F64, m: int, n: int, PHt: F64, S: F64) -> None:
     """``PHt = P H^T`` (n, m) and ``S = H P H^T + diag(r)`` (m, m) for the first ``m`` rows."""
     for i in range(n):
@@ -172,7 +173,7 @@ def innovation_cov(H: F64, P: F64, r: F64, m: int, n: int, PHt: F64, S: F64) -> 
         S[k, k] += r[k]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def keep_pd(P: F64, n: int, L: F64, t_ns: int, ev_i: I64, ev_f: F64, counts: I64) -> bool:
     """``ensure_pd`` with a ``cov_repair`` event (value: the jitter added) when a repair was
     needed; False if impossible."""
@@ -182,7 +183,7 @@ def keep_pd(P: F64, n: int, L: F64, t_ns: int, ev_i: I64, ev_f: F64, counts: I64
     return ok
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def accepted_rows(blocks: I64, nb_: int, accepted: I64, out: I64) -> int:
     """Row indices of the accepted blocks into ``out``; returns their number."""
     ma = 0
@@ -194,7 +195,7 @@ def accepted_rows(blocks: I64, nb_: int, accepted: I64, out: I64) -> int:
     return ma
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def fail(t_ns: int, status: int, ev_i: I64, ev_f: F64, counts: I64) -> int:
     """Record a divergence (event and time) and return its status code."""
     record_event(ev_i, ev_f, counts, t_ns, EV_DIVERGED, -1, -1, float(status))
@@ -202,7 +203,7 @@ def fail(t_ns: int, status: int, ev_i: I64, ev_f: F64, counts: I64) -> int:
     return status
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def gate_blocks(
     nu: F64, S: F64, blocks: I64, nb_: int, gate: F64, nis: F64, accepted: I64, work: F64
 ) -> None:
@@ -240,7 +241,7 @@ def gate_blocks(
         accepted[b] = 1 if e <= gate[d] else 0
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def gating_cov(S: F64, dr: F64, m: int) -> F64:
     """``S + diag(dr)`` over the first ``m`` rows: the covariance the innovations are gated
     against, and their NIS and logged sigmas computed from, where a row's update variance
@@ -251,7 +252,7 @@ def gating_cov(S: F64, dr: F64, m: int) -> F64:
     return Sg
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def stream_health(blocks: I64, nb_: int, accepted: I64) -> tuple[I64, I64]:
     """Per stream: (seen this epoch, accepted this epoch) flags, each (N_STREAMS,).
 
@@ -277,7 +278,7 @@ def stream_health(blocks: I64, nb_: int, accepted: I64) -> tuple[I64, I64]:
     return seen, ok
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def streams_to_reset(
     t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64, timeout_s: float
 ) -> I64:
@@ -299,7 +300,7 @@ def streams_to_reset(
     return out
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def update_reject_since(t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64) -> None:
     """Advance the per-stream rejection clocks after an epoch's final gating decisions."""
     seen, ok = stream_health(blocks, nb_, accepted)
@@ -312,7 +313,7 @@ def update_reject_since(t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_
             reject_since[s] = t_ns
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def inflate_for_stream(
     P: F64, n: int, stream: int, nu: F64, blocks: I64, nb_: int, scale: F64, cfg: F64
 ) -> float:
@@ -340,7 +341,7 @@ def inflate_for_stream(
     return big
 
 
-@nb.njit(
+@njit(
     nb.void(_F2C, nb.int64, nb.int64, nb.int64, nb.float64, _F1C), cache=True, error_model="numpy"
 )
 def _reset_block(P: F64, n: int, first: int, count: int, sigma: float, scale: F64) -> None:
@@ -352,7 +353,7 @@ def _reset_block(P: F64, n: int, first: int, count: int, sigma: float, scale: F6
         P[i, i] = max(P[i, i], (sigma * scale[i]) ** 2)
 
 
-@nb.njit(
+@njit(
     nb.void(_I2C, _F1C, _I1C, nb.int64, nb.int64, nb.int64, nb.int64, nb.float64),
     cache=True,
     error_model="numpy",
@@ -368,7 +369,7 @@ def record_event(
     counts[CNT_EV] = k + 1
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def record_innovations(
     t_ns: int,
     nu: F64,
@@ -401,7 +402,7 @@ def record_innovations(
             record_event(ev_i, ev_f, counts, t_ns, EV_REJECT, blocks[b, 2], blocks[b, 3], nis[b])
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def check_state(X: F64, P: F64, n: int, scale: F64, cfg: F64) -> int:
     """The NaN barrier and divergence limits; returns a ``STATUS_*`` code."""
     for j in range(X.shape[0]):
@@ -419,7 +420,7 @@ def check_state(X: F64, P: F64, n: int, scale: F64, cfg: F64) -> int:
     return STATUS_OK
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def record_output(
     t_ns: int, X: F64, P_err: F64, n: int, out_t: I64, out_x: F64, out_P: F64, counts: I64
 ) -> None:

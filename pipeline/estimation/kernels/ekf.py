@@ -16,9 +16,9 @@ only the Joseph update itself is done by filterpy there. ``ekf_prepare`` and
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.estimation.kernels.common import (
     CFG_GAP_S,
     CFG_MAX_STEP,
@@ -61,7 +61,7 @@ from pipeline.estimation.models.measurement import (
 from pipeline.nav.earth import F64, I64
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def ekf_prepare(
     t_ns: int,
     X: F64,
@@ -135,7 +135,7 @@ def ekf_prepare(
     return accepted_rows(blocks, nb_, accepted, acc_rows)
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def joseph_update(
     P: F64, n: int, H: F64, S: F64, r: F64, nu: F64, acc_rows: I64, ma: int
 ) -> tuple[F64, bool]:
@@ -194,7 +194,7 @@ def joseph_update(
     return dx, True
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def run_ekf(
     x0: F64,
     P0: F64,

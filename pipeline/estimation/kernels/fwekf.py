@@ -42,9 +42,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
 from pipeline.estimation.kernels.common import (
     CFG_GAP_S,
@@ -70,13 +70,13 @@ from pipeline.nav.earth import F64, I64
 RING_COLS = 6  # north, east, down position; north, east, down velocity
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def fade_prior(P: F64, Phi: F64, Qd: F64, alpha: float) -> None:
     """Paper 004 eq. 26 in place: ``P <- alpha^2 Phi P Phi^T + Qd``."""
     P[:, :] = (alpha * alpha) * (Phi @ P @ Phi.T) + Qd
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def weighted_update(
     P: F64, n: int, H: F64, S: F64, r: F64, nu: F64, acc_rows: I64, ma: int, alpha: float
 ) -> tuple[F64, bool]:
@@ -106,7 +106,7 @@ def weighted_update(
     return joseph_update(P, n, H, S_w, r_w, nu, acc_rows, ma)
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def push_residuals(ring: F64, count: int, rows: I64, nu: F64, S: F64, m: int) -> int:
     """Append one epoch's normalized GNSS residuals (all rows, gated or not) to the ring;
     returns the new count."""
@@ -119,7 +119,7 @@ def push_residuals(ring: F64, count: int, rows: I64, nu: F64, S: F64, m: int) ->
     return count + 1
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def run_fwekf(
     x0: F64,
     P0: F64,

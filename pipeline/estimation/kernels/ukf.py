@@ -37,9 +37,9 @@ the same. Inlining the small common helpers as well measured slower, and is not 
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.estimation.kernels.common import (
     CFG_GAP_S,
     CFG_MAX_STEP,
@@ -98,7 +98,7 @@ from pipeline.nav.earth import F64, I64
 from pipeline.nav.mechanization import LANES, LN_DIM
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _clock_only(L: F64, c: int) -> bool:
     """Column ``c`` of the Cholesky factor moves no navigation or bias state."""
     for r in range(E_CB):  # noqa: SIM110 (numba: no all() over a generator)
@@ -107,7 +107,7 @@ def _clock_only(L: F64, c: int) -> bool:
     return True
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def ukf_predict(
     s: F64,
     P: F64,
@@ -192,7 +192,7 @@ def ukf_predict(
     return i_next
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def ukf_update(
     t_ns: int,
     s: F64,
@@ -274,7 +274,7 @@ def ukf_update(
     return True
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _reset_streams(
     t_ns: int,
     P: F64,
@@ -299,7 +299,7 @@ def _reset_streams(
     return bool(reset.sum() > 0)
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _apply_gain(s: F64, P: F64, n: int, Pxz: F64, S: F64, nu: F64, a: I64, ma: int) -> None:
     """``s += K nu``, ``P -= K S K^T`` with ``K = Pxz S^-1`` over the accepted rows ``a``."""
     Sa = np.empty((ma, ma))
@@ -328,14 +328,14 @@ def _apply_gain(s: F64, P: F64, n: int, Pxz: F64, S: F64, nu: F64, a: I64, ma: i
                 P[c, r] = P[r, c]
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _error_cov(P: F64, sc: F64, n: int, out: F64) -> None:
     for r in range(n):
         for c in range(n):
             out[r, c] = P[r, c] / (sc[r] * sc[c])
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def run_ukf(
     x0: F64,
     P0: F64,

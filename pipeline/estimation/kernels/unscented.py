@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.estimation.kernels.common import cholesky
 from pipeline.estimation.models.ins import to_full
 from pipeline.estimation.models.measurement import epoch_h
@@ -30,7 +30,7 @@ def ukf_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[F64, F
     return wm, wc, math.sqrt(n + lam)
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def draw_sigmas(s: F64, P: F64, n: int, gamma: float, L: F64, sig: F64) -> bool:
     """Sigma points ``s``, ``s +/- gamma * L[:, j]`` (``L L^T = P``) into ``sig`` (2n+1, n)."""
     if not cholesky(P, n, L):
@@ -45,7 +45,7 @@ def draw_sigmas(s: F64, P: F64, n: int, gamma: float, L: F64, sig: F64) -> bool:
     return True
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def unscented_mean_cov(sig: F64, wm: F64, wc: F64, n_out: int, mean: F64, cov: F64) -> None:
     """Weighted mean and covariance of the rows of ``sig[:, :n_out]``."""
     ns = sig.shape[0]
@@ -63,7 +63,7 @@ def unscented_mean_cov(sig: F64, wm: F64, wc: F64, n_out: int, mean: F64, cov: F
             cov[c, r] = a
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def sigma_h(
     sig: F64,
     q_ref: F64,
@@ -86,7 +86,7 @@ def sigma_h(
             Z[j, k] -= h_ref[k]
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def cross_cov(sig: F64, s: F64, Z: F64, zp: F64, wc: F64, n: int, m: int, Pxz: F64) -> None:
     """``Pxz = sum_j wc_j (sig_j - s)(Z_j - zp)^T`` into ``Pxz[:n, :m]``."""
     for r in range(n):

@@ -31,9 +31,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.estimation.kernels.common import (
     CNT_OUT,
     CNT_STOP,
@@ -90,7 +90,7 @@ STREAM_NAMES = ("gnss_pos", "gnss_speed", "gnss_course", "yaw_rate")
 M_MAX = 5
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def epoch_rows(stop: I64, veh: F64, fix: F64, rows: I64, blocks: I64) -> tuple[int, int, int]:
     """Lay out the measurement rows of a stop: ``rows[k]`` = (``Z_*`` kind, source row).
 
@@ -125,7 +125,7 @@ def epoch_rows(stop: I64, veh: F64, fix: F64, rows: I64, blocks: I64) -> tuple[i
     return m, nb_, vi
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def epoch_values(
     model: int,
     x: F64,
@@ -169,7 +169,7 @@ def epoch_values(
         vm.measure_jac(model, x, delta, kind, vp, H[k])
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def innovation_cov(P: F64, H: F64, r: F64, m: int, S: F64) -> None:
     """``S = H P H^T + R`` into ``S[:m, :m]``."""
     Hm = np.ascontiguousarray(H[:m, :])
@@ -178,7 +178,7 @@ def innovation_cov(P: F64, H: F64, r: F64, m: int, S: F64) -> None:
         S[k, k] += r[k]
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def predict(
     model: int, x: F64, P: F64, u: F64, dt: float, vp: F64, sig_u: F64, q: F64, max_step: float
 ) -> None:
@@ -200,7 +200,7 @@ def predict(
     symmetrize(P, vm.NX)
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def log_likelihood(nu: F64, S: F64, acc: I64, ma: int) -> float:
     """Gaussian log-likelihood of the accepted innovations (0 when none are accepted)."""
     if ma == 0:
@@ -227,13 +227,13 @@ def log_likelihood(nu: F64, S: F64, acc: I64, ma: int) -> float:
     return -0.5 * (s + d + ma * math.log(2.0 * math.pi))
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def likelihood(ll: float, floor: float) -> float:
     """``exp(ll)``, floored so that no model's probability collapses to exactly zero."""
     return max(math.exp(min(ll, 700.0)), floor)
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def imm_mixing(mu: F64, M: F64) -> tuple[F64, F64]:
     """(cbar, omega): predicted model probabilities ``cbar = mu M`` and mixing weights
     ``omega[i, j] = M[i, j] mu[i] / cbar[j]`` (filterpy's ``_compute_mixing_probabilities``)."""
@@ -249,7 +249,7 @@ def imm_mixing(mu: F64, M: F64) -> tuple[F64, F64]:
     return cbar, omega
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def imm_combine(xs: F64, Ps: F64, w: F64, x: F64, P: F64) -> None:
     """Weighted mean and covariance (with the spread of the means) of the models' estimates."""
     k = w.shape[0]
@@ -262,7 +262,7 @@ def imm_combine(xs: F64, Ps: F64, w: F64, x: F64, P: F64) -> None:
         P += w[i] * (np.outer(d, d) + Ps[i])
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def reset_stream(P: F64, stream: int, nu: F64, blocks: I64, nb_: int) -> float:
     """Decorrelate and inflate the states a timed-out stream observes (bad-inputs F2).
 
@@ -294,7 +294,7 @@ def reset_stream(P: F64, stream: int, nu: F64, blocks: I64, nb_: int) -> float:
     return big
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def gate_with_reset(
     t: int, x: F64, P: F64, H: F64, r: F64, nu: F64, m: int, S: F64, blocks: I64, nb_: int,
     gate: F64, cfg: F64, reject_since: I64, nis: F64, accepted: I64, gwork: F64, ev_i: I64,
@@ -317,7 +317,7 @@ def gate_with_reset(
     update_reject_since(t, blocks, nb_, accepted, reject_since)
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def check(x: F64, P: F64, cfg: F64) -> int:
     """The NaN barrier and the divergence limit for a vehicle state."""
     for i in range(vm.NX):
@@ -331,7 +331,7 @@ def check(x: F64, P: F64, cfg: F64) -> int:
     return STATUS_OK
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def switch_model(current: int, v_whl: float, cfg: F64) -> int:
     """Speed-based model choice with hysteresis (``VC_V_UP`` > ``VC_V_DOWN``)."""
     if current == vm.KINEMATIC and v_whl > cfg[VC_V_UP]:
@@ -341,7 +341,7 @@ def switch_model(current: int, v_whl: float, cfg: F64) -> int:
     return current
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def run_vehicle(
     x0: F64,
     P0: F64,
@@ -505,7 +505,7 @@ def run_vehicle(
     return STATUS_OK
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def _record(
     t: int, x: F64, P: F64, aux: float, out_t: I64, out_x: F64, out_P: F64, out_aux: F64,
     counts: I64,

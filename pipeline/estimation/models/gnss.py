@@ -27,8 +27,7 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
-
+from pipeline._jit import njit
 from pipeline.estimation.models.ins import (
     E_ATT,
     E_BG,
@@ -60,7 +59,7 @@ AN_C = 27  # 27..35: C_b^n, row-major
 AN_DIM = 36
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def sk(a0: float, a1: float, a2: float, r: int, c: int) -> float:
     """Entry (r, c) of the cross-product matrix [a x]."""
     if r == c:
@@ -72,7 +71,7 @@ def sk(a0: float, a1: float, a2: float, r: int, c: int) -> float:
     return -a1 if c == 0 else a0
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def ned_offset(lat: float, lon: float, h: float, ref: F64) -> tuple[float, float, float]:
     """NED offset (m) of the point (lat, lon, h) from ``ref`` = (lat, lon, h), with the radii of
     ``ref`` (exact for the small offsets of a filter update)."""
@@ -86,7 +85,7 @@ def ned_offset(lat: float, lon: float, h: float, ref: F64) -> tuple[float, float
     )
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def antenna(X: F64, lever_b: F64, w_ib_b: F64, C: F64, out: F64) -> None:
     """The antenna context of state ``X`` (``AN_*`` layout) into ``out`` (``AN_DIM``,).
 
@@ -134,7 +133,7 @@ def antenna(X: F64, lever_b: F64, w_ib_b: F64, C: F64, out: F64) -> None:
         )
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _los(ant: F64, sat: F64) -> tuple[float, float, float, float]:
     """Range to the satellite and the ECEF unit vector from the antenna to it."""
     dx = sat[0] - ant[AN_RE]
@@ -144,14 +143,14 @@ def _los(ant: F64, sat: F64) -> tuple[float, float, float, float]:
     return rng, dx / rng, dy / rng, dz / rng
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def pseudorange_h(ant: F64, X: F64, sat: F64) -> float:
     """Predicted pseudorange ``|r_sat - r_ant| + cb`` (m) for satellite ``sat[0:3]`` (ECEF)."""
     rng, _, _, _ = _los(ant, sat)
     return float(rng + X[X_CB])
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def pseudorange_rate_h(ant: F64, X: F64, sat: F64) -> float:
     """Predicted pseudorange rate ``e . (v_sat - v_ant) + cd`` (m/s); ``sat[3:6]`` is the
     satellite ECEF velocity."""
@@ -162,7 +161,7 @@ def pseudorange_rate_h(ant: F64, X: F64, sat: F64) -> float:
     return float(rate + X[X_CD])
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _los_ned(ant: F64, ex: float, ey: float, ez: float) -> tuple[float, float, float]:
     """An ECEF vector resolved in NED (``C_e^n`` of the antenna)."""
     c = ant[AN_CEN : AN_CEN + 9]
@@ -173,7 +172,7 @@ def _los_ned(ant: F64, ex: float, ey: float, ez: float) -> tuple[float, float, f
     )
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def position_jac(ant: F64, axis: int, n: int, H_row: F64) -> None:
     """Jacobian row of the antenna position (NED ``axis``): ``[I, 0, -[(C l) x], 0, 0]``."""
     for c in range(n):
@@ -184,7 +183,7 @@ def position_jac(ant: F64, axis: int, n: int, H_row: F64) -> None:
         H_row[E_ATT + c] = -sk(cl0, cl1, cl2, axis, c)
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _cross(
     a0: float, a1: float, a2: float, b0: float, b1: float, b2: float
 ) -> tuple[float, float, float]:
@@ -192,7 +191,7 @@ def _cross(
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def velocity_jac(ant: F64, lever_b: F64, axis: int, n: int, H_row: F64) -> None:
     """Jacobian row of the antenna NED velocity: ``H_v = I``, ``H_phi = -[u x]``,
     ``H_bg = C [l x]`` (its row ``axis``: ``(C_axis x l)^T``)."""
@@ -207,7 +206,7 @@ def velocity_jac(ant: F64, lever_b: F64, axis: int, n: int, H_row: F64) -> None:
         H_row[E_BG + c] = bg[c]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def pseudorange_jac(ant: F64, sat: F64, n: int, H_row: F64) -> None:
     """Jacobian row of ``pseudorange_h``: ``H_r = -e^T``, ``H_phi = e^T [(C l) x]``,
     ``H_cb = 1`` (``e`` in NED)."""
@@ -222,7 +221,7 @@ def pseudorange_jac(ant: F64, sat: F64, n: int, H_row: F64) -> None:
     H_row[E_CB] = 1.0
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def pseudorange_rate_jac(ant: F64, lever_b: F64, sat: F64, n: int, H_row: F64) -> None:
     """Jacobian row of ``pseudorange_rate_h``: ``H_v = -e^T``, ``H_phi = e^T [u x]``,
     ``H_bg = -e^T C [l x]``, ``H_r = -(dv - e (e . dv))^T / range``, ``H_cd = 1``."""

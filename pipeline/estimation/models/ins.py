@@ -36,9 +36,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.nav.earth import F64, I64, radii
 from pipeline.nav.mechanization import (
     LANES,
@@ -68,7 +68,7 @@ ACC_GAP = 13  # total duration of IMU gaps inside the span, s
 ACC_DIM = 14
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _exp_mul(a0: float, a1: float, a2: float, q: F64) -> tuple[float, float, float, float]:
     """``Exp(a) * q`` (rotation vector ``a`` applied on the left), unit, scalar part >= 0."""
     angle = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
@@ -86,7 +86,7 @@ def _exp_mul(a0: float, a1: float, a2: float, q: F64) -> tuple[float, float, flo
     return w * s, x * s, y * s, z * s
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _log_div(q: F64, r: F64) -> tuple[float, float, float]:
     """Rotation vector of ``q * r^-1`` (angle in [0, pi])."""
     w = q[0] * r[0] + q[1] * r[1] + q[2] * r[2] + q[3] * r[3]
@@ -102,7 +102,7 @@ def _log_div(q: F64, r: F64) -> tuple[float, float, float]:
     return x * k, y * k, z * k
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def dcm_into(q: F64, C: F64) -> None:
     """C_b^n of the unit quaternion ``q`` (as ``rotations.quat_to_dcm``) into ``C`` (3, 3)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
@@ -117,7 +117,7 @@ def dcm_into(q: F64, C: F64) -> None:
     C[2, 2] = w * w - x * x - y * y + z * z
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def inject(X: F64, dx: F64, n: int) -> None:
     """Apply an error-state correction in place: ``X <- X [+] dx`` (see the module docstring).
 
@@ -142,7 +142,7 @@ def inject(X: F64, dx: F64, n: int) -> None:
         X[X_CD] += dx[E_CD]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def difference(Xa: F64, Xb: F64, n: int) -> F64:
     """The error state ``dx`` with ``inject(Xb, dx) == Xa`` (exact inverse of ``inject``).
 
@@ -170,7 +170,7 @@ def difference(Xa: F64, Xb: F64, n: int) -> F64:
     return dx
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def to_full(s: F64, q_ref: F64, n: int, X: F64) -> None:
     """UKF coordinates ``s`` (n,) and reference quaternion -> full state ``X`` (18,), in place.
 
@@ -191,7 +191,7 @@ def to_full(s: F64, q_ref: F64, n: int, X: F64) -> None:
         X[X_CD] = 0.0
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def from_full(X: F64, q_ref: F64, n: int, s: F64) -> None:
     """Full state ``X`` -> UKF coordinates ``s`` relative to ``q_ref``, in place."""
     for j in range(3):
@@ -206,7 +206,7 @@ def from_full(X: F64, q_ref: F64, n: int, s: F64) -> None:
         s[E_CD] = X[X_CD]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def coords_scale(X: F64, n: int, out: F64) -> None:
     """Diagonal of the map from error coordinates to UKF coordinates at ``X``, shape (n,).
 
@@ -223,7 +223,7 @@ def coords_scale(X: F64, n: int, out: F64) -> None:
     out[2] = -1.0
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _next_interval(
     imu_t: I64, i: int, t_cur: int, t_end: int, substeps: int, max_step_s: float
 ) -> tuple[bool, int, float, int]:
@@ -238,7 +238,7 @@ def _next_interval(
     return advance, t_next, dt, ns
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _target_input(
     imu_t: I64,
     imu: F64,
@@ -268,7 +268,7 @@ def _target_input(
             w1[j] = u_cur[3 + j]
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _accumulate(nav: F64, f0: F64, f1: F64, dt: float, acc: F64) -> None:
     """acc += (C_b^n mean(f0, f1) dt, C_b^n dt) with C_b^n at the interval start."""
     qw, qx, qy, qz = nav[6], nav[7], nav[8], nav[9]
@@ -296,7 +296,7 @@ def _accumulate(nav: F64, f0: F64, f1: F64, dt: float, acc: F64) -> None:
     acc[ACC_C + 8] += dt * c22
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _accumulate_interval(
     nav: F64, f0: F64, f1: F64, dt: float, imu_t: I64, i: int, gap_s: float, acc: F64
 ) -> None:
@@ -308,7 +308,7 @@ def _accumulate_interval(
         acc[ACC_GAP] += dt
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def propagate_span(
     X: F64,
     imu_t: I64,
@@ -381,7 +381,7 @@ def propagate_span(
     return i
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _lane_inputs(X: F64, lanes: I64, m: int, u0: F64, f1: F64, w1: F64, Y: F64) -> None:
     """Each lane's interval inputs, corrected with its own biases, as ``propagate_span``
     forms them (raw input ``u0`` at the start, ``f1``/``w1`` at the end), and its reference
@@ -401,7 +401,7 @@ def _lane_inputs(X: F64, lanes: I64, m: int, u0: F64, f1: F64, w1: F64, Y: F64) 
         Y[LN_LAT * L + b] = Y[b]
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _accumulate_lane0(
     X0: F64, Y: F64, u0: F64, f1: F64, dt: float, imu_t: I64, i: int, gap_s: float, work: F64,
     acc: F64,
@@ -417,7 +417,7 @@ def _accumulate_lane0(
     _accumulate_interval(nav0, f0c, f1c, dt, imu_t, i, gap_s, acc)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def propagate_sigmas(
     X: F64,
     lanes: I64,

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.estimation.models.ins import (
     ACC_C,
     ACC_FN,
@@ -70,13 +70,13 @@ def noise_vector(
     )
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _dgravity_dh(lat: float, h: float) -> float:
     """d g / d h of ``earth.gravity`` (normal gravity decreases with height), 1/s^2."""
     return (gravity(lat, h + 1.0) - gravity(lat, h - 1.0)) / 2.0
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def error_jacobian(X: F64, f_n: F64, C: F64, n: int, F: F64) -> None:
     """Continuous error dynamics ``d(dx)/dt = F dx`` at the full state ``X`` (eq. 4-6).
 
@@ -167,7 +167,7 @@ def error_jacobian(X: F64, f_n: F64, C: F64, n: int, F: F64) -> None:
         F[E_CB, E_CD] = 1.0
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _cross_entry(a: tuple[float, float, float], r: int, c: int) -> float:
     """Entry (r, c) of the cross-product matrix [a x]."""
     if r == c:
@@ -179,7 +179,7 @@ def _cross_entry(a: tuple[float, float, float], r: int, c: int) -> float:
     return -a[1] if c == 0 else a[0]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def transition(X: F64, acc: F64, noise: F64, n: int, Phi: F64, Qd: F64) -> None:
     """Error-state transition and process noise over one span (the EKF's predict model).
 

@@ -30,9 +30,9 @@ seconds faster (issue 5's cold-compile budget); the arithmetic is the same eithe
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.estimation.models.gnss import (
     AN_DIM,
     AN_LLH,
@@ -79,7 +79,7 @@ def sv_name(code: int) -> str:
     return f"{chr(code // 1000)}{code % 1000:02d}"
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def epoch_layout(
     stop: I64,
     fix: F64 | None,
@@ -131,7 +131,7 @@ def epoch_layout(
     return m, nb_
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def epoch_z(
     rows: I64,
     m: int,
@@ -167,7 +167,7 @@ def epoch_z(
             r[k] = nhc_sigma[kind - K_NHC] ** 2
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def gate_shift(rows: I64, m: int, fix: F64 | None, r: F64, dr: F64) -> None:
     """Per row, the gating variance minus the update variance ``r`` (``dr[:m]``, <= 0).
 
@@ -190,7 +190,7 @@ def gate_shift(rows: I64, m: int, fix: F64 | None, r: F64, dr: F64) -> None:
                 dr[k] = r[k] * (1.0 / infl - 1.0)
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def epoch_h(
     X: F64, rows: I64, m: int, obs: F64 | None, ref: F64, w_ib_b: F64, lever_b: F64, out: F64
 ) -> None:
@@ -215,7 +215,7 @@ def epoch_h(
             out[k] = body_velocity(X, ant, 1 + kind - K_NHC)
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def epoch_jac(
     X: F64, rows: I64, m: int, obs: F64 | None, w_ib_b: F64, lever_b: F64, n: int, H: F64
 ) -> None:

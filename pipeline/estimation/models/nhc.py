@@ -12,14 +12,13 @@ With ``C_true = Exp(phi) C`` the body velocity perturbs as
 
 from __future__ import annotations
 
-import numba as nb
-
+from pipeline._jit import njit
 from pipeline.estimation.models.gnss import AN_C, sk
 from pipeline.estimation.models.ins import E_ATT, E_VEL, X_VEL
 from pipeline.nav.earth import F64
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def body_velocity(X: F64, ant: F64, axis: int) -> float:
     """Component ``axis`` of the IMU velocity in body FRD, m/s (``ant``: antenna context of
     ``X``, for its ``C_b^n``)."""
@@ -30,7 +29,7 @@ def body_velocity(X: F64, ant: F64, axis: int) -> float:
     )
 
 
-@nb.njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def nhc_jac(X: F64, ant: F64, axis: int, n: int, H_row: F64) -> None:
     """Jacobian row of ``body_velocity(X, ant, axis)``: ``C^T`` and ``C^T [v x]`` rows."""
     v0, v1, v2 = X[X_VEL], X[X_VEL + 1], X[X_VEL + 2]

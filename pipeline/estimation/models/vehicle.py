@@ -49,9 +49,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from pipeline._jit import njit
 from pipeline.nav.earth import F64
 
 NX = 5
@@ -66,7 +66,7 @@ V_MIN = 0.5  # m/s: floor of the speed in the dynamic model's coefficients (v ->
 Z_SPEED, Z_YAW_RATE, Z_COURSE, Z_N, Z_E = 0, 1, 2, 3, 4
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def wrap_angle(a: float) -> float:
     """``a`` wrapped to (-pi, pi]."""
     two_pi = 2.0 * math.pi
@@ -76,7 +76,7 @@ def wrap_angle(a: float) -> float:
     return w - math.pi
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def dyn_coefficients(v: float, vp: F64) -> tuple[float, float, float, float, float]:
     """(a, b, c1/D, c2/D, D) of the dynamic model at speed ``v`` (see the module docstring)."""
     lf, lr, m, cf, cr = vp[VP_LF], vp[VP_LR], vp[VP_M], vp[VP_CF], vp[VP_CR]
@@ -89,7 +89,7 @@ def dyn_coefficients(v: float, vp: F64) -> tuple[float, float, float, float, flo
     return a, b, c1 / d, c2 / d, d
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def _beta_step(beta: float, v_in: float, delta: float, dt: float, vp: F64) -> tuple[float, float]:
     """Dynamic sideslip after ``dt`` and its derivative w.r.t. the previous sideslip."""
     a, b, _, _, _ = dyn_coefficients(v_in, vp)
@@ -97,7 +97,7 @@ def _beta_step(beta: float, v_in: float, delta: float, dt: float, vp: F64) -> tu
     return phi * beta + (phi - 1.0) / a * b * delta, phi
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def yaw_rate(model: int, x: F64, delta: float, vp: F64) -> float:
     """The model's yaw rate at state ``x`` with steering ``delta``, rad/s (FRD: + = right)."""
     v, beta = float(x[X_V]), float(x[X_BETA])
@@ -107,7 +107,7 @@ def yaw_rate(model: int, x: F64, delta: float, vp: F64) -> float:
     return v * (c1d * delta + c2d * beta)
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def yaw_rate_jac(model: int, x: F64, delta: float, vp: F64, out: F64) -> None:
     """d yaw_rate / dx into ``out`` (5,); the dynamic coefficients do not depend on ``x``."""
     out[:] = 0.0
@@ -120,7 +120,7 @@ def yaw_rate_jac(model: int, x: F64, delta: float, vp: F64, out: F64) -> None:
     out[X_BETA] = x[X_V] * c2d
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def yaw_rate_steer_sens(model: int, x: F64, delta: float, vp: F64) -> float:
     """d yaw_rate / d delta, (rad/s)/rad: how the steering input's own noise enters a yaw-rate
     prediction (``v c1 / D`` for the dynamic model, whose yaw rate is set by the steering of
@@ -131,7 +131,7 @@ def yaw_rate_steer_sens(model: int, x: F64, delta: float, vp: F64) -> float:
     return float(x[X_V] * c1d)
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def step(model: int, x: F64, v_whl: float, delta: float, dt: float, vp: F64, out: F64) -> None:
     """Process model ``x' = f(x, u, dt)`` into ``out`` (may not alias ``x``)."""
     v, beta, psi = x[X_V], x[X_BETA], x[X_PSI]
@@ -148,7 +148,7 @@ def step(model: int, x: F64, v_whl: float, delta: float, dt: float, vp: F64, out
     out[X_E] = x[X_E] + dt * v * math.sin(th)
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def step_jac(model: int, x: F64, v_whl: float, delta: float, dt: float, vp: F64, F: F64) -> None:
     """State Jacobian ``F = df/dx`` (5, 5) of ``step``."""
     v, beta, psi = x[X_V], x[X_BETA], x[X_PSI]
@@ -180,7 +180,7 @@ def step_jac(model: int, x: F64, v_whl: float, delta: float, dt: float, vp: F64,
     F[X_E, X_E] = 1.0
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def input_jac(model: int, x: F64, v_whl: float, delta: float, dt: float, vp: F64, G: F64) -> None:
     """Input Jacobian ``G = df/du`` (5, 2), columns (v_whl, delta).
 
@@ -219,7 +219,7 @@ def input_jac(model: int, x: F64, v_whl: float, delta: float, dt: float, vp: F64
     G[X_E, 1] = dt * v * math.cos(th) * 0.5 * dt * dr_dd
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def process_noise(
     model: int, x: F64, v_whl: float, delta: float, dt: float, vp: F64, sig_u: F64, q: F64, Q: F64
 ) -> None:
@@ -232,7 +232,7 @@ def process_noise(
         Q[i, i] += q[i] * dt
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def measure(model: int, x: F64, delta: float, kind: int, vp: F64) -> float:
     """Predicted value of measurement ``kind`` (``Z_*``); the course is not wrapped."""
     if kind == Z_SPEED:
@@ -246,7 +246,7 @@ def measure(model: int, x: F64, delta: float, kind: int, vp: F64) -> float:
     return float(x[X_E])
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def measure_jac(model: int, x: F64, delta: float, kind: int, vp: F64, out: F64) -> None:
     """Jacobian row (5,) of ``measure``."""
     if kind == Z_YAW_RATE:
@@ -264,7 +264,7 @@ def measure_jac(model: int, x: F64, delta: float, kind: int, vp: F64, out: F64) 
         out[X_E] = 1.0
 
 
-@nb.njit(cache=True)
+@njit(cache=True)
 def residual(kind: int, z: float, hx: float) -> float:
     """``z - h(x)``, wrapped to (-pi, pi] for the course."""
     d = z - hx

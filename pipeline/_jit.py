@@ -1,0 +1,33 @@
+"""The project's numba decorator: ``numba.njit`` without the C-callback wrapper.
+
+For every function it compiles, numba also builds a C-callable wrapper, which is only used
+when the function is a C callback (``cfunc``) or a first-class function value. No pipeline
+function is either, and the wrapper is about an eighth of the LLVM a cold tc_ukf compile
+optimizes, so ``njit`` here passes ``no_cfunc_wrapper=True`` and is otherwise ``numba.njit``
+(the same arguments; the function stays callable from Python and from compiled code).
+``tests/pipeline/test_numba_config.py`` checks that every compiled pipeline function is built
+this way.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, TypeVar
+
+import numba as nb
+
+if TYPE_CHECKING:
+    from numba.core.dispatcher import Dispatcher
+
+_F = TypeVar("_F", bound=Callable[..., object])
+
+
+def njit(signature: Any = None, /, **options: Any) -> Callable[[_F], Dispatcher[_F]]:
+    """``numba.njit(signature, **options)`` with ``no_cfunc_wrapper=True``, as a decorator."""
+
+    def decorate(fn: _F) -> Dispatcher[_F]:
+        jit = nb.njit(signature, no_cfunc_wrapper=True, **options)  # type: ignore[call-overload]
+        compiled: Dispatcher[_F] = jit(fn)
+        return compiled
+
+    return decorate
