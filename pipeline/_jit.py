@@ -2,7 +2,7 @@
 
 For every function it compiles, numba also builds a C-callable wrapper, which is only used
 when the function is a C callback (``cfunc``) or a first-class function value. No pipeline
-function is either, and the wrapper is about an eighth of the LLVM a cold tc_ukf compile
+function is either, and the wrappers are about a tenth of the LLVM a cold tc_ukf compile
 optimizes, so ``njit`` here passes ``no_cfunc_wrapper=True`` and is otherwise ``numba.njit``
 (the same arguments; the function stays callable from Python and from compiled code).
 ``tests/pipeline/test_numba_config.py`` checks that every compiled pipeline function is built
