@@ -10,6 +10,9 @@ grid + update epochs + NHC slots) and hands arrays to a backend:
   model functions, gating and bookkeeping driven by filterpy's ExtendedKalmanFilter and
   UnscentedKalmanFilter, with the same signature and outputs.
 
+With a cold numba cache and a second core, a helper process compiles the kernel's callees
+meanwhile (``compile_helper``).
+
 A divergence (NaN barrier, indefinite covariance, limits) raises ``DivergenceError`` or, with
 ``divergence.on_divergence: flag``, ends the run there and marks it diverged.
 """
@@ -32,9 +35,10 @@ from ingest.config import ImuNoise
 from ingest.meta import SensorMeta
 from pipeline._numba_cache import fewer_gc_passes
 from pipeline.errors import DivergenceError, PipelineError
+from pipeline.estimation import compile_helper
 from pipeline.estimation import inputs as inp
 from pipeline.estimation.alignment import Alignment, align
-from pipeline.estimation.config import FILTER_KINDS, InsFilterParams
+from pipeline.estimation.config import FILTER_KINDS, FilterKind, InsFilterParams
 from pipeline.estimation.kernels import common as cm
 from pipeline.estimation.kernels.unscented import ukf_weights
 from pipeline.estimation.models import ins, ins_errors
@@ -170,8 +174,10 @@ def _table(tables: Mapping[str, pa.Table], name: str, filt: str) -> pa.Table:
 KernelFn = Callable[..., int]
 
 
-def _backend(setup: FilterSetup, backend: Backend) -> KernelFn:
-    if setup.fuzzy is not None:
+def kernel_for(kind: FilterKind, backend: Backend) -> KernelFn:
+    """The function that runs a filter of ``kind`` on ``backend`` (a numba dispatcher for
+    ``numba``)."""
+    if kind.fading:
         if backend == "numba":
             from pipeline.estimation.kernels.fwekf import run_fwekf
 
@@ -183,10 +189,10 @@ def _backend(setup: FilterSetup, backend: Backend) -> KernelFn:
         from pipeline.estimation.kernels.ekf import run_ekf
         from pipeline.estimation.kernels.ukf import run_ukf
 
-        return run_ekf if setup.estimator == "ekf" else run_ukf
+        return run_ekf if kind.estimator == "ekf" else run_ukf
     from pipeline.estimation.reference import run_ekf_filterpy, run_ukf_filterpy
 
-    return run_ekf_filterpy if setup.estimator == "ekf" else run_ukf_filterpy
+    return run_ekf_filterpy if kind.estimator == "ekf" else run_ukf_filterpy
 
 
 def run_filter(
@@ -218,6 +224,26 @@ def run_filter(
     """
     t_wall = time.perf_counter()
     kind = FILTER_KINDS[name]
+    kernel = kernel_for(kind, backend)
+    with compile_helper.helping(name, kernel) as compiled:
+        return _run_filter(
+            tables, sensors, name, params, backend, imu, initial, kernel, compiled, t_wall
+        )
+
+
+def _run_filter(
+    tables: Mapping[str, pa.Table],
+    sensors: SensorMeta | None,
+    name: str,
+    params: InsFilterParams,
+    backend: Backend,
+    imu: inp.ImuData | None,
+    initial: Alignment | None,
+    kernel: KernelFn,
+    compiled: Callable[[], None],
+    t_wall: float,
+) -> RunResult:
+    kind = FILTER_KINDS[name]
     imu_data = imu if imu is not None else inp.prepare_imu(_table(tables, "imu", name), params.step)
     noise_model, noise_source = resolve_imu_noise(params, sensors, imu_data)
     setup = make_setup(name, params, sensors, noise_model)
@@ -230,7 +256,6 @@ def run_filter(
     events = list(imu_data.events)
     events += list(fixes.events) if fixes is not None and kind.coupling == "loose" else []
     events += list(obs.events) if obs is not None and kind.coupling == "tight" else []
-    kernel = _backend(setup, backend)
     parts: list[tuple[I64, F64, F64, I64, F64]] = []
     alphas: list[F64] = []
     alignments: list[Alignment] = []
@@ -246,7 +271,7 @@ def run_filter(
             continue
         alignments.append(al)
         out, code, t_fail, seg_events, seg_compile_s, alpha = _run_segment(
-            kernel, setup, params, kind.coupling, kind.nhc, imu_data, seg, fixes, obs, al
+            kernel, setup, params, kind.coupling, kind.nhc, imu_data, seg, fixes, obs, al, compiled
         )
         compile_s += seg_compile_s
         parts.append(out)
@@ -361,6 +386,7 @@ def _run_segment(
     fixes: inp.FixData | None,
     obs: inp.ObsData | None,
     al: Alignment,
+    compiled: Callable[[], None],
 ) -> tuple[tuple[I64, F64, F64, I64, F64], int, int, list[inp.Event], float, F64]:
     lo, hi = seg
     imu_t = imu.t_ns[lo:hi]
@@ -418,6 +444,7 @@ def _run_segment(
         with fewer_gc_passes():
             kernel.compile(tuple(_typeof(a) for a in args))
         compile_s = time.perf_counter() - t0
+    compiled()  # the cold-compile helper, if any, has nothing left to do
     code = kernel(*args)
     k_out, k_inn, k_ev = (int(counts[c]) for c in (cm.CNT_OUT, cm.CNT_INN, cm.CNT_EV))
     if k_inn > n_inn or k_ev > n_ev or k_out > n_out:

@@ -1,0 +1,413 @@
+"""A cold replay compiles on two cores: a helper process compiles the kernel's callees.
+
+numba compiles one function at a time in a process (a global compiler lock). A cold
+``navreplay run`` spends most of its 20-30 CPU s compiling the replay kernel and the ~45 model
+and bookkeeping functions it calls: typing the kernel compiles each callee when it reaches the
+callee's call site, or loads the callee from numba's on-disk cache if it is there. So when the
+kernel of a filter is not in the cache and the machine has a second core, ``run_filter`` starts
+a helper process (``python -m pipeline.estimation.compile_helper FILTER``, niced) that compiles
+the same callees with the same argument types into the same cache, from the *last* the
+kernel's compile reaches to the first. The two meet half way: the replay loads what the helper
+has finished. The helper is stopped (killed) as soon as the kernel is compiled.
+
+The compiled code is the same either way (a function compiles to the same machine code in
+either process, and a cached callee is what a later warm run would load anyway); only the wall
+time of a cold run drops. The CPU time rises a little: the helper's own start, and the function
+both processes happen to compile at the meeting point. ``benchmarks/bench_estimation.py``
+measures both, with the helper and without.
+
+Which callees, with which types: ``compile_plan.json``, one ordered list per kernel signature,
+recorded from cold compiles by ``python -m pipeline.estimation.compile_helper --write-plan``.
+``tests/pipeline/estimation/test_compile_helper.py`` checks that the plan is current, so a
+change to a kernel's callees fails a test until the plan is written again. A stale entry
+would only cost the helper's time: the replay never depends on what the helper did.
+
+Not started: with ``NAVREPLAY_COMPILE_HELPER=0``, on one usable core, in a worker of a process
+pool (the Monte Carlo's, the scenario runs'), when the kernel is already compiled in this
+process or cached on disk, or for a filter the plan does not list.
+If the helper is killed while numba writes a cache file, at most a temporary file
+(``*.tmp.<hex>``) stays behind; numba replaces its cache files atomically, so no cache entry is
+ever half-written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from pipeline.synth import SynthResult
+
+PLAN_PATH = Path(__file__).with_name("compile_plan.json")
+REPO_PARAMS = Path(__file__).resolve().parents[2] / "params.yaml"
+ENV_SWITCH = "NAVREPLAY_COMPILE_HELPER"
+WRITE_COMMAND = "python -m pipeline.estimation.compile_helper --write-plan"
+
+
+@dataclass(frozen=True)
+class KernelPlan:
+    """What a cold compile of one kernel signature compiles, in the order it starts each.
+
+    ``kernel`` and every callee are ``module:qualname`` of a numba dispatcher; ``args`` and the
+    callees' argument types are numba type strings (``format_types``).
+    """
+
+    kernel: str
+    args: tuple[str, ...]
+    callees: tuple[tuple[str, tuple[str, ...]], ...]
+
+
+# -- numba types as text ----------------------------------------------------------------------
+
+
+def format_type(t: Any) -> str:
+    """A numba type as text that ``parse_types`` reads back (``float64[:, ::1]``, ``int64``)."""
+    from numba.core import types
+
+    if isinstance(t, types.Array) and t.mutable and t.aligned and t.layout in "CA":
+        dims = [":"] * t.ndim
+        if t.layout == "C":
+            dims[-1] = "::1"
+        text = f"{t.dtype}[{', '.join(dims)}]"
+    elif isinstance(t, types.IntegerLiteral | types.BooleanLiteral):
+        text = f"{type(t).__name__}({t.literal_value!r})"
+    else:
+        text = repr(t)
+    try:
+        same = parse_type(text) == t
+    except Exception:  # not a type numba's namespace can build from the text
+        same = False
+    if not same:
+        raise ValueError(f"numba type {t!r} does not survive as text {text!r}")
+    return text
+
+
+def parse_type(text: str) -> Any:
+    """The numba type ``text`` names (evaluated among ``numba.core.types`` only)."""
+    from numba.core import types
+
+    return eval(text, {"__builtins__": {}}, vars(types))  # a closed namespace: types only
+
+
+def format_types(ts: Sequence[Any]) -> tuple[str, ...]:
+    return tuple(format_type(t) for t in ts)
+
+
+# -- the plan ---------------------------------------------------------------------------------
+
+
+@cache
+def load_plan(path: Path = PLAN_PATH) -> tuple[dict[str, str], dict[str, KernelPlan]]:
+    """(filter name -> kernel key, kernel key -> plan) of ``compile_plan.json``; empty if the
+    file is absent."""
+    if not path.exists():
+        return {}, {}
+    raw = json.loads(path.read_text())
+    kernels = {
+        key: KernelPlan(
+            k["kernel"], tuple(k["args"]), tuple((c[0], tuple(c[1])) for c in k["callees"])
+        )
+        for key, k in raw["kernels"].items()
+    }
+    return dict(raw["filters"]), kernels
+
+
+def resolve(name: str) -> Any:
+    """The object ``module:qualname`` names (an AttributeError or ImportError if none)."""
+    module, _, qualname = name.partition(":")
+    obj: Any = importlib.import_module(module)
+    for part in qualname.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def dispatcher_name(dispatcher: Any) -> str:
+    fn = dispatcher.py_func
+    return f"{fn.__module__}:{fn.__qualname__}"
+
+
+def is_cached(dispatcher: Any, argtypes: tuple[Any, ...]) -> bool:
+    """Whether ``dispatcher`` is compiled for ``argtypes`` in this process or in numba's cache.
+
+    Reads numba's cache index the way ``Dispatcher.compile`` does (numba has no public call for
+    it). If that fails (a numba that keeps its cache differently) the answer is True, so the
+    helper is not started: a newer numba can cost the speed-up, never a run.
+    """
+    if argtypes in dispatcher.overloads:
+        return True
+    try:
+        cache_ = dispatcher._cache
+        key = cache_._index_key(argtypes, dispatcher.targetctx.codegen())
+        return key in cache_._cache_file._load_index()
+    except Exception:  # any failure means: do not start the helper
+        return True
+
+
+def usable_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+# -- the main process's side -------------------------------------------------------------------
+
+
+class Helper:
+    """A running helper process; ``stop()`` kills and reaps it (idempotent)."""
+
+    def __init__(self, proc: subprocess.Popen[bytes]) -> None:
+        self._proc: subprocess.Popen[bytes] | None = proc
+
+    def stop(self) -> None:
+        proc, self._proc = self._proc, None
+        if proc is not None:
+            proc.kill()
+            proc.wait()
+
+
+def wanted(filter_name: str, kernel: Any, plan_path: Path = PLAN_PATH) -> bool:
+    """Whether a helper would help: a cold compile of a planned kernel on a free core (see
+    the module docstring for when it would not)."""
+    import multiprocessing
+
+    if os.environ.get(ENV_SWITCH, "1") == "0" or usable_cores() < 2:
+        return False
+    if multiprocessing.parent_process() is not None:  # a pool's worker: its siblings use the cores
+        return False
+    filters, kernels = load_plan(plan_path)
+    plan = kernels.get(filters.get(filter_name, ""))
+    if plan is None or not hasattr(kernel, "overloads"):
+        return False
+    try:
+        planned = dispatcher_name(kernel) == plan.kernel
+        argtypes = tuple(parse_type(t) for t in plan.args)
+    except Exception:  # an unreadable plan entry: no helper
+        return False
+    return planned and not is_cached(kernel, argtypes)
+
+
+def start(filter_name: str, kernel: Any, plan_path: Path = PLAN_PATH) -> Helper | None:
+    """Start the helper for ``filter_name``'s ``kernel`` if it is ``wanted``."""
+    if not wanted(filter_name, kernel, plan_path):
+        return None
+    from numba.core import config
+
+    env = dict(os.environ)
+    cache_dir = getattr(config, "CACHE_DIR", "")  # numba's live setting (_numba_cache)
+    if cache_dir:
+        env["NUMBA_CACHE_DIR"] = str(cache_dir)
+    cmd = [sys.executable, "-m", "pipeline.estimation.compile_helper", filter_name]
+    if plan_path != PLAN_PATH:
+        cmd += ["--plan", str(plan_path)]
+    proc = subprocess.Popen(
+        cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    return Helper(proc)
+
+
+@contextlib.contextmanager
+def helping(filter_name: str, kernel: Any) -> Iterator[Callable[[], None]]:
+    """``with helping(name, kernel) as compiled:`` runs the helper (if any) in the block;
+    calling ``compiled()`` once the kernel is compiled stops it early."""
+    helper = start(filter_name, kernel)
+    stop = helper.stop if helper is not None else (lambda: None)
+    try:
+        yield stop
+    finally:
+        stop()
+
+
+# -- the helper process -------------------------------------------------------------------------
+
+
+def run_helper(filter_name: str, plan_path: Path = PLAN_PATH, report: Path | None = None) -> int:
+    """Compile the plan's callees for ``filter_name`` from the last to the first; the number
+    compiled here (not loaded from the cache). With ``report``, append one line per callee
+    compiled (``module:qualname``), for the tests."""
+    from pipeline._numba_cache import fewer_gc_passes
+
+    with contextlib.suppress(OSError):
+        os.nice(10)  # the replay's own compile comes first
+    filters, kernels = load_plan(plan_path)
+    plan = kernels.get(filters.get(filter_name, ""))
+    if plan is None:
+        return 0
+    parent = os.getppid()
+    done = 0
+    with fewer_gc_passes():
+        for name, args in reversed(plan.callees):
+            if os.getppid() != parent:  # the replay is gone
+                break
+            try:
+                dispatcher = resolve(name)
+                argtypes = tuple(parse_type(t) for t in args)
+                if is_cached(dispatcher, argtypes):
+                    continue
+                dispatcher.compile(argtypes)
+            except Exception:  # a stale entry: the replay compiles what it needs itself
+                continue
+            done += 1
+            if report is not None:
+                with report.open("a") as f:
+                    f.write(name + "\n")
+    return done
+
+
+# -- writing the plan ----------------------------------------------------------------------------
+
+
+def plan_drive() -> SynthResult:
+    """The drive ``record`` replays: 40 s of seoul_campus (params.yaml), 10 s at rest first."""
+    from dataclasses import replace
+
+    from pipeline.params import load_params
+    from pipeline.synth.seoul_campus import simulate
+
+    synth = load_params(REPO_PARAMS).synth
+    sp = replace(synth.seoul_campus, duration_s=40.0, stationary_s=10.0)
+    return simulate(sp, seed=synth.seed, variant="cw")
+
+
+def record(filter_name: str) -> dict[str, Any]:
+    """Run ``filter_name`` on ``plan_drive()`` and record what its kernel compile compiles, in
+    order (run in a process with an empty numba cache: ``record_cold``)."""
+    from numba.core import event
+
+    from pipeline.estimation.config import FILTER_KINDS
+    from pipeline.estimation.replay import kernel_for, run_filter
+    from pipeline.params import load_params
+
+    drive = plan_drive()
+    section = load_params(REPO_PARAMS).filters.get(filter_name)
+    kernel = kernel_for(FILTER_KINDS[filter_name], "numba")
+    started: list[tuple[str, tuple[Any, ...]]] = []
+
+    class Listener(event.Listener):
+        def on_start(self, ev: event.Event) -> None:
+            data = ev.data
+            if data["dispatcher"].py_func.__module__.startswith("pipeline."):
+                started.append((dispatcher_name(data["dispatcher"]), tuple(data["args"])))
+
+        def on_end(self, ev: event.Event) -> None:
+            pass
+
+    with event.install_listener("numba:compile", Listener()):
+        run_filter(dict(drive.tables), drive.sensors, filter_name, section)
+    name = dispatcher_name(kernel)
+    kernel_args = [args for n, args in started if n == name]
+    if len(kernel_args) != 1:
+        raise RuntimeError(f"{filter_name}: the kernel compiled {len(kernel_args)} times, not once")
+    callees, skipped = [], []
+    for n, args in started:
+        if n == name:
+            continue
+        try:
+            callees.append([n, list(format_types(args))])
+        except ValueError as e:  # the helper cannot compile it; the replay will
+            skipped.append(f"{n}: {e}")
+    return {
+        "kernel": name,
+        "args": list(format_types(kernel_args[0])),
+        "callees": callees,
+        "not_in_plan": skipped,
+    }
+
+
+def record_cold(filter_name: str) -> dict[str, Any]:
+    """``record`` in a fresh process with an empty numba cache and no helper."""
+    with tempfile.TemporaryDirectory(prefix="navreplay-plan-") as tmp:
+        env = dict(os.environ, NUMBA_CACHE_DIR=tmp, **{ENV_SWITCH: "0"})
+        done = subprocess.run(
+            [sys.executable, "-m", "pipeline.estimation.compile_helper", "--record", filter_name],
+            env=env, capture_output=True, text=True, check=False,
+        )  # fmt: skip
+    if done.returncode != 0:
+        raise RuntimeError(f"recording {filter_name} failed:\n{done.stderr}")
+    recorded: dict[str, Any] = json.loads(done.stdout.strip().splitlines()[-1])
+    return recorded
+
+
+def build_plan(filter_names: Sequence[str], progress: Callable[[str], None]) -> dict[str, Any]:
+    """The plan of ``filter_names``; filters whose kernels compile alike share an entry."""
+    import numba
+
+    filters: dict[str, str] = {}
+    kernels: dict[str, dict[str, Any]] = {}
+    for name in filter_names:
+        progress(f"recording {name} (a cold compile)")
+        rec = record_cold(name)
+        key = next((k for k, v in kernels.items() if v == rec), name)
+        kernels.setdefault(key, rec)
+        filters[name] = key
+    return {
+        "about": f"what cold kernel compiles compile, in order; written by {WRITE_COMMAND}",
+        "numba": numba.__version__,
+        "filters": filters,
+        "kernels": kernels,
+    }
+
+
+def write_plan(path: Path, plan: dict[str, Any]) -> None:
+    """Write ``plan`` to ``path`` atomically."""
+    text = json.dumps(plan, indent=1) + "\n"
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from pipeline.estimation.config import FILTER_KINDS
+
+    ap = argparse.ArgumentParser(
+        prog="python -m pipeline.estimation.compile_helper",
+        description="The cold-compile helper of navreplay run (see the module docstring). "
+        "Given a filter name: compile its kernel's callees into numba's cache, from the last "
+        "to the first (what navreplay run starts by itself). --write-plan: record the plan "
+        "from cold compiles of every filter (a few minutes).",
+    )
+    ap.add_argument("filter", nargs="?", help="compile this filter's callees (the helper)")
+    ap.add_argument("--plan", type=Path, default=PLAN_PATH, help="the plan file")
+    ap.add_argument("--report", type=Path, help="append the names compiled here to this file")
+    ap.add_argument("--record", metavar="FILTER", help="print one filter's plan entry as JSON")
+    ap.add_argument("--write-plan", action="store_true", help="record and write the plan")
+    ap.add_argument(
+        "--only", action="append", choices=list(FILTER_KINDS), metavar="FILTER",
+        help="with --write-plan: record only this filter (repeat for more), keep the others",
+    )  # fmt: skip
+    a = ap.parse_args(argv)
+    if a.record:
+        print(json.dumps(record(a.record)))
+        return 0
+    if a.write_plan:
+        names = a.only or list(FILTER_KINDS)
+        plan = build_plan(names, lambda s: print(s, file=sys.stderr, flush=True))
+        if a.only and a.plan.exists():  # update those filters' entries, keep the others
+            old = json.loads(a.plan.read_text())
+            kernels = {k: v for k, v in old["kernels"].items() if k not in plan["filters"].values()}
+            filters = {f: k for f, k in old["filters"].items() if f not in plan["filters"]}
+            plan["kernels"] = {**kernels, **plan["kernels"]}
+            plan["filters"] = {**filters, **plan["filters"]}
+        write_plan(a.plan, plan)
+        print(f"wrote {a.plan}", file=sys.stderr)
+        return 0
+    if a.filter is None:
+        ap.error("give a filter name, --record FILTER or --write-plan")
+    run_helper(a.filter, a.plan, a.report)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
