@@ -398,8 +398,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             old = json.loads(a.plan.read_text())
             kernels = {k: v for k, v in old["kernels"].items() if k not in plan["filters"].values()}
             filters = {f: k for f, k in old["filters"].items() if f not in plan["filters"]}
-            plan["kernels"] = {**kernels, **plan["kernels"]}
-            plan["filters"] = {**filters, **plan["filters"]}
+            merged = {**filters, **plan["filters"]}
+            plan["filters"] = {f: merged[f] for f in FILTER_KINDS if f in merged}
+            both = {**kernels, **plan["kernels"]}
+            plan["kernels"] = {k: both[k] for k in dict.fromkeys(plan["filters"].values())}
         write_plan(a.plan, plan)
         print(f"wrote {a.plan}", file=sys.stderr)
         return 0
