@@ -14,6 +14,10 @@ With one --scenario, DIR is the run directory. With several, or `--scenario all`
 scenarios of params.yaml `run.scenarios`), DIR holds one run directory per scenario,
 DIR/<scenario>/, and appears as a whole or not at all.
 
+The first run after installing or changing navreplay compiles the filter (numba; cached for
+later runs). On a machine with two or more cores a helper process compiles part of it on
+another core meanwhile; NAVREPLAY_COMPILE_HELPER=0 turns that off.
+
 examples:
   navreplay run datasets/seoul_campus_cw/tables --filter tc_ukf_nhc --out runs/tc_ukf_nhc
   navreplay run TABLES --filter lc_ekf --scenario outage_60s --out runs/lc_ekf-outage
