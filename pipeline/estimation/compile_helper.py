@@ -123,6 +123,12 @@ def load_plan(path: Path = PLAN_PATH) -> tuple[dict[str, str], dict[str, KernelP
     return dict(raw["filters"]), kernels
 
 
+def plan_for(filter_name: str, path: Path = PLAN_PATH) -> KernelPlan | None:
+    """The plan of ``filter_name``'s kernel, or None if the plan does not list the filter."""
+    filters, kernels = load_plan(path)
+    return kernels.get(filters.get(filter_name, ""))
+
+
 def resolve(name: str) -> Any:
     """The object ``module:qualname`` names (an AttributeError or ImportError if none)."""
     module, _, qualname = name.partition(":")
@@ -186,8 +192,7 @@ def wanted(filter_name: str, kernel: Any, plan_path: Path = PLAN_PATH) -> bool:
         return False
     if multiprocessing.parent_process() is not None:  # a pool's worker: its siblings use the cores
         return False
-    filters, kernels = load_plan(plan_path)
-    plan = kernels.get(filters.get(filter_name, ""))
+    plan = plan_for(filter_name, plan_path)
     if plan is None or not hasattr(kernel, "overloads"):
         return False
     try:
@@ -241,8 +246,7 @@ def run_helper(filter_name: str, plan_path: Path = PLAN_PATH, report: Path | Non
 
     with contextlib.suppress(OSError):
         os.nice(10)  # the replay's own compile comes first
-    filters, kernels = load_plan(plan_path)
-    plan = kernels.get(filters.get(filter_name, ""))
+    plan = plan_for(filter_name, plan_path)
     if plan is None:
         return 0
     parent = os.getppid()
@@ -281,18 +285,12 @@ def plan_drive() -> SynthResult:
     return simulate(sp, seed=synth.seed, variant="cw")
 
 
-def record(filter_name: str) -> dict[str, Any]:
-    """Run ``filter_name`` on ``plan_drive()`` and record what its kernel compile compiles, in
-    order (run in a process with an empty numba cache: ``record_cold``)."""
+@contextlib.contextmanager
+def compiles_started() -> Iterator[list[tuple[str, tuple[Any, ...]]]]:
+    """Inside the block, the list collects ``(module:qualname, argument types)`` of every
+    pipeline function numba compiles (not loads from its cache), in the order each starts."""
     from numba.core import event
 
-    from pipeline.estimation.config import FILTER_KINDS
-    from pipeline.estimation.replay import kernel_for, run_filter
-    from pipeline.params import load_params
-
-    drive = plan_drive()
-    section = load_params(REPO_PARAMS).filters.get(filter_name)
-    kernel = kernel_for(FILTER_KINDS[filter_name], "numba")
     started: list[tuple[str, tuple[Any, ...]]] = []
 
     class Listener(event.Listener):
@@ -305,6 +303,20 @@ def record(filter_name: str) -> dict[str, Any]:
             pass
 
     with event.install_listener("numba:compile", Listener()):
+        yield started
+
+
+def record(filter_name: str) -> dict[str, Any]:
+    """Run ``filter_name`` on ``plan_drive()`` and record what its kernel compile compiles, in
+    order (run in a process with an empty numba cache: ``record_cold``)."""
+    from pipeline.estimation.config import FILTER_KINDS
+    from pipeline.estimation.replay import kernel_for, run_filter
+    from pipeline.params import load_params
+
+    drive = plan_drive()
+    section = load_params(REPO_PARAMS).filters.get(filter_name)
+    kernel = kernel_for(FILTER_KINDS[filter_name], "numba")
+    with compiles_started() as started:
         run_filter(dict(drive.tables), drive.sensors, filter_name, section)
     name = dispatcher_name(kernel)
     kernel_args = [args for n, args in started if n == name]

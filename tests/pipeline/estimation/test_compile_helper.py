@@ -80,25 +80,16 @@ def test_the_plan_covers_every_filter_with_resolvable_entries() -> None:
 
 DIGEST = """
 import json, sys
-from numba.core import event
 from pipeline.params import load_params
 from pipeline.estimation.replay import run_filter
 from pipeline.estimation import compile_helper as ch
 from tests.pipeline.estimation.test_compile_helper import _digest
 params = load_params(ch.REPO_PARAMS)
 drive = ch.plan_drive()
-compiled = []
-class L(event.Listener):
-    def on_start(self, ev):
-        d = ev.data["dispatcher"].py_func
-        if d.__module__.startswith("pipeline."):
-            compiled.append(f"{d.__module__}:{d.__qualname__}")
-    def on_end(self, ev):
-        pass
 name = sys.argv[1]
-with event.install_listener("numba:compile", L()):
+with ch.compiles_started() as started:
     res = run_filter(dict(drive.tables), drive.sensors, name, params.filters.get(name))
-print(json.dumps({"compiled": compiled, "digest": _digest(res)}))
+print(json.dumps({"compiled": [n for n, _ in started], "digest": _digest(res)}))
 """
 
 
