@@ -10,11 +10,17 @@ the same callees with the same argument types into the same cache, from the *las
 kernel's compile reaches to the first. The two meet half way: the replay loads what the helper
 has finished. The helper is stopped (killed) as soon as the kernel is compiled.
 
+Neither compiles a callee twice: each claims a callee before compiling it (``Claims``, a
+directory of marker files the two share), and when the replay's compile reaches a callee the
+helper is still compiling, it waits for it and loads it from the cache instead of compiling it
+again from the start. ``navreplay run`` starts the helper (``early``) before it reads and
+prepares the inputs, so that the helper is ready when the kernel's compile begins.
+
 The compiled code is the same either way (a function compiles to the same machine code in
 either process, and a cached callee is what a later warm run would load anyway); only the wall
-time of a cold run drops. The CPU time rises a little: the helper's own start, and the function
-both processes happen to compile at the meeting point. ``benchmarks/bench_estimation.py``
-measures both, with the helper and without.
+time of a cold run drops. The CPU time rises a little: the helper's own start, and the numba
+internals both processes compile for themselves. ``benchmarks/bench_estimation.py`` measures
+both, with the helper and without.
 
 Which callees, with which types: ``compile_plan.json``, one ordered list per kernel signature,
 recorded from cold compiles by ``python -m pipeline.estimation.compile_helper --write-plan``.
@@ -37,9 +43,11 @@ import contextlib
 import importlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -170,17 +178,104 @@ def usable_cores() -> int:
 # -- the main process's side -------------------------------------------------------------------
 
 
-class Helper:
-    """A running helper process; ``stop()`` kills and reaps it (idempotent)."""
+@dataclass(frozen=True)
+class Claims:
+    """Who compiles which plan entry: a directory shared by the replay and its helper.
 
-    def __init__(self, proc: subprocess.Popen[bytes]) -> None:
+    Whichever process first creates ``<i>.claim`` (atomically, ``O_EXCL``) compiles entry
+    ``i`` of the plan; the helper writes ``<i>.done`` once it has finished one (compiled and
+    saved to the cache, or failed). So the two never compile the same entry, and when the
+    replay reaches an entry the helper is still compiling it waits for it, instead of
+    compiling it again from the start.
+    """
+
+    root: Path
+
+    def take(self, i: int) -> bool:
+        """Claim entry ``i``; False if the other process has."""
+        try:
+            os.close(os.open(self.root / f"{i}.claim", os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        except FileExistsError:
+            return False
+        except OSError:  # the directory is gone: nobody else compiles it
+            return True
+        return True
+
+    def finish(self, i: int) -> None:
+        with contextlib.suppress(OSError):
+            (self.root / f"{i}.done").touch()
+
+    def wait(self, i: int, alive: Callable[[], bool], timeout_s: float = 300.0) -> None:
+        """Until the helper has finished entry ``i``, or is gone (or ``timeout_s``)."""
+        done = self.root / f"{i}.done"
+        deadline = time.monotonic() + timeout_s
+        while not done.exists() and alive() and time.monotonic() < deadline:
+            time.sleep(0.005)
+
+
+def _wait_for_helper(plan: KernelPlan, claims: Claims, alive: Callable[[], bool]) -> list[Any]:
+    """Make this process's cache lookups of the plan's callees claim-aware: a miss on an entry
+    the helper has claimed waits for the helper and looks again; a miss on an unclaimed entry
+    claims it (this process compiles it). Returns the caches changed (``_unwait``)."""
+    from numba.core import sigutils
+
+    entries: dict[Any, dict[tuple[Any, ...], int]] = {}
+    for i, (name, args) in enumerate(plan.callees):
+        try:
+            dispatcher = resolve(name)
+            argtypes = tuple(parse_type(t) for t in args)
+        except Exception:  # a stale entry: nothing to wait for
+            continue
+        cache_ = getattr(dispatcher, "_cache", None)
+        if cache_ is not None and hasattr(cache_, "load_overload"):
+            entries.setdefault(cache_, {})[argtypes] = i
+
+    def waiting(cache_: Any, index: dict[tuple[Any, ...], int]) -> Callable[[Any, Any], Any]:
+        load = cache_.load_overload
+
+        def load_overload(sig: Any, target_context: Any) -> Any:
+            got = load(sig, target_context)
+            if got is not None:
+                return got
+            args, _ = sigutils.normalize_signature(sig)  # type: ignore[no-untyped-call]
+            i = index.get(tuple(args))
+            if i is None or claims.take(i):
+                return None  # this process compiles it
+            claims.wait(i, alive)
+            return load(sig, target_context)
+
+        return load_overload
+
+    for cache_, index in entries.items():
+        cache_.load_overload = waiting(cache_, index)
+    return list(entries)
+
+
+def _unwait(caches: list[Any]) -> None:
+    for cache_ in caches:
+        with contextlib.suppress(AttributeError):
+            del cache_.load_overload  # numba's own method again
+
+
+class Helper:
+    """A running helper process; ``stop()`` kills and reaps it and ends the claims
+    (idempotent)."""
+
+    def __init__(self, proc: subprocess.Popen[bytes], claims: Claims, plan: KernelPlan) -> None:
         self._proc: subprocess.Popen[bytes] | None = proc
+        self._claims = claims
+        self._caches = _wait_for_helper(plan, claims, self.alive)
+
+    def alive(self) -> bool:
+        return self._proc is not None and self._proc.poll() is None
 
     def stop(self) -> None:
         proc, self._proc = self._proc, None
         if proc is not None:
             proc.kill()
             proc.wait()
+            _unwait(self._caches)
+            shutil.rmtree(self._claims.root, ignore_errors=True)
 
 
 def wanted(filter_name: str, kernel: Any, plan_path: Path = PLAN_PATH) -> bool:
@@ -213,21 +308,50 @@ def start(filter_name: str, kernel: Any, plan_path: Path = PLAN_PATH) -> Helper 
     cache_dir = getattr(config, "CACHE_DIR", "")  # numba's live setting (_numba_cache)
     if cache_dir:
         env["NUMBA_CACHE_DIR"] = str(cache_dir)
+    claims = Claims(Path(tempfile.mkdtemp(prefix="navreplay-compile-")))
     cmd = [sys.executable, "-m", "pipeline.estimation.compile_helper", filter_name]
+    cmd += ["--claims", str(claims.root)]
     if plan_path != PLAN_PATH:
         cmd += ["--plan", str(plan_path)]
     proc = subprocess.Popen(
         cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )  # fmt: skip
-    return Helper(proc)
+    plan = plan_for(filter_name, plan_path)
+    assert plan is not None  # wanted() checked
+    return Helper(proc, claims, plan)
+
+
+_started_early: dict[str, Helper] = {}
+
+
+@contextlib.contextmanager
+def early(filter_name: str, backend: str) -> Iterator[None]:
+    """Start the helper for ``filter_name`` now, before the inputs are read and prepared, so
+    that it is ready when the kernel compile begins; the first ``helping`` of that filter in
+    the block adopts it. It is stopped when the block ends, at the latest."""
+    from pipeline.estimation.config import FILTER_KINDS
+
+    helper = None
+    if backend == "numba" and filter_name in FILTER_KINDS:
+        helper = start(filter_name, resolve(FILTER_KINDS[filter_name].numba_kernel))
+    if helper is not None:
+        _started_early[filter_name] = helper
+    try:
+        yield
+    finally:
+        if helper is not None:
+            if _started_early.get(filter_name) is helper:
+                del _started_early[filter_name]
+            helper.stop()
 
 
 @contextlib.contextmanager
 def helping(filter_name: str, kernel: Any) -> Iterator[Callable[[], None]]:
-    """``with helping(name, kernel) as compiled:`` runs the helper (if any) in the block;
-    calling ``compiled()`` once the kernel is compiled stops it early."""
-    helper = start(filter_name, kernel)
+    """``with helping(name, kernel) as compiled:`` runs the helper (if any) in the block: the
+    one ``early`` started, or a new one; calling ``compiled()`` once the kernel is compiled
+    stops it early."""
+    helper = _started_early.pop(filter_name, None) or start(filter_name, kernel)
     stop = helper.stop if helper is not None else (lambda: None)
     try:
         yield stop
@@ -238,10 +362,16 @@ def helping(filter_name: str, kernel: Any) -> Iterator[Callable[[], None]]:
 # -- the helper process -------------------------------------------------------------------------
 
 
-def run_helper(filter_name: str, plan_path: Path = PLAN_PATH, report: Path | None = None) -> int:
-    """Compile the plan's callees for ``filter_name`` from the last to the first; the number
-    compiled here (not loaded from the cache). With ``report``, append one line per callee
-    compiled (``module:qualname``), for the tests."""
+def run_helper(
+    filter_name: str,
+    plan_path: Path = PLAN_PATH,
+    report: Path | None = None,
+    claims: Claims | None = None,
+) -> int:
+    """Compile the plan's callees for ``filter_name`` from the last to the first, skipping
+    those the replay has claimed (``claims``); the number compiled here (not loaded from the
+    cache). With ``report``, append one line per callee compiled (``module:qualname``), for
+    the tests."""
     from pipeline._numba_cache import fewer_gc_passes
 
     with contextlib.suppress(OSError):
@@ -252,17 +382,24 @@ def run_helper(filter_name: str, plan_path: Path = PLAN_PATH, report: Path | Non
     parent = os.getppid()
     done = 0
     with fewer_gc_passes():
-        for name, args in reversed(plan.callees):
+        for i in reversed(range(len(plan.callees))):
+            name, args = plan.callees[i]
             if os.getppid() != parent:  # the replay is gone
                 break
             try:
                 dispatcher = resolve(name)
                 argtypes = tuple(parse_type(t) for t in args)
-                if is_cached(dispatcher, argtypes):
+                if is_cached(dispatcher, argtypes) or (claims is not None and not claims.take(i)):
                     continue
-                dispatcher.compile(argtypes)
             except Exception:  # a stale entry: the replay compiles what it needs itself
                 continue
+            try:
+                dispatcher.compile(argtypes)
+            except Exception:  # the replay finds no cache entry and compiles it itself
+                continue
+            finally:
+                if claims is not None:
+                    claims.finish(i)
             done += 1
             if report is not None:
                 with report.open("a") as f:
@@ -381,8 +518,6 @@ def write_plan(path: Path, plan: dict[str, Any]) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from pipeline.estimation.config import FILTER_KINDS
-
     ap = argparse.ArgumentParser(
         prog="python -m pipeline.estimation.compile_helper",
         description="The cold-compile helper of navreplay run (see the module docstring). "
@@ -393,33 +528,39 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("filter", nargs="?", help="compile this filter's callees (the helper)")
     ap.add_argument("--plan", type=Path, default=PLAN_PATH, help="the plan file")
     ap.add_argument("--report", type=Path, help="append the names compiled here to this file")
+    ap.add_argument("--claims", type=Path, help="the directory of claims shared with the replay")
     ap.add_argument("--record", metavar="FILTER", help="print one filter's plan entry as JSON")
     ap.add_argument("--write-plan", action="store_true", help="record and write the plan")
     ap.add_argument(
-        "--only", action="append", choices=list(FILTER_KINDS), metavar="FILTER",
+        "--only", action="append", metavar="FILTER",
         help="with --write-plan: record only this filter (repeat for more), keep the others",
     )  # fmt: skip
     a = ap.parse_args(argv)
+    if a.filter is not None and not (a.record or a.write_plan):
+        run_helper(a.filter, a.plan, a.report, Claims(a.claims) if a.claims else None)
+        return 0  # the helper: no more imports than its compiles need
+    from pipeline.estimation.config import FILTER_KINDS
+
+    unknown = sorted(set(a.only or ()) - set(FILTER_KINDS))
+    if unknown:
+        ap.error(f"--only {', '.join(unknown)}: not a filter (known: {', '.join(FILTER_KINDS)})")
     if a.record:
         print(json.dumps(record(a.record)))
         return 0
-    if a.write_plan:
-        names = a.only or list(FILTER_KINDS)
-        plan = build_plan(names, lambda s: print(s, file=sys.stderr, flush=True))
-        if a.only and a.plan.exists():  # update those filters' entries, keep the others
-            old = json.loads(a.plan.read_text())
-            kernels = {k: v for k, v in old["kernels"].items() if k not in plan["filters"].values()}
-            filters = {f: k for f, k in old["filters"].items() if f not in plan["filters"]}
-            merged = {**filters, **plan["filters"]}
-            plan["filters"] = {f: merged[f] for f in FILTER_KINDS if f in merged}
-            both = {**kernels, **plan["kernels"]}
-            plan["kernels"] = {k: both[k] for k in dict.fromkeys(plan["filters"].values())}
-        write_plan(a.plan, plan)
-        print(f"wrote {a.plan}", file=sys.stderr)
-        return 0
-    if a.filter is None:
+    if not a.write_plan:
         ap.error("give a filter name, --record FILTER or --write-plan")
-    run_helper(a.filter, a.plan, a.report)
+    names = a.only or list(FILTER_KINDS)
+    plan = build_plan(names, lambda s: print(s, file=sys.stderr, flush=True))
+    if a.only and a.plan.exists():  # update those filters' entries, keep the others
+        old = json.loads(a.plan.read_text())
+        kernels = {k: v for k, v in old["kernels"].items() if k not in plan["filters"].values()}
+        filters = {f: k for f, k in old["filters"].items() if f not in plan["filters"]}
+        merged = {**filters, **plan["filters"]}
+        plan["filters"] = {f: merged[f] for f in FILTER_KINDS if f in merged}
+        both = {**kernels, **plan["kernels"]}
+        plan["kernels"] = {k: both[k] for k in dict.fromkeys(plan["filters"].values())}
+    write_plan(a.plan, plan)
+    print(f"wrote {a.plan}", file=sys.stderr)
     return 0
 
 

@@ -321,6 +321,14 @@ class FilterKind:
     nhc: bool
     fading: bool = False
 
+    @property
+    def numba_kernel(self) -> str:
+        """``module:qualname`` of the numba kernel that runs this kind."""
+        module, fn = (
+            ("fwekf", "run_fwekf") if self.fading else (self.estimator, f"run_{self.estimator}")
+        )
+        return f"pipeline.estimation.kernels.{module}:{fn}"
+
 
 FILTER_KINDS: dict[str, FilterKind] = {
     "lc_ekf": FilterKind("ekf", "loose", nhc=False),

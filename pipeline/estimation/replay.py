@@ -177,19 +177,13 @@ KernelFn = Callable[..., int]
 def kernel_for(kind: FilterKind, backend: Backend) -> KernelFn:
     """The function that runs a filter of ``kind`` on ``backend`` (a numba dispatcher for
     ``numba``)."""
+    if backend == "numba":
+        kernel: KernelFn = compile_helper.resolve(kind.numba_kernel)
+        return kernel
     if kind.fading:
-        if backend == "numba":
-            from pipeline.estimation.kernels.fwekf import run_fwekf
-
-            return run_fwekf
         from pipeline.estimation.reference_fwekf import run_fwekf_filterpy
 
         return run_fwekf_filterpy
-    if backend == "numba":
-        from pipeline.estimation.kernels.ekf import run_ekf
-        from pipeline.estimation.kernels.ukf import run_ukf
-
-        return run_ekf if kind.estimator == "ekf" else run_ukf
     from pipeline.estimation.reference import run_ekf_filterpy, run_ukf_filterpy
 
     return run_ekf_filterpy if kind.estimator == "ekf" else run_ukf_filterpy

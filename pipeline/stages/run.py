@@ -27,11 +27,16 @@ examples:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pipeline.errors import NotBuiltError, ParamsError
+
+if TYPE_CHECKING:
+    from pipeline.estimation.replay import Backend
+    from pipeline.params import Params
 
 log = logging.getLogger(__name__)
 
@@ -81,23 +86,36 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pipeline.estimation import compile_helper
+    from pipeline.params import load_params
+
+    params = load_params(args.params)
+    backend: Backend = args.backend or params.run.backend
+    asked: list[str] = args.scenario or ["nominal"]
+    names = list(params.run.scenarios) if asked == ["all"] else asked
+    # A cold first run compiles the filter: its helper process starts now, while this one
+    # imports and reads the inputs (not when the replays run in a pool of worker processes).
+    pooled = len(names) > 1 and params.run.workers > 1
+    with contextlib.nullcontext() if pooled else compile_helper.early(args.filter, backend):
+        return _run(args, params, backend, asked, names)
+
+
+def _run(
+    args: argparse.Namespace, params: Params, backend: Backend, asked: list[str], names: list[str]
+) -> int:
     from ingest.atomic import atomic_directory
     from pipeline.analyze import Skipped, plan, write_skip
     from pipeline.estimation.config import FILTER_KINDS
     from pipeline.estimation.families import runner
     from pipeline.estimation.run import write_run
     from pipeline.outages.runs import Inputs, run_scenarios
-    from pipeline.params import load_params
 
-    params = load_params(args.params)
     try:
         run_family = runner(args.filter)
     except KeyError as err:
         raise ParamsError(
             f"filters.{args.filter}", str(err.args[0]), source=str(args.params)
         ) from err
-    asked: list[str] = args.scenario or ["nominal"]
-    names = list(params.run.scenarios) if asked == ["all"] else asked
     for name in names:
         if name not in params.scenarios.named:
             known = ", ".join(params.scenarios.named)
@@ -107,7 +125,6 @@ def run(args: argparse.Namespace) -> int:
                 source=str(args.params),
             )
     single = len(asked) == 1 and asked != ["all"]
-    backend = args.backend or params.run.backend
     if args.filter not in FILTER_KINDS:
         # the vehicle-model filters (paper 003) replay the tables as they are
         if names != ["nominal"]:

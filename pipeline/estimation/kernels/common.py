@@ -45,8 +45,9 @@ STATUS_TEXT = {
 
 N_STREAMS = 4
 
-# Explicit signatures for the helpers called from many places: a call from jitted code
-# otherwise compiles a new specialization for every literal constant or array layout it sees.
+# Pinned signatures (``pipeline._jit``) for the helpers called from many places: a call from
+# jitted code otherwise compiles a new specialization for every literal constant or array
+# layout it sees. They compile at first use, not at import.
 _F2 = nb.float64[:, :]
 _F2C = nb.float64[:, ::1]
 _F1C = nb.float64[::1]

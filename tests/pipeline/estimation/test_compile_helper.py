@@ -11,7 +11,11 @@ import json
 import os
 import subprocess
 import sys
+import threading
+import types as types_ns
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numba as nb
 import numpy as np
@@ -79,7 +83,7 @@ def test_the_plan_covers_every_filter_with_resolvable_entries() -> None:
 
 
 DIGEST = """
-import json, sys
+import json, subprocess, sys
 from pipeline.params import load_params
 from pipeline.estimation.replay import run_filter
 from pipeline.estimation import compile_helper as ch
@@ -87,16 +91,24 @@ from tests.pipeline.estimation.test_compile_helper import _digest
 params = load_params(ch.REPO_PARAMS)
 drive = ch.plan_drive()
 name = sys.argv[1]
+if len(sys.argv) > 2:  # a helper alongside, which reports what it compiles to argv[2]
+    popen = subprocess.Popen
+    subprocess.Popen = lambda cmd, *a, **k: popen([*cmd, "--report", sys.argv[2]], *a, **k)
+    ch.usable_cores = lambda: 2
 with ch.compiles_started() as started:
     res = run_filter(dict(drive.tables), drive.sensors, name, params.filters.get(name))
 print(json.dumps({"compiled": [n for n, _ in started], "digest": _digest(res)}))
 """
 
 
-def _replay(cache: Path, name: str) -> tuple[list[str], str]:
-    """(what a replay compiled, the digest of its estimates) in a new process without helper."""
+def _replay(cache: Path, name: str, helper_report: Path | None = None) -> tuple[list[str], str]:
+    """(what a replay compiled, the digest of its estimates) in a new process; without
+    helper, or with one that reports to ``helper_report``."""
+    helper = "0" if helper_report is None else "1"
+    report = [] if helper_report is None else [str(helper_report)]
     out = subprocess.run(
-        [sys.executable, "-c", DIGEST, name], env=_env(cache, NAVREPLAY_COMPILE_HELPER="0"),
+        [sys.executable, "-c", DIGEST, name, *report],
+        env=_env(cache, NAVREPLAY_COMPILE_HELPER=helper),
         cwd=REPO, capture_output=True, text=True, check=True,
     )  # fmt: skip
     result = json.loads(out.stdout.strip().splitlines()[-1])
@@ -126,6 +138,29 @@ def test_the_replay_loads_what_the_helper_compiled_and_estimates_the_same(
     compiled, digest = _replay(helped, name)
     assert plan.kernel in compiled
     assert not by_helper & set(compiled)
+    here = _digest(run_filter(dict(drive40.tables), drive40.sensors, name, filters.get(name)))
+    assert digest == here
+
+
+@pytest.mark.slow
+def test_a_cold_replay_and_its_helper_share_the_compile_without_overlap(
+    tmp_path: Path, filters: FiltersParams
+) -> None:
+    """A cold replay with its helper alongside (the claims in action): between them they
+    compile the plan's callees, none twice, and the estimates are bitwise this process's."""
+    drive40 = ch.plan_drive()
+    name = "lc_ekf"
+    report = tmp_path / "report.txt"
+    compiled, digest = _replay(tmp_path / "cache", name, helper_report=report)
+    by_helper = report.read_text().split() if report.exists() else []
+    plan = ch.plan_for(name)
+    assert plan is not None
+    callees = [c for c in compiled if c != plan.kernel]
+    assert plan.kernel in compiled
+    assert by_helper, "the helper compiled nothing"
+    assert len(set(by_helper)) == len(by_helper)
+    assert not set(by_helper) & set(callees), "compiled in both processes"
+    assert set(by_helper) | set(callees) <= {c for c, _ in plan.callees}
     here = _digest(run_filter(dict(drive40.tables), drive40.sensors, name, filters.get(name)))
     assert digest == here
 
@@ -162,6 +197,103 @@ def test_the_helper_starts_only_for_a_cold_planned_kernel(
     monkeypatch.setenv(ch.ENV_SWITCH, "1")
     monkeypatch.setattr(ch, "is_cached", lambda d, a: True)
     assert ch.start("tiny", _tiny_kernel, plan) is None
+
+
+class _FakeHelper:
+    """Counts how often it was actually stopped (``Helper.stop`` is idempotent)."""
+
+    def __init__(self) -> None:
+        self.stops = 0
+        self.running = True
+
+    def stop(self) -> None:
+        self.stops += self.running
+        self.running = False
+
+
+def test_a_helper_started_early_is_adopted_by_the_replay_and_stopped_at_the_end(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    started: list[tuple[str, object]] = []
+
+    def fake_start(name: str, kernel: object, plan_path: Path = ch.PLAN_PATH) -> _FakeHelper:
+        started.append((name, kernel))
+        return _FakeHelper()
+
+    monkeypatch.setattr(ch, "start", fake_start)
+    kernel = kernel_for(FILTER_KINDS["tc_ukf"], "numba")
+    with ch.early("tc_ukf", "numba"):
+        assert started == [("tc_ukf", kernel)]  # started before any replay
+        early_helper = ch._started_early["tc_ukf"]
+        with ch.helping("tc_ukf", kernel) as compiled:
+            assert len(started) == 1  # adopted, not a second helper
+            compiled()
+        assert early_helper.stops == 1  # type: ignore[attr-defined]
+        with ch.helping("tc_ukf", kernel):  # a later replay (another scenario) starts anew
+            assert len(started) == 2
+    assert early_helper.stops == 1  # type: ignore[attr-defined]
+    assert ch._started_early == {}
+    with ch.early("tc_ukf", "filterpy"), ch.early("vehicle_kinematic", "numba"):
+        assert len(started) == 2  # no numba kernel to compile: no helper
+
+
+def test_claims_are_exclusive_and_waits_end_when_done_or_helper_gone(tmp_path: Path) -> None:
+    claims = ch.Claims(tmp_path)
+    assert claims.take(3)
+    assert not claims.take(3)  # the other process's now
+    assert claims.take(4)
+    asked: list[int] = []
+
+    def alive(answer: bool) -> Callable[[], bool]:
+        def ask() -> bool:
+            asked.append(1)
+            return answer
+
+        return ask
+
+    claims.wait(3, alive(False))  # the helper is gone: asked once, no wait
+    assert len(asked) == 1
+    claims.finish(4)
+    claims.wait(4, alive(True))  # finished: not even asked
+    assert len(asked) == 1
+    threading.Timer(0.2, claims.finish, (3,)).start()
+    claims.wait(3, alive(True))  # polls until the helper has finished
+    assert (tmp_path / "3.done").exists()
+    assert len(asked) > 2
+
+
+class _FakeCache:
+    """A cache entry that appears once the helper has finished entry 0."""
+
+    def __init__(self, claims: ch.Claims) -> None:
+        self.claims = claims
+        self.looks = 0
+
+    def load_overload(self, sig: Any, target_context: Any) -> Any:
+        self.looks += 1
+        done = (self.claims.root / "0.done").exists()
+        return "compiled" if sig == (types.float64,) and done else None
+
+
+def test_a_miss_waits_for_the_helper_s_claim_and_claims_the_rest(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    claims = ch.Claims(tmp_path)
+    cache = _FakeCache(claims)
+    fake = types_ns.SimpleNamespace(_cache=cache)
+    monkeypatch.setattr(ch, "resolve", lambda name: fake)
+    plan = ch.KernelPlan("k", (), (("a", ("float64",)), ("b", ("int64",))))
+    caches = ch._wait_for_helper(plan, claims, alive=lambda: True)
+    assert caches == [cache]
+    assert claims.take(0)  # the helper compiles entry 0 ...
+    threading.Timer(0.2, claims.finish, (0,)).start()
+    assert fake._cache.load_overload((types.float64,), None) == "compiled"  # ... waited for
+    assert cache.looks == 2  # looked again once the helper was done
+    assert fake._cache.load_overload((types.int64,), None) is None  # a miss: compile here
+    assert not claims.take(1)  # ... and the helper will not
+    assert fake._cache.load_overload((types.float32,), None) is None  # not in the plan
+    ch._unwait(caches)
+    assert "load_overload" not in vars(cache)  # the cache's own method again
 
 
 CACHED = f"""
