@@ -39,8 +39,8 @@ def njit(signature: Any = None, /, **options: Any) -> Callable[[_F], Dispatcher[
     def decorate(fn: _F) -> Dispatcher[_F]:
         jit = nb.njit(no_cfunc_wrapper=True, **options)  # type: ignore[call-overload]
         compiled: Dispatcher[_F] = jit(fn)
-        if signature is not None:
-            _pin(compiled, signature)
+        if signature is not None and hasattr(compiled, "_compile_for_args"):
+            _pin(compiled, signature)  # not with NUMBA_DISABLE_JIT: ``fn`` itself is returned
         return compiled
 
     return decorate

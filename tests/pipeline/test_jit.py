@@ -76,3 +76,15 @@ def test_the_kernels_pinned_helpers_do_not_compile_at_import(tmp_path: Path) -> 
     compiled = json.loads(out.stdout.strip().splitlines()[-1])
     assert compiled == {"cholesky": 0, "cho_solve": 0, "_reset_block": 0, "record_event": 0}
     assert not any(tmp_path.rglob("*.nbi"))  # and nothing was written to the cache
+
+
+def test_with_the_jit_disabled_a_pinned_function_is_the_python_function(tmp_path: Path) -> None:
+    """NUMBA_DISABLE_JIT=1 (the benchmark's interpreted reference) runs the same source."""
+    code = "from pipeline.estimation.kernels import common; print(type(common.cholesky).__name__)"
+    env = dict(
+        os.environ, PYTHONPATH=str(REPO), NUMBA_CACHE_DIR=str(tmp_path), NUMBA_DISABLE_JIT="1"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.split()[-1] == "function"
