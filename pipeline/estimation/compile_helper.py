@@ -216,9 +216,11 @@ class Claims:
 def _wait_for_helper(plan: KernelPlan, claims: Claims, alive: Callable[[], bool]) -> list[Any]:
     """Make this process's cache lookups of the plan's callees claim-aware: a miss on an entry
     the helper has claimed waits for the helper and looks again; a miss on an unclaimed entry
-    claims it (this process compiles it). Returns the caches changed (``_unwait``)."""
+    claims it (this process compiles it). Returns the caches changed (``_unwait``). A process
+    forked from this one (a pool's worker) looks up as numba does: the helper is not its."""
     from numba.core import sigutils
 
+    owner = os.getpid()
     entries: dict[Any, dict[tuple[Any, ...], int]] = {}
     for i, (name, args) in enumerate(plan.callees):
         try:
@@ -235,7 +237,7 @@ def _wait_for_helper(plan: KernelPlan, claims: Claims, alive: Callable[[], bool]
 
         def load_overload(sig: Any, target_context: Any) -> Any:
             got = load(sig, target_context)
-            if got is not None:
+            if got is not None or os.getpid() != owner:
                 return got
             args, _ = sigutils.normalize_signature(sig)  # type: ignore[no-untyped-call]
             i = index.get(tuple(args))
@@ -265,6 +267,7 @@ class Helper:
         self._proc: subprocess.Popen[bytes] | None = proc
         self._claims = claims
         self._caches = _wait_for_helper(plan, claims, self.alive)
+        self.owner = os.getpid()  # a forked child neither adopts nor stops it
 
     def alive(self) -> bool:
         return self._proc is not None and self._proc.poll() is None
@@ -278,29 +281,30 @@ class Helper:
             shutil.rmtree(self._claims.root, ignore_errors=True)
 
 
-def wanted(filter_name: str, kernel: Any, plan_path: Path = PLAN_PATH) -> bool:
-    """Whether a helper would help: a cold compile of a planned kernel on a free core (see
-    the module docstring for when it would not)."""
+def wanted(filter_name: str, kernel: Any, plan_path: Path = PLAN_PATH) -> KernelPlan | None:
+    """The plan for the helper if a helper would help: a cold compile of a planned kernel on a
+    free core (see the module docstring for when it would not); else None."""
     import multiprocessing
 
     if os.environ.get(ENV_SWITCH, "1") == "0" or usable_cores() < 2:
-        return False
+        return None
     if multiprocessing.parent_process() is not None:  # a pool's worker: its siblings use the cores
-        return False
+        return None
     plan = plan_for(filter_name, plan_path)
     if plan is None or not hasattr(kernel, "overloads"):
-        return False
+        return None
     try:
         planned = dispatcher_name(kernel) == plan.kernel
         argtypes = tuple(parse_type(t) for t in plan.args)
     except Exception:  # an unreadable plan entry: no helper
-        return False
-    return planned and not is_cached(kernel, argtypes)
+        return None
+    return plan if planned and not is_cached(kernel, argtypes) else None
 
 
 def start(filter_name: str, kernel: Any, plan_path: Path = PLAN_PATH) -> Helper | None:
     """Start the helper for ``filter_name``'s ``kernel`` if it is ``wanted``."""
-    if not wanted(filter_name, kernel, plan_path):
+    plan = wanted(filter_name, kernel, plan_path)
+    if plan is None:
         return None
     from numba.core import config
 
@@ -317,8 +321,6 @@ def start(filter_name: str, kernel: Any, plan_path: Path = PLAN_PATH) -> Helper 
         cmd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )  # fmt: skip
-    plan = plan_for(filter_name, plan_path)
-    assert plan is not None  # wanted() checked
     return Helper(proc, claims, plan)
 
 
@@ -329,7 +331,9 @@ _started_early: dict[str, Helper] = {}
 def early(filter_name: str, backend: str) -> Iterator[None]:
     """Start the helper for ``filter_name`` now, before the inputs are read and prepared, so
     that it is ready when the kernel compile begins; the first ``helping`` of that filter in
-    the block adopts it. It is stopped when the block ends, at the latest."""
+    the block adopts it (in this process: the workers of a pool forked meanwhile load what it
+    compiled, but neither adopt nor wait for it). It is stopped when the block ends, at the
+    latest."""
     from pipeline.estimation.config import FILTER_KINDS
 
     helper = None
@@ -351,7 +355,11 @@ def helping(filter_name: str, kernel: Any) -> Iterator[Callable[[], None]]:
     """``with helping(name, kernel) as compiled:`` runs the helper (if any) in the block: the
     one ``early`` started, or a new one; calling ``compiled()`` once the kernel is compiled
     stops it early."""
-    helper = _started_early.pop(filter_name, None) or start(filter_name, kernel)
+    helper = _started_early.get(filter_name)
+    if helper is not None and helper.owner == os.getpid():
+        del _started_early[filter_name]
+    else:
+        helper = start(filter_name, kernel)
     stop = helper.stop if helper is not None else (lambda: None)
     try:
         yield stop

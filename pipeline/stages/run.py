@@ -27,7 +27,6 @@ examples:
 from __future__ import annotations
 
 import argparse
-import contextlib
 import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -94,9 +93,8 @@ def run(args: argparse.Namespace) -> int:
     asked: list[str] = args.scenario or ["nominal"]
     names = list(params.run.scenarios) if asked == ["all"] else asked
     # A cold first run compiles the filter: its helper process starts now, while this one
-    # imports and reads the inputs (not when the replays run in a pool of worker processes).
-    pooled = len(names) > 1 and params.run.workers > 1
-    with contextlib.nullcontext() if pooled else compile_helper.early(args.filter, backend):
+    # imports and reads the inputs.
+    with compile_helper.early(args.filter, backend):
         return _run(args, params, backend, asked, names)
 
 

@@ -205,6 +205,7 @@ class _FakeHelper:
     def __init__(self) -> None:
         self.stops = 0
         self.running = True
+        self.owner = os.getpid()
 
     def stop(self) -> None:
         self.stops += self.running
