@@ -9,9 +9,9 @@ on a slice of the hour, scaled to one hour (stated in the table): filterpy's
 ExtendedKalmanFilter / UnscentedKalmanFilter calling the compiled model functions, and the
 same with every model function interpreted (``NUMBA_DISABLE_JIT=1``, in a subprocess): the
 pure-Python reference a filterpy user would write. Cold start: ``navreplay run`` in a
-subprocess with an empty numba cache, then again with the cache it left, with and without
-the cold-compile helper (``pipeline.estimation.compile_helper``). Finally the
-accuracy cost of the speed choices on the 900 s seoul_campus drive.
+subprocess with an empty numba cache, then again with the cache it left; and ``navreplay
+warm`` into an empty cache followed by each filter's first run on 12 minutes of data. Finally
+the accuracy cost of the speed choices on the 900 s seoul_campus drive.
 
 Every figure is CPU seconds (user + system) unless labelled wall: the benchmark machine is
 shared, and CPU time is what a loaded machine does not inflate much.
@@ -20,8 +20,9 @@ Targets (issue 5): tc_ukf <= 5 s, lc_ekf and tc_ekf <= 1.5 s per hour; >= 300x f
 the UKF (read here as against filterpy with the interpreted model: what a filterpy user
 writes; the ratio against filterpy driving our compiled model functions is printed too, and
 is much smaller, because then filterpy's own Python and numpy overhead is all that is left);
-a cold first run compiles in <= 20 s (read as the wall time a user waits; the CPU time of
-both processes is printed beside it).
+a cold first run compiles in <= 20 s (read as the wall time a user waits; the CPU time is
+printed beside it); after ``navreplay warm`` a filter's first run is warm (<= 3 s wall on a
+12-minute drive, issue 20).
 """
 
 from __future__ import annotations
@@ -47,6 +48,9 @@ TARGET_S = {"lc_ekf": 1.5, "tc_ekf": 1.5, "tc_ukf": 5.0, "tc_ukf_10": None}
 TARGET_RATIO = {"tc_ukf": 300.0}  # against filterpy + interpreted model
 COLD_FILTERS = ("lc_ekf", "tc_ekf", "tc_ukf")
 COLD_BUDGET_S = 20.0
+AFTER_WARM_FILTERS = ("lc_ekf", "tc_ekf", "tc_ukf", "lc_ekf_nhc", "tc_ekf_nhc", "tc_ukf_nhc",
+                      "fwekf")  # fmt: skip
+AFTER_WARM_BUDGET_S = 3.0
 MASK_DEG = 5.0
 
 
@@ -161,24 +165,25 @@ def _python_reference(tables_dir: Path, name: str) -> float:
     return float(cpu_s) * 3600.0 / float(duration_s)
 
 
-def _cold(
-    tables_dir: Path, name: str, tmp: Path, helper: bool
-) -> tuple[float, float, float, float]:
+def _navreplay(args: list[str], cache: Path) -> tuple[float, float]:
+    """(cpu, wall) seconds of ``navreplay ARGS`` in a fresh process with numba cache ``cache``."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    cpu = _children_cpu()
+    wall = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "pipeline.cli", "-q", *args], env=env, check=True,
+                   capture_output=True)  # fmt: skip
+    return _children_cpu() - cpu, time.perf_counter() - wall
+
+
+def _cold(tables_dir: Path, name: str, tmp: Path) -> tuple[float, float, float, float]:
     """(cold cpu, cold wall, warm cpu, warm wall) of ``navreplay run`` in a fresh process,
-    first with an empty numba cache, then with the cache the first run left; with or without
-    the cold-compile helper (its CPU counts: the run reaps it)."""
+    first with an empty numba cache, then with the cache the first run left."""
     tmp.mkdir(parents=True, exist_ok=True)
-    tag = "helper" if helper else "alone"
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp / f"cache-{name}-{tag}"),
-               NAVREPLAY_COMPILE_HELPER="1" if helper else "0")  # fmt: skip
-    cmd = [sys.executable, "-m", "pipeline.cli", "-q", "run", str(tables_dir), "--filter", name]
+    cache = tmp / f"cache-{name}"
     out: list[float] = []
     for k in range(2):
-        cpu = _children_cpu()
-        wall = time.perf_counter()
-        subprocess.run([*cmd, "--out", str(tmp / f"run-{name}-{tag}-{k}")], env=env, check=True,
-                       capture_output=True)  # fmt: skip
-        out += [_children_cpu() - cpu, time.perf_counter() - wall]
+        out += _navreplay(["run", str(tables_dir), "--filter", name,
+                           "--out", str(tmp / f"run-{name}-{k}")], cache)  # fmt: skip
     return out[0], out[1], out[2], out[3]
 
 
@@ -190,25 +195,31 @@ def _spread(values: list[float]) -> str:
 def _cold_table(small: Path, tmp: Path, reps: int) -> None:
     rows = []
     for n in COLD_FILTERS:
-        runs: dict[bool, list[tuple[float, float, float, float]]] = {False: [], True: []}
-        for k in range(reps):  # alternating, so both see the same minutes of the host
-            for helper in (False, True):
-                runs[helper].append(_cold(small, n, tmp / f"rep{k}", helper))
-        row: list[object] = [n]
-        for helper in (False, True):
-            row += [_spread([c[0] - c[2] for c in runs[helper]]),
-                    _spread([c[1] - c[3] for c in runs[helper]])]  # fmt: skip
-        rows.append([*row, COLD_BUDGET_S])
+        runs = [_cold(small, n, tmp / f"rep{k}") for k in range(reps)]
+        rows.append([n, _spread([c[0] - c[2] for c in runs]),
+                     _spread([c[1] - c[3] for c in runs]), COLD_BUDGET_S])  # fmt: skip
     print("   navreplay run (fresh process) on 90 s of data: first with an empty numba")
     print("   cache, then with the cache it left; compile = cold - warm (imports, data and")
-    print(f"   the replay itself cancel), {reps} times each: median [min, max]. 'alone': one")
-    print("   process compiles; 'helper': the cold-compile helper compiles the kernel's callees")
-    print("   on the second core meanwhile (pipeline/estimation/compile_helper.py; its CPU is")
-    print(f"   counted). The issue's budget: {COLD_BUDGET_S:g} s for a cold first run.")
-    print_table(
-        ["filter", "alone cpu s", "alone wall s", "helper cpu s", "helper wall s", "budget s"],
-        rows,
-    )
+    print(f"   the replay itself cancel), {reps} times each: median [min, max]. The issue's")
+    print(f"   budget: {COLD_BUDGET_S:g} s for a cold first run.")
+    print_table(["filter", "compile cpu s", "compile wall s", "budget s"], rows)
+
+
+def _after_warm_table(drive: Path, tmp: Path) -> None:
+    """``navreplay warm`` into an empty cache, then each filter's first run on ``drive``."""
+    cache = tmp / "cache-warm"
+    warm_cpu, warm_wall = _navreplay(["warm"], cache)
+    rows = []
+    for n in AFTER_WARM_FILTERS:
+        cpu, wall = _navreplay(
+            ["run", str(drive), "--filter", n, "--out", str(tmp / f"after-warm-{n}")], cache
+        )
+        rows.append([n, cpu, wall, AFTER_WARM_BUDGET_S])
+    print(f"   navreplay warm into an empty cache: {warm_wall:.1f} s wall, {warm_cpu:.1f} CPU s")
+    print("   (every filter, one process per kernel, both cores); then each filter's first")
+    print("   navreplay run on 12 minutes of data (fresh process: imports, reading the tables,")
+    print("   loading the kernel from the cache, the replay, writing the run)")
+    print_table(["filter", "first run cpu s", "first run wall s", "budget wall s"], rows)
 
 
 def run(options: argparse.Namespace) -> None:
@@ -255,6 +266,8 @@ def run(options: argparse.Namespace) -> None:
         if not options.estimation_no_cold:
             small = _write_tables(warm, sensors, tmp / "cold")
             _cold_table(small, tmp, max(1, options.estimation_cold_reps))
+            drive = _write_tables(_slice(tables, 720.0), sensors, tmp / "drive12")
+            _after_warm_table(drive, tmp)
         _accuracy_cost()
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -1,12 +1,15 @@
-"""Numba's on-disk cache, keyed by the source of the whole ``pipeline`` package.
+"""Numba's on-disk cache, keyed by the source numba compiles.
 
 Numba invalidates a cached function only when *its own* file changes; a kernel that calls a
 function from another module keeps the callee's old machine code after the callee is edited
-(numba documents this limitation). For a replay tool that would mean silently running stale
+(numba documents this limitation), and a constant imported from another module is frozen into
+the machine code the same way. For a replay tool that would mean silently running stale
 physics. Before any numba function is defined, ``configure()`` points ``NUMBA_CACHE_DIR`` at
-``<user cache>/navreplay/numba-<sha256 of every pipeline/*.py>``, so any source change starts
-a fresh cache while unchanged code keeps loading its compiled functions. An explicit
-``NUMBA_CACHE_DIR`` in the environment is respected.
+``<user cache>/navreplay/numba-<digest>``, where the digest covers exactly the sources numba
+can see (``compiled_sources``): every module of ``pipeline`` and ``ingest`` that defines a
+jitted function, and every project module those import, transitively. Editing any of them
+starts a fresh cache; editing anything else (a report, a stage, the CLI) keeps the compiled
+kernels. An explicit ``NUMBA_CACHE_DIR`` in the environment is respected.
 
 ``configure()`` also sets ``NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING`` (unless set): with
 colorama installed (dvc brings it), numba otherwise wraps the terminal streams anew for every
@@ -15,8 +18,7 @@ and rejects at each call site: about a second of a cold kernel compile). Numba's
 messages then come without colour.
 
 ``fewer_gc_passes()`` is the collector's setting for a compile, used around every ``navreplay``
-command (the stage's imports compile the kernels' explicitly typed helpers) and around a
-kernel compile; see there.
+command and around a kernel compile; see there.
 """
 
 from __future__ import annotations
@@ -24,19 +26,91 @@ from __future__ import annotations
 import gc
 import hashlib
 import os
+import re
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
+#: the project's top-level packages, siblings in one directory
+PACKAGES = ("pipeline", "ingest")
 
-def source_digest(package: Path) -> str:
-    """sha256 (16 hex) over the relative paths and bytes of the package's ``.py`` files."""
+
+def _module_path(base: Path, module: str) -> Path | None:
+    """The file of ``module`` (dotted) under ``base``, or None if it is not a project module."""
+    path = base.joinpath(*module.split("."))
+    if path.with_suffix(".py").is_file():
+        return path.with_suffix(".py")
+    if (path / "__init__.py").is_file():
+        return path / "__init__.py"
+    return None
+
+
+_FROM = re.compile(rb"^[ \t]*from[ \t]+([\w.]+)[ \t]+import[ \t]+(\([^)]*\)|[^\n]*)", re.M)
+_IMPORT = re.compile(rb"^[ \t]*import[ \t]+([^\n]*)", re.M)
+
+
+def _imported_modules(source: bytes, packages: Sequence[str]) -> Iterator[str]:
+    """Every project module an ``import`` statement anywhere in ``source`` names; ``from M
+    import n`` also yields ``M.n``, a module when ``n`` is a submodule.
+
+    A textual scan (a tenth of the time ``ast`` takes, and this runs at every start): an import
+    in a string or comment only adds a file, which costs a needless recompile, never a stale
+    one.
+    """
+    found: list[tuple[str, list[str]]] = []
+    for m in _FROM.finditer(source):
+        names = m.group(2).split(b"#")[0].strip(b"()").replace(b"\n", b",").split(b",")
+        found.append((m.group(1).decode(), [n.split()[0].decode() for n in names if n.split()]))
+    for m in _IMPORT.finditer(source):
+        for item in m.group(1).split(b"#")[0].split(b","):
+            if item.split():
+                found.append((item.split()[0].decode(), []))
+    for module, names in found:
+        if module.split(".")[0] in packages:
+            yield module
+            yield from (f"{module}.{n}" for n in names)
+
+
+def compiled_sources(base: Path, packages: Sequence[str] = PACKAGES) -> list[Path]:
+    """The project's ``.py`` files under ``base`` whose content can reach compiled code.
+
+    The seeds are the files that mention ``njit`` (they define jitted functions); then every
+    project module they import, transitively, with the parent packages' ``__init__.py`` that
+    Python runs on the way. Sorted.
+    """
+    files = [p for pkg in packages for p in sorted((base / pkg).rglob("*.py"))]
+    todo = [p for p in files if b"njit" in p.read_bytes()]
+    seen: set[Path] = set()
+    while todo:
+        path = todo.pop()
+        if path in seen:
+            continue
+        seen.add(path)
+        parts = path.relative_to(base).parts
+        for k in range(1, len(parts)):  # the packages Python imports on the way
+            init = base.joinpath(*parts[:k], "__init__.py")
+            if init.is_file() and init not in seen:
+                todo.append(init)
+        for module in _imported_modules(path.read_bytes(), packages):
+            found = _module_path(base, module)
+            if found is not None and found not in seen:
+                todo.append(found)
+    return sorted(seen)
+
+
+def source_digest(base: Path, packages: Sequence[str] = PACKAGES) -> str:
+    """sha256 (16 hex) over the relative paths and bytes of ``compiled_sources``."""
     h = hashlib.sha256()
-    for path in sorted(package.rglob("*.py")):
-        h.update(str(path.relative_to(package)).encode())
+    for path in compiled_sources(base, packages):
+        h.update(str(path.relative_to(base)).encode())
         h.update(path.read_bytes())
     return h.hexdigest()[:16]
+
+
+def installed_digest() -> str:
+    """``source_digest`` of the installed ``pipeline`` and ``ingest``: the cache's key."""
+    return source_digest(Path(__file__).resolve().parent.parent)
 
 
 def configure() -> None:
@@ -51,7 +125,7 @@ def configure() -> None:
     if "NUMBA_CACHE_DIR" in os.environ:
         return
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    digest = source_digest(Path(__file__).resolve().parent)
+    digest = installed_digest()
     path = str(Path(base) / "navreplay" / f"numba-{digest}")
     os.environ["NUMBA_CACHE_DIR"] = path
     numba = sys.modules.get("numba")

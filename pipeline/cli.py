@@ -30,6 +30,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "pipeline.stages.ingest",
         "convert logs (MCAP, ROS bags, tlog, DataFlash, ULog, RINEX, CSV) to tables",
     ),
+    "warm": (
+        "pipeline.stages.warm",
+        "compile every filter now, so that its first run loads it from the cache",
+    ),
     "run": ("pipeline.stages.run", "replay a filter over canonical tables under scenarios"),
     "montecarlo": (
         "pipeline.stages.montecarlo",

@@ -10,15 +10,13 @@ grid + update epochs + NHC slots) and hands arrays to a backend:
   model functions, gating and bookkeeping driven by filterpy's ExtendedKalmanFilter and
   UnscentedKalmanFilter, with the same signature and outputs.
 
-With a cold numba cache and a second core, a helper process compiles the kernel's callees
-meanwhile (``compile_helper``).
-
 A divergence (NaN barrier, indefinite covariance, limits) raises ``DivergenceError`` or, with
 ``divergence.on_divergence: flag``, ends the run there and marks it diverged.
 """
 
 from __future__ import annotations
 
+import importlib
 import logging
 import math
 import time
@@ -35,7 +33,6 @@ from ingest.config import ImuNoise
 from ingest.meta import SensorMeta
 from pipeline._numba_cache import fewer_gc_passes
 from pipeline.errors import DivergenceError, PipelineError
-from pipeline.estimation import compile_helper
 from pipeline.estimation import inputs as inp
 from pipeline.estimation.alignment import Alignment, align
 from pipeline.estimation.config import FILTER_KINDS, FilterKind, InsFilterParams
@@ -178,7 +175,8 @@ def kernel_for(kind: FilterKind, backend: Backend) -> KernelFn:
     """The function that runs a filter of ``kind`` on ``backend`` (a numba dispatcher for
     ``numba``)."""
     if backend == "numba":
-        kernel: KernelFn = compile_helper.resolve(kind.numba_kernel)
+        module, _, function = kind.numba_kernel.partition(":")
+        kernel: KernelFn = getattr(importlib.import_module(module), function)
         return kernel
     if kind.fading:
         from pipeline.estimation.reference_fwekf import run_fwekf_filterpy
@@ -219,25 +217,6 @@ def run_filter(
     t_wall = time.perf_counter()
     kind = FILTER_KINDS[name]
     kernel = kernel_for(kind, backend)
-    with compile_helper.helping(name, kernel) as compiled:
-        return _run_filter(
-            tables, sensors, name, params, backend, imu, initial, kernel, compiled, t_wall
-        )
-
-
-def _run_filter(
-    tables: Mapping[str, pa.Table],
-    sensors: SensorMeta | None,
-    name: str,
-    params: InsFilterParams,
-    backend: Backend,
-    imu: inp.ImuData | None,
-    initial: Alignment | None,
-    kernel: KernelFn,
-    compiled: Callable[[], None],
-    t_wall: float,
-) -> RunResult:
-    kind = FILTER_KINDS[name]
     imu_data = imu if imu is not None else inp.prepare_imu(_table(tables, "imu", name), params.step)
     noise_model, noise_source = resolve_imu_noise(params, sensors, imu_data)
     setup = make_setup(name, params, sensors, noise_model)
@@ -265,7 +244,7 @@ def _run_filter(
             continue
         alignments.append(al)
         out, code, t_fail, seg_events, seg_compile_s, alpha = _run_segment(
-            kernel, setup, params, kind.coupling, kind.nhc, imu_data, seg, fixes, obs, al, compiled
+            kernel, setup, params, kind.coupling, kind.nhc, imu_data, seg, fixes, obs, al
         )
         compile_s += seg_compile_s
         parts.append(out)
@@ -380,7 +359,6 @@ def _run_segment(
     fixes: inp.FixData | None,
     obs: inp.ObsData | None,
     al: Alignment,
-    compiled: Callable[[], None],
 ) -> tuple[tuple[I64, F64, F64, I64, F64], int, int, list[inp.Event], float, F64]:
     lo, hi = seg
     imu_t = imu.t_ns[lo:hi]
@@ -438,7 +416,6 @@ def _run_segment(
         with fewer_gc_passes():
             kernel.compile(tuple(_typeof(a) for a in args))
         compile_s = time.perf_counter() - t0
-    compiled()  # the cold-compile helper, if any, has nothing left to do
     code = kernel(*args)
     k_out, k_inn, k_ev = (int(counts[c]) for c in (cm.CNT_OUT, cm.CNT_INN, cm.CNT_EV))
     if k_inn > n_inn or k_ev > n_ev or k_out > n_out:

@@ -14,9 +14,8 @@ With one --scenario, DIR is the run directory. With several, or `--scenario all`
 scenarios of params.yaml `run.scenarios`), DIR holds one run directory per scenario,
 DIR/<scenario>/, and appears as a whole or not at all.
 
-The first run after installing or changing navreplay compiles the filter (numba; cached for
-later runs). On a machine with two or more cores a helper process compiles part of it on
-another core meanwhile; NAVREPLAY_COMPILE_HELPER=0 turns that off.
+The first run after installing or changing navreplay compiles the filter (numba, 10-30 s;
+cached for later runs); `navreplay warm` compiles every filter ahead of time.
 
 examples:
   navreplay run datasets/seoul_campus_cw/tables --filter tc_ukf_nhc --out runs/tc_ukf_nhc
@@ -85,17 +84,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.estimation import compile_helper
     from pipeline.params import load_params
 
     params = load_params(args.params)
     backend: Backend = args.backend or params.run.backend
     asked: list[str] = args.scenario or ["nominal"]
     names = list(params.run.scenarios) if asked == ["all"] else asked
-    # A cold first run compiles the filter: its helper process starts now, while this one
-    # imports and reads the inputs.
-    with compile_helper.early(args.filter, backend):
-        return _run(args, params, backend, asked, names)
+    return _run(args, params, backend, asked, names)
 
 
 def _run(

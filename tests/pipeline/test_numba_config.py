@@ -5,6 +5,7 @@ from __future__ import annotations
 import gc
 import json
 import os
+import shutil
 import subprocess
 import sys
 import weakref
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline._numba_cache import fewer_gc_passes, source_digest
+from pipeline._numba_cache import compiled_sources, fewer_gc_passes, source_digest
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -45,7 +46,7 @@ def test_cache_dir_is_keyed_by_the_package_source(tmp_path: Path) -> None:
         {"XDG_CACHE_HOME": str(tmp_path)},
         drop=("NUMBA_CACHE_DIR", "NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING"),
     )
-    digest = source_digest(REPO / "pipeline")
+    digest = source_digest(REPO)
     expected = str(tmp_path / "navreplay" / f"numba-{digest}")
     assert got["cache_dir"] == expected
     assert got["env_cache_dir"] == expected
@@ -62,19 +63,91 @@ def test_explicit_cache_dir_and_highlighting_are_respected(tmp_path: Path) -> No
     assert got["scheme"] != "NOPColorScheme"  # the user's (empty) setting kept highlighting on
 
 
-def test_source_digest_changes_with_any_file(tmp_path: Path) -> None:
-    pkg = tmp_path / "pkg"
-    (pkg / "sub").mkdir(parents=True)
-    (pkg / "a.py").write_text("x = 1\n")
-    (pkg / "sub" / "b.py").write_text("y = 2\n")
-    first = source_digest(pkg)
-    assert source_digest(pkg) == first
-    (pkg / "sub" / "b.py").write_text("y = 3\n")
-    assert source_digest(pkg) != first
-    (pkg / "sub" / "b.py").write_text("y = 2\n")
-    assert source_digest(pkg) == first
-    (pkg / "sub" / "b.py").rename(pkg / "b.py")  # same bytes, another path
-    assert source_digest(pkg) != first
+def _tree(tmp_path: Path) -> Path:
+    """A copy of the repository's ``pipeline`` and ``ingest`` sources."""
+    for pkg in ("pipeline", "ingest"):
+        shutil.copytree(REPO / pkg, tmp_path / pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    return tmp_path
+
+
+def test_editing_a_report_keeps_the_kernels_and_editing_their_sources_does_not(
+    tmp_path: Path,
+) -> None:
+    base = _tree(tmp_path)
+    first = source_digest(base)
+    assert source_digest(base) == first
+
+    def edited(rel: str) -> str:
+        path = base / rel
+        original = path.read_bytes()
+        path.write_bytes(original + b"\n# edited\n")
+        try:
+            return source_digest(base)
+        finally:
+            path.write_bytes(original)
+
+    # no jitted code reaches these: the compiled kernels stay valid
+    for rel in ("pipeline/report/html.py", "pipeline/stages/run.py", "pipeline/cli.py"):
+        assert edited(rel) == first, rel
+    # a kernel, a callee in another module, a module of constants a kernel imports
+    for rel in (
+        "pipeline/estimation/kernels/ukf.py",
+        "pipeline/estimation/models/ins.py",
+        "pipeline/nav/earth.py",
+        "pipeline/estimation/kernels/common.py",
+    ):
+        assert edited(rel) != first, rel
+    assert source_digest(base) == first
+
+
+def test_a_new_import_in_a_jitted_module_extends_the_digest(tmp_path: Path) -> None:
+    base = tmp_path
+    (base / "pipeline" / "sub").mkdir(parents=True)
+    (base / "ingest").mkdir()
+    for init in ("pipeline/__init__.py", "pipeline/sub/__init__.py", "ingest/__init__.py"):
+        (base / init).write_text("")
+    (base / "pipeline" / "consts.py").write_text("G = 9.8\n")
+    (base / "pipeline" / "other.py").write_text("x = 1\n")
+    kernel = base / "pipeline" / "sub" / "kernel.py"
+    kernel.write_text("from pipeline._jit import njit\n\n@njit\ndef f():\n    return 1\n")
+    assert base / "pipeline" / "consts.py" not in compiled_sources(base)
+    kernel.write_text(
+        "from pipeline._jit import njit\nfrom pipeline import (\n    consts,  # g\n)\n"
+        "@njit\ndef f():\n    return consts.G\n"
+    )
+    found = compiled_sources(base)
+    assert base / "pipeline" / "consts.py" in found
+    assert base / "pipeline" / "sub" / "__init__.py" in found
+    assert base / "pipeline" / "other.py" not in found
+    before = source_digest(base)
+    (base / "pipeline" / "consts.py").write_text("G = 9.81\n")
+    assert source_digest(base) != before
+
+
+IMPORTED = """
+import importlib, json, sys
+for name in sys.argv[1:]:
+    importlib.import_module(name)
+ours = [m for n, m in sys.modules.items() if n.split(".")[0] in ("pipeline", "ingest")]
+print(json.dumps(sorted(m.__file__ for m in ours if getattr(m, "__file__", None))))
+"""
+
+
+def test_the_digest_covers_every_module_python_loads_with_the_jitted_ones() -> None:
+    """The static scan against Python's own imports: loading the jitted modules imports
+    nothing from the project that the digest leaves out."""
+    seeds = [p for p in compiled_sources(REPO) if b"njit" in p.read_bytes()]
+    modules = [".".join(p.relative_to(REPO).with_suffix("").parts) for p in seeds]
+    modules = [m.removesuffix(".__init__") for m in modules]
+    assert "pipeline.estimation.kernels.ukf" in modules
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    out = subprocess.run(
+        [sys.executable, "-c", IMPORTED, *modules],
+        env=env, capture_output=True, text=True, check=True, cwd=REPO,
+    )  # fmt: skip
+    loaded = {Path(f).resolve() for f in json.loads(out.stdout.strip().splitlines()[-1])}
+    missing = loaded - set(compiled_sources(REPO))
+    assert not missing, f"imported with the jitted modules but not in the digest: {missing}"
 
 
 class _Node:

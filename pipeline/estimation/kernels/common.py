@@ -45,9 +45,9 @@ STATUS_TEXT = {
 
 N_STREAMS = 4
 
-# Pinned signatures (``pipeline._jit``) for the helpers called from many places: a call from
-# jitted code otherwise compiles a new specialization for every literal constant or array
-# layout it sees. They compile at first use, not at import.
+# Explicit signatures for the helpers called from many places: a call from jitted code
+# otherwise compiles a new specialization for every array layout it sees. numba compiles them
+# when this module is imported (or loads them from its cache).
 _F2 = nb.float64[:, :]
 _F2C = nb.float64[:, ::1]
 _F1C = nb.float64[::1]

@@ -33,10 +33,7 @@ and ``models.measurement``: the sigma-point and epoch helpers) are therefore
 ``inline="always"``: inlined into the loop while numba builds it, they add no level. A cold
 first run compiles about 3 s sooner for it (``benchmarks/bench_estimation.py``); the code is
 the same. Inlining the small common helpers as well measured slower, and is not done.
-``ukf_update`` is the exception: compiled on its own, it is one of the callees the cold-compile
-helper (``estimation.compile_helper``) compiles on the second core while the loop compiles,
-instead of a third of the loop's own typing and lowering, which no other core can share
-(cold tc_ukf with the helper: 22.9 s wall against 25.2 s inlined, mean of 4 alternating pairs).
+``ukf_update`` is compiled on its own (not inlined).
 """
 
 from __future__ import annotations

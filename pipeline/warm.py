@@ -1,0 +1,153 @@
+"""Compile every filter's kernel into numba's on-disk cache before the first real run.
+
+A cold first run of a filter spends 10-30 s compiling its replay loop; later runs load it from
+numba's cache (``pipeline._numba_cache``) in about a second. ``warm`` pays that cost once, up
+front: it replays every filter over a short synthesized drive of its family, through the same
+path a real run takes (tables written and read back, ``estimation.families.runner``), so the
+argument types it compiles for are exactly those of a real run. Nothing but numba's public
+API is involved: each kernel is compiled by calling it.
+
+Filters that share one compiled kernel (a filter and its ``_nhc`` variant; the vehicle-model
+filters; the cascaded filters) are one *group* and are warmed one after the other in one
+process: the second loads what the first compiled. Groups compile independently, one process
+each, ``jobs`` at a time.
+"""
+
+from __future__ import annotations
+
+import logging
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from ingest.meta import DatasetMeta, write_meta
+from ingest.tables import Provenance, write_table
+from pipeline.errors import PipelineError
+from pipeline.params import Params
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class WarmResult:
+    """One group's outcome: its filters, wall time, and the error if it failed."""
+
+    filters: tuple[str, ...]
+    wall_s: float
+    error: str | None = None
+
+
+def groups(names: Sequence[str] | None = None) -> list[tuple[str, ...]]:
+    """The filters in compile groups (one compiled kernel each), in family order.
+
+    ``names`` restricts them to those filters (unknown names raise ``KeyError``)."""
+    from pipeline.estimation.config import FILTER_KINDS
+    from pipeline.estimation.families import FAMILIES, filter_names
+
+    known = filter_names()
+    wanted = known if names is None else tuple(names)
+    for name in wanted:
+        if name not in known:
+            raise KeyError(f"unknown filter {name!r} (known: {', '.join(known)})")
+    keyed: dict[tuple[str, ...], list[str]] = {}
+    for family, (members, _) in FAMILIES.items():
+        for name in members:
+            if name not in wanted:
+                continue
+            key: tuple[str, ...] = (family,)
+            if family == "ins":
+                kind = FILTER_KINDS[name]
+                key = (family, kind.numba_kernel, kind.coupling)
+            keyed.setdefault(key, []).append(name)
+    return [tuple(v) for v in keyed.values()]
+
+
+def _family(name: str) -> str:
+    from pipeline.estimation.families import FAMILIES
+
+    return next(f for f, (members, _) in FAMILIES.items() if name in members)
+
+
+def _drive(family: str, params: Params, out: Path) -> Path:
+    """A short synthesized drive of ``family``'s kind, written as canonical tables to ``out``."""
+    synth = params.synth
+    if family == "ins":
+        from pipeline.synth.seoul_campus import simulate
+
+        sp = replace(synth.seoul_campus, duration_s=40.0, stationary_s=10.0)
+        result = simulate(sp, seed=synth.seed, variant="cw")
+    elif family == "vehicle":
+        from pipeline.synth.car import synthesize as car
+
+        result = car(replace(synth.car_speed_ramp, ramp_s=20.0, hold_s=10.0), synth.seed)
+    else:
+        from pipeline.synth.tractor_log import synthesize as tractor
+
+        result = tractor(replace(synth.tractor_straight, duration_s=20.0), synth.seed)
+    for name, table in result.tables.items():
+        prov = Provenance.create(name, sources=[], params=None, extra={"synthesizer": "warm"})
+        write_table(out / f"{name}.parquet", name, table, prov)
+    tables = {name: t.num_rows for name, t in sorted(result.tables.items())}
+    write_meta(out, DatasetMeta(f"warm-{family}", result.time_base, (), tables, result.sensors))
+    return out
+
+
+def warm_here(names: Sequence[str], params: Params) -> None:
+    """Compile (or load) the kernels of ``names`` in this process by running each filter once.
+
+    Raises:
+        PipelineError: a filter could not run on its warm-up drive (the message names it).
+    """
+    from pipeline.errors import DivergenceError
+    from pipeline.estimation.families import runner
+
+    with tempfile.TemporaryDirectory(prefix="navreplay-warm-") as tmp:
+        drives: dict[str, Path] = {}
+        for name in names:
+            family = _family(name)
+            if family not in drives:
+                drives[family] = _drive(family, params, Path(tmp) / family)
+            out = Path(tmp) / name
+            try:
+                runner(name)(drives[family], name, params.filters, "numba", out, "nominal")
+            except DivergenceError:
+                pass  # the kernel compiled and ran; a short drive may end off its limits
+            except PipelineError as err:
+                raise PipelineError(f"warm {name}: {err}") from err
+
+
+def warm(
+    params_path: Path,
+    names: Sequence[str] | None = None,
+    *,
+    jobs: int = 2,
+    progress: Callable[[WarmResult, int, int], None] | None = None,
+) -> list[WarmResult]:
+    """Warm every compile group of ``names`` (default: every filter) in its own process,
+    ``jobs`` at a time; returns one result per group, in group order."""
+    todo = groups(names)
+
+    def one(group: tuple[str, ...]) -> WarmResult:
+        cmd = [sys.executable, "-m", "pipeline.cli", "-q", "warm", "--in-process"]
+        cmd += ["--params", str(params_path)]
+        for name in group:
+            cmd += ["--filter", name]
+        t0 = time.perf_counter()
+        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        wall = time.perf_counter() - t0
+        if done.returncode != 0:
+            lines = (done.stderr or done.stdout).strip().splitlines()
+            return WarmResult(group, wall, lines[-1] if lines else f"exit {done.returncode}")
+        return WarmResult(group, wall)
+
+    with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+        futures = [pool.submit(one, group) for group in todo]
+        for k, future in enumerate(as_completed(futures), 1):
+            if progress is not None:
+                progress(future.result(), k, len(todo))
+    return [f.result() for f in futures]

@@ -1,0 +1,82 @@
+"""``navreplay warm``: the kernels it compiles are the ones a later run loads from the cache."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pipeline._numba_cache import installed_digest
+from pipeline.estimation.families import filter_names
+from pipeline.warm import groups
+
+REPO = Path(__file__).resolve().parents[3]
+
+# A fresh process runs lc_ekf on a short drive with the given cache and prints numba's cache
+# statistics (Dispatcher.stats) of the loop it ran: hits are loads, misses are compiles.
+PROBE = """
+import json, sys, tempfile
+from dataclasses import replace
+from pathlib import Path
+from pipeline.params import load_params
+from pipeline.warm import _drive
+from pipeline.estimation.families import runner
+from pipeline.estimation.kernels.ekf import run_ekf
+params = load_params(Path(sys.argv[1]))
+with tempfile.TemporaryDirectory() as tmp:
+    tables = _drive("ins", params, Path(tmp) / "t")
+    runner("lc_ekf")(tables, "lc_ekf", params.filters, "numba", Path(tmp) / "o", "nominal")
+st = run_ekf.stats
+print(json.dumps({"hits": sum(st.cache_hits.values()), "misses": sum(st.cache_misses.values())}))
+"""
+
+
+def _stats(cache: Path) -> dict[str, int]:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE, str(REPO / "params.yaml")],
+        env=env, capture_output=True, text=True, check=True, cwd=REPO,
+    )  # fmt: skip
+    stats: dict[str, int] = json.loads(out.stdout.strip().splitlines()[-1])
+    return stats
+
+
+def test_groups_put_filters_that_share_a_kernel_together() -> None:
+    every = groups()
+    assert ("lc_ekf", "lc_ekf_nhc") in every
+    assert ("tc_ukf", "tc_ukf_nhc") in every
+    assert ("fwekf",) in every
+    assert sorted(n for g in every for n in g) == sorted(filter_names())  # each once
+    assert groups(["tc_ekf_nhc", "lc_ekf"]) == [("lc_ekf",), ("tc_ekf_nhc",)]
+    with pytest.raises(KeyError, match="unknown filter 'nope'"):
+        groups(["nope"])
+
+
+@pytest.mark.slow
+def test_after_warm_the_first_run_loads_the_kernel_and_compiles_nothing(tmp_path: Path) -> None:
+    cache = tmp_path / "cache"
+    assert _stats(tmp_path / "cold") == {"hits": 0, "misses": 1}  # the control: it compiles
+    stamp = tmp_path / "warm.json"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    done = subprocess.run(
+        [sys.executable, "-m", "pipeline.cli", "warm", "--filter", "lc_ekf",
+         "--filter", "lc_ekf_nhc", "--stamp", str(stamp)],
+        env=env, capture_output=True, text=True, check=False, cwd=REPO,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "[1/1] lc_ekf, lc_ekf_nhc: compiled" in done.stdout
+    assert json.loads(stamp.read_text()) == {
+        "numba_source_digest": installed_digest(),
+        "filters": [["lc_ekf", "lc_ekf_nhc"]],
+    }
+    assert _stats(cache) == {"hits": 1, "misses": 0}
+
+
+def test_an_unknown_filter_is_a_parameter_error(tmp_path: Path) -> None:
+    from pipeline.cli import EXIT_ERROR, main
+
+    assert main(["warm", "--filter", "nope", "--params", str(REPO / "params.yaml")]) == EXIT_ERROR
