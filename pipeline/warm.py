@@ -129,8 +129,15 @@ def warm(
     progress: Callable[[WarmResult, int, int], None] | None = None,
 ) -> list[WarmResult]:
     """Warm every compile group of ``names`` (default: every filter) in its own process,
-    ``jobs`` at a time; returns one result per group, in group order."""
+    ``jobs`` at a time; returns one result per group, in group order.
+
+    The groups of one family share most of their callees (the INS model, alignment, gating),
+    so a family's first group runs before its others, which then load those callees from the
+    cache instead of compiling them in two processes at once; the other worker meanwhile
+    compiles another family, which shares nothing with it.
+    """
     todo = groups(names)
+    families = [_family(g[0]) for g in todo]
 
     def one(group: tuple[str, ...]) -> WarmResult:
         cmd = [sys.executable, "-m", "pipeline.cli", "-q", "warm", "--in-process"]
@@ -145,9 +152,18 @@ def warm(
             return WarmResult(group, wall, lines[-1] if lines else f"exit {done.returncode}")
         return WarmResult(group, wall)
 
+    leaders = {f: families.index(f) for f in families}  # each family's first group
+    results: dict[int, WarmResult] = {}
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = [pool.submit(one, group) for group in todo]
-        for k, future in enumerate(as_completed(futures), 1):
+        running = {pool.submit(one, todo[i]): i for i in leaders.values()}
+        while running:
+            done = next(as_completed(running))
+            i = running.pop(done)
+            results[i] = done.result()
+            if i == leaders[families[i]]:  # the family's shared callees are in the cache
+                for j, f in enumerate(families):
+                    if f == families[i] and j != i:
+                        running[pool.submit(one, todo[j])] = j
             if progress is not None:
-                progress(future.result(), k, len(todo))
-    return [f.result() for f in futures]
+                progress(results[i], len(results), len(todo))
+    return [results[i] for i in range(len(todo))]
