@@ -28,9 +28,8 @@ from pipeline.estimation.models import measurement as me
 from pipeline.estimation.outage_metrics import outage_windows
 from pipeline.estimation.replay import RunResult
 from pipeline.estimation.truth import error_states, full_truth
+from pipeline.estimation.windows import Window, WindowMetricsParams
 from pipeline.nav.earth import F64
-from pipeline.scenarios.config import WindowMetricsParams
-from pipeline.scenarios.windows import Window
 
 
 def _rms(a: F64) -> float | None:

@@ -31,10 +31,9 @@ import pyarrow as pa
 from pipeline.estimation.models import ins
 from pipeline.estimation.replay import RunResult
 from pipeline.estimation.truth import error_states, truth_at
+from pipeline.estimation.windows import NS, Window, WindowMetricsParams
 from pipeline.nav.earth import E2, F64, I64, A
 from pipeline.nav.rotations import quat_to_dcm
-from pipeline.scenarios.config import WindowMetricsParams
-from pipeline.scenarios.windows import NS, Window
 
 
 @dataclass(frozen=True)
