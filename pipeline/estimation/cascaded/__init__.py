@@ -17,7 +17,8 @@ Layout: ``model`` (the physics as pure functions: f, F, h, H, Q, R), ``numerics`
 generic pieces the INS kernels do not provide for a six-state filter), ``filters``
 (compiled predict/update of the three estimators), ``cascade`` (one sample of the cascade and
 the compiled replay loop), ``reference`` (the same model through filterpy), ``engine`` (run
-set-up and the backend-neutral stepper), ``inputs``/``outputs``/``metrics``/``run`` (tables
+set-up, run state and the compiled stepper), ``backends`` (a stepper of either backend by
+name, and the open-loop replay), ``inputs``/``outputs``/``metrics``/``run`` (tables
 in, run directory out), ``closed_loop`` (the LQR steering the simulator from the estimates)
 and ``experiments``/``figures`` (the paper's scenario, Monte Carlo, outages).
 """

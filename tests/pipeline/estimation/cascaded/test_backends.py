@@ -8,9 +8,10 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
+from pipeline.estimation.cascaded.backends import replay
 from pipeline.estimation.cascaded.closed_loop import run_closed_loop
 from pipeline.estimation.cascaded.config import CascadedFilterParams
-from pipeline.estimation.cascaded.engine import CascadedResult, make_setup, replay
+from pipeline.estimation.cascaded.engine import CascadedResult, make_setup
 from pipeline.estimation.cascaded.inputs import prepare_inputs
 from pipeline.estimation.cascaded.outputs import sigmas
 from pipeline.synth.tractor import TractorStraightParams

@@ -23,8 +23,9 @@ import numpy as np
 import pytest
 
 from pipeline.estimation.cascaded import cascade as cs
+from pipeline.estimation.cascaded.backends import replay
 from pipeline.estimation.cascaded.config import CascadedFilterParams
-from pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup, make_setup, replay
+from pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup, make_setup
 from pipeline.estimation.cascaded.model import NAV_PSI, NAV_PSIB, NAV_RB, NX
 
 SPEED, RADAR_BIAS, GYRO_BIAS, HEADING_BIAS, STEER_BIAS = 3.0, 0.4, 0.3, 0.2, 0.1
