@@ -25,13 +25,13 @@ from scipy.stats import chi2
 
 from pipeline.errors import DivergenceError
 from pipeline.estimation.cascaded import cascade as cs
-from pipeline.estimation.cascaded.config import (
+from pipeline.estimation.cascaded.filters import EST_EKF, EST_HYBRID, EST_UKF
+from pipeline.estimation.cascaded.model import NX, ctl_discretize, model_params
+from pipeline.estimation.cascaded_config import (
     CASCADED_KINDS,
     NAV_STATE_NAMES,
     CascadedFilterParams,
 )
-from pipeline.estimation.cascaded.filters import EST_EKF, EST_HYBRID, EST_UKF
-from pipeline.estimation.cascaded.model import NX, ctl_discretize, model_params
 from pipeline.estimation.inputs import Event
 from pipeline.estimation.kernels import common as cm
 from pipeline.estimation.kernels.unscented import ukf_weights
