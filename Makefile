@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml Makefile
 	$(BIN)/python -m pip install --quiet --editable .
 	@touch $(STAMP)
 
-# The development tools on top (pytest, ruff, mypy and stubs, selenium): `make test`.
+# The development tools on top (pytest, ruff, mypy and stubs, import-linter, selenium): `make test`.
 dev: $(DEV_STAMP)
 
 $(DEV_STAMP): $(STAMP)
@@ -36,9 +36,12 @@ demo: venv
 
 test: lint typecheck pytest
 
+# lint-imports: the import contracts of pyproject.toml [tool.importlinter] (layers, no cycles);
+# --no-cache: the import graph is rebuilt every time (well under a second), never read stale
 lint: dev
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	$(BIN)/lint-imports --no-cache
 
 typecheck: dev
 	$(BIN)/mypy

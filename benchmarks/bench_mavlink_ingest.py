@@ -58,9 +58,10 @@ def plain_pymavlink(path: Path, types: list[str] | None) -> int:
 
 def reader_only(path: Path) -> int:
     """Inventory and read every stream ingest could convert: decoding without output."""
+    from ingest.damage import DamageLog
     from ingest.detect import detect
     from ingest.readers import open_reader
-    from ingest.readers.base import DamageLog, ReadContext, Selection
+    from ingest.readers.base import ReadContext, Selection
 
     with open_reader(detect(path), ReadContext(DamageLog(path, strict=False))) as reader:
         inv = reader.inventory()

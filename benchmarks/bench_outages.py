@@ -20,10 +20,10 @@ import time
 from benchmarks._table import print_table
 from pipeline.estimation.metrics import compute_metrics
 from pipeline.estimation.replay import run_filter
+from pipeline.estimation.windows import NS
 from pipeline.outages.montecarlo import Case, draw_starts, run_montecarlo
 from pipeline.scenarios.apply import apply_scenario
 from pipeline.scenarios.config import ScenarioSpec, WindowsSpec
-from pipeline.scenarios.windows import NS
 from tests.pipeline.scenarios.drives import drive, params
 
 LENGTH_S, TAIL_S, PER_SEED = 60.0, 30.0, 8

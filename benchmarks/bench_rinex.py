@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from benchmarks._table import print_table, timed
+from ingest.damage import DamageLog
 from ingest.gpstime import gps_from_calendar
-from ingest.readers.base import DamageLog
 from ingest.rinexobs import from_georinex, read_obs, signals
 from ingest.rinextext import open_lines, read_header
 from ingest.schema import from_columns

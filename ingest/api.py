@@ -53,11 +53,12 @@ from typing import Any
 from ingest.alignment import check_tables
 from ingest.atomic import atomic_directory, atomic_write_json
 from ingest.config import DatasetConfig
+from ingest.damage import DamageLog
 from ingest.detect import Detected, Format, detect
 from ingest.errors import IngestError
 from ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
 from ingest.readers import open_reader
-from ingest.readers.base import DamageLog, Inventory, LogReader, ReadContext, Selection
+from ingest.readers.base import Inventory, LogReader, ReadContext, Selection
 from ingest.readers.rosmsg import DefinitionError
 from ingest.schema import TableName
 from ingest.select import TablePlan, select_streams

@@ -25,7 +25,7 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from ingest.readers.base import Completeness, DamageLog, Defect
+from ingest.damage import Completeness, DamageLog, Defect
 from ingest.rinextext import Header
 
 _V2_EPOCH = re.compile(r"^ [ \d]\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d[ \d.]{11}  [0-6][ \d]{2}\d")

@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ingest.damage import Completeness, DamageLog, Defect
 from ingest.errors import CorruptLogError
 from ingest.gnss import Ephemeris, concat
 from ingest.gpstime import GPS_EPOCH, NS_PER_S, NS_PER_WEEK
-from ingest.readers.base import Completeness, DamageLog, Defect
 from ingest.rinextext import Header, open_lines, read_header
 
 # georinex variable -> Ephemeris field

@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from ingest.damage import Completeness, DamageLog, Defect
 from ingest.errors import CorruptLogError
 from ingest.gpstime import GPS_EPOCH, GPS_EPOCH_UNIX_NS, NS_PER_S
-from ingest.readers.base import Completeness, DamageLog, Defect
 from ingest.rinexepochs import Counts, Epoch, epochs
 from ingest.rinextext import Header, open_lines, read_header
 from ingest.timebase import utc_to_gps_ns

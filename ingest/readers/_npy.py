@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ingest.damage import Completeness, DamageLog, Defect
 from ingest.errors import CorruptLogError
-from ingest.readers.base import Completeness, DamageLog, Defect
 
 NPY_MAGIC = b"\x93NUMPY"
 

@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from ingest.damage import Completeness, Defect
 from ingest.detect import Detected, Format
 from ingest.ecef import (
     c_ned_ecef,
@@ -57,16 +58,7 @@ from ingest.ecef import (
 )
 from ingest.errors import CorruptLogError
 from ingest.readers import _npy
-from ingest.readers.base import (
-    Batch,
-    Completeness,
-    Defect,
-    Inventory,
-    LogReader,
-    ReadContext,
-    Selection,
-    StreamInfo,
-)
+from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
 from ingest.schema import FixType, TableName
 from ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
 

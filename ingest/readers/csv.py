@@ -28,18 +28,10 @@ import numpy.typing as npt
 import pyarrow as pa
 
 from ingest.config import CsvSource
+from ingest.damage import Completeness, Defect
 from ingest.detect import Detected, Format
 from ingest.errors import ConfigError, CorruptLogError, UnsupportedFormatError
-from ingest.readers.base import (
-    Batch,
-    Completeness,
-    Defect,
-    Inventory,
-    LogReader,
-    ReadContext,
-    Selection,
-    StreamInfo,
-)
+from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
 from ingest.schema import TableName, spec
 from ingest.timebase import TimeBase
 

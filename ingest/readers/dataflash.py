@@ -26,19 +26,11 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 import numpy.typing as npt
 
+from ingest.damage import Completeness, Defect
 from ingest.detect import Detected, Format
 from ingest.errors import CorruptLogError
 from ingest.readers.asof import AsofJoin, Left
-from ingest.readers.base import (
-    Batch,
-    Completeness,
-    Defect,
-    Inventory,
-    LogReader,
-    ReadContext,
-    Selection,
-    StreamInfo,
-)
+from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
 from ingest.readers.dfclock import DfSurvey, instances, survey
 from ingest.readers.dfformat import DfFormat
 from ingest.readers.dfmsgs import BY_NAME, JOIN_COLUMNS, DfExtras, DfStream, finish_gnss

@@ -44,13 +44,12 @@ import numpy.typing as npt
 import pymap3d
 
 from ingest.android import CONSTELLATIONS, RawColumns, pseudoranges
+from ingest.damage import Completeness, Defect
 from ingest.detect import Detected, Format
 from ingest.errors import IngestError
 from ingest.obsgeometry import observation_geometry
 from ingest.readers.base import (
     Batch,
-    Completeness,
-    Defect,
     Inventory,
     LogReader,
     ReadContext,

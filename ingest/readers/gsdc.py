@@ -28,12 +28,11 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 
 from ingest import gsdc
+from ingest.damage import Completeness, Defect
 from ingest.detect import Detected, Format
 from ingest.errors import CorruptLogError
 from ingest.readers.base import (
     Batch,
-    Completeness,
-    Defect,
     Inventory,
     LogReader,
     ReadContext,

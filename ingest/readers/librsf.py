@@ -42,20 +42,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from ingest.damage import Completeness, Defect
 from ingest.detect import Detected, Format
 from ingest.ecef import geodetic_from_ecef
 from ingest.errors import CorruptLogError
 from ingest.gnss import C_MPS, rotate_earth
-from ingest.readers.base import (
-    Batch,
-    Completeness,
-    Defect,
-    Inventory,
-    LogReader,
-    ReadContext,
-    Selection,
-    StreamInfo,
-)
+from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
 from ingest.schema import TableName
 from ingest.timebase import NS_PER_S, TimeBase
 

@@ -43,18 +43,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from ingest.damage import Completeness, Defect
 from ingest.detect import Detected, Format
 from ingest.readers._nmea import Epoch, EpochBuilder, Gga, checksum_ok, date_ymd, time_of_day_s
-from ingest.readers.base import (
-    Batch,
-    Completeness,
-    Defect,
-    Inventory,
-    LogReader,
-    ReadContext,
-    Selection,
-    StreamInfo,
-)
+from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
 from ingest.schema import FixType, TableName
 from ingest.timebase import NS_PER_S, TimeBase, utc_to_gps_ns
 

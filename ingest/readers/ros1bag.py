@@ -23,21 +23,12 @@ from typing import BinaryIO
 import numpy as np
 import numpy.typing as npt
 
+from ingest.damage import Completeness, DamageLog, Defect
 from ingest.detect import ROSBAG_MAGIC, Detected, Format
 from ingest.errors import CorruptLogError
 from ingest.readers._compression import DecompressError, decompress
 from ingest.readers._walk import BAD_HEADER, INCOMPLETE, OK, TOO_LONG, ros1_records
-from ingest.readers.base import (
-    Batch,
-    Completeness,
-    DamageLog,
-    Defect,
-    Inventory,
-    LogReader,
-    ReadContext,
-    Selection,
-    StreamInfo,
-)
+from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
 from ingest.readers.roscommon import RosChannel, decode_batch, make_channel, stream_info
 
 U8Array = npt.NDArray[np.uint8]

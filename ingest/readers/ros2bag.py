@@ -24,19 +24,10 @@ from typing import Any, Literal
 
 import numpy as np
 
+from ingest.damage import Completeness, DamageLog, Defect
 from ingest.detect import MCAP_MAGIC, SQLITE_MAGIC, Detected, Format
 from ingest.errors import CorruptLogError
-from ingest.readers.base import (
-    Batch,
-    Completeness,
-    DamageLog,
-    Defect,
-    Inventory,
-    LogReader,
-    ReadContext,
-    Selection,
-    StreamInfo,
-)
+from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
 from ingest.readers.mcap import McapReader
 from ingest.readers.roscommon import RosChannel, decode_batch, make_channel, stream_info
 

@@ -31,20 +31,12 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 import numpy.typing as npt
 
+from ingest.damage import Completeness, Defect
 from ingest.detect import Detected, Format
 from ingest.errors import CorruptLogError
 from ingest.readers._mavscan import VALID
 from ingest.readers.asof import AsofJoin, Left
-from ingest.readers.base import (
-    Batch,
-    Completeness,
-    Defect,
-    Inventory,
-    LogReader,
-    ReadContext,
-    Selection,
-    StreamInfo,
-)
+from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
 from ingest.readers.mavclock import ROLLOVER_NS
 from ingest.readers.mavdialect import load_dialect
 from ingest.readers.mavmsgs import BY_NAME, Extras, MavStream

@@ -18,7 +18,7 @@ from typing import Literal
 
 from ingest.config import ImuNoise
 from ingest.typed import FieldError
-from pipeline.estimation.cascaded.config import CASCADED_KINDS, CascadedFilterParams, check_sections
+from pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams, check_sections
 from pipeline.estimation.fuzzy import FuzzyParams
 from pipeline.estimation.vehicle_config import VehicleFilterParams
 
@@ -384,7 +384,7 @@ class FiltersParams:
         return section
 
     def cascaded(self, name: str) -> CascadedFilterParams:
-        """The section of cascaded filter ``name`` (``cascaded.config.CASCADED_KINDS``)."""
+        """The section of cascaded filter ``name`` (``cascaded_config.CASCADED_KINDS``)."""
         if name not in CASCADED_KINDS:
             raise KeyError(f"unknown cascaded filter {name!r} (known: {', '.join(CASCADED_KINDS)})")
         section: CascadedFilterParams = getattr(self, name)

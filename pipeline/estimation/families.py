@@ -12,7 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
 
-from pipeline.estimation.cascaded.config import CASCADED_KINDS
+from pipeline.estimation.cascaded_config import CASCADED_KINDS
 from pipeline.estimation.config import FILTER_KINDS, FiltersParams
 from pipeline.estimation.vehicle_config import VEHICLE_FILTERS
 

@@ -30,10 +30,10 @@ import pyarrow as pa
 
 from pipeline.estimation.models import ins
 from pipeline.estimation.replay import RunResult
+from pipeline.estimation.truth import error_states, truth_at
+from pipeline.estimation.windows import NS, Window, WindowMetricsParams
 from pipeline.nav.earth import E2, F64, I64, A
 from pipeline.nav.rotations import quat_to_dcm
-from pipeline.scenarios.config import WindowMetricsParams
-from pipeline.scenarios.windows import NS, Window
 
 
 @dataclass(frozen=True)
@@ -80,10 +80,8 @@ def _local_ned(lat: F64, lon: F64, h: F64, origin: Origin | None) -> tuple[F64, 
 
 
 def truth_track(result: RunResult, truth: pa.Table, origin: Origin | None = None) -> ErrorTrack:
-    """Errors against the truth table at the estimate's times (``metrics.error_states``);
+    """Errors against the truth table at the estimate's times (``truth.error_states``);
     reference positions relative to ``origin`` (default: the first)."""
-    from pipeline.estimation.metrics import error_states, truth_at
-
     inside, err, _ = error_states(result, truth)
     t = result.t_ns[inside]
     _, tr = truth_at(truth, t)

@@ -15,8 +15,9 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.estimation.kernels import vehicle as kv
-from pipeline.estimation.metrics import nis_by_stream, truth_at
+from pipeline.estimation.metrics import nis_by_stream
 from pipeline.estimation.models import vehicle as vm
+from pipeline.estimation.truth import truth_at
 from pipeline.estimation.vehicle_replay import VehicleRunResult
 from pipeline.nav.earth import F64
 

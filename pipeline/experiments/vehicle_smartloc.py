@@ -186,7 +186,7 @@ def smartloc_rows(
 
 def errors_of_fixes(fixes: pa.Table, truth: pa.Table) -> np.ndarray:
     """Horizontal error of the least-squares fixes against the truth, m."""
-    from pipeline.estimation.metrics import truth_at
+    from pipeline.estimation.truth import truth_at
     from pipeline.nav.local import LocalFrame
 
     t = np.asarray(fixes.column("t_ns").to_numpy(), dtype=np.int64)

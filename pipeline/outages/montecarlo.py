@@ -33,16 +33,10 @@ from pipeline.estimation.alignment import Alignment
 from pipeline.estimation.config import InsFilterParams
 from pipeline.estimation.outage_metrics import ErrorTrack, fixes_track, truth_track, window_metrics
 from pipeline.estimation.replay import Backend, RunResult, run_filter
+from pipeline.estimation.windows import NS, WindowMetricsParams
 from pipeline.nav.earth import I64
 from pipeline.scenarios.apply import apply_scenario, log_span
-from pipeline.scenarios.config import (
-    Policy,
-    SatellitesSpec,
-    ScenarioSpec,
-    WindowMetricsParams,
-    WindowsSpec,
-)
-from pipeline.scenarios.windows import NS
+from pipeline.scenarios.config import Policy, SatellitesSpec, ScenarioSpec, WindowsSpec
 
 log = logging.getLogger(__name__)
 

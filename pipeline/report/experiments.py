@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.outages.tables import SAT_REDUCTION_COLUMNS
-from pipeline.report.inputs import ReportInputError, read_json
+from pipeline.report.input_files import ReportInputError, read_json
 
 SECTION_NAME = "section.json"
 SAT_REDUCTION_NAME = "sat_reduction.csv"

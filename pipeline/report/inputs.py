@@ -22,7 +22,6 @@ Missing sections are fine (the page leaves them out); a malformed file is a
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,18 +35,10 @@ from ingest.errors import IngestError
 from ingest.meta import META_NAME, DatasetMeta, read_meta
 from ingest.schema import TableName
 from ingest.tables import read_table
-from pipeline.errors import PipelineError
+from pipeline.report.experiments import load_experiments
+from pipeline.report.input_files import ReportInputError, read_json
 
 REPORT_NAME = "ingest_report.json"
-
-
-class ReportInputError(PipelineError):
-    """A file a report is rendered from is malformed; names the file and the problem."""
-
-    def __init__(self, path: Path, reason: str) -> None:
-        self.path = path
-        self.reason = reason
-        super().__init__(f"{path}: {reason}")
 
 
 @dataclass(frozen=True)
@@ -119,16 +110,6 @@ class DatasetInputs:
         """Scenario names, ``nominal`` first, then as sorted."""
         names = sorted({r.scenario for r in self.runs})
         return sorted(names, key=lambda s: (s != "nominal", s))
-
-
-def read_json(path: Path) -> Any:
-    """Parse a JSON file; a malformed one is a ``ReportInputError`` naming it."""
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except OSError as err:
-        raise ReportInputError(path, f"cannot read: {err.strerror}") from err
-    except ValueError as err:
-        raise ReportInputError(path, f"not valid JSON: {err}") from err
 
 
 def _table(path: Path, name: TableName | None = None) -> pa.Table | None:
@@ -221,8 +202,6 @@ def load_dataset(
     dataset: str, tables_dir: Path, runs_dir: Path | None, experiments_dir: Path | None
 ) -> DatasetInputs:
     """Load the inputs of one dataset's report (see the module docstring)."""
-    from pipeline.report.experiments import load_experiments
-
     meta = None
     if (tables_dir / META_NAME).is_file():
         try:

@@ -1,7 +1,7 @@
 """Time series a report plots: position error against a reference, with the filter's sigma.
 
 The reference is the ``truth`` table when the dataset has one (interpolated to the estimate's
-times, ``estimation.metrics.truth_at``). Without truth it is the GNSS fixes (the estimate
+times, ``estimation.truth.truth_at``). Without truth it is the GNSS fixes (the estimate
 interpolated to each fix time): outside outages that is a residual, not an error, but inside
 an outage window the withheld fixes are the truth (architecture section 5).
 
@@ -17,7 +17,7 @@ from typing import Literal
 import numpy as np
 import pyarrow as pa
 
-from pipeline.estimation.metrics import truth_at
+from pipeline.estimation.truth import truth_at
 from pipeline.nav.earth import E2, F64, A
 from pipeline.report.inputs import Run, column, times_ns
 

@@ -34,7 +34,7 @@ from ingest.tables import git_commit, package_version
 from pipeline.report import html as h
 from pipeline.report import tables as tb
 from pipeline.report.experiments import SAT_REDUCTION_NAME, read_csv
-from pipeline.report.inputs import ReportInputError, read_json
+from pipeline.report.input_files import ReportInputError, read_json
 from pipeline.report.sections import paper_pct
 from pipeline.report.tables import PAPER_PAIR
 

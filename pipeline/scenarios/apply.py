@@ -18,6 +18,7 @@ import pyarrow as pa
 
 from ingest.schema import FixType
 from ingest.typed import to_plain
+from pipeline.estimation.windows import Window
 from pipeline.nav import earth
 from pipeline.scenarios.config import SatellitesSpec, ScenarioSpec
 from pipeline.scenarios.faults import (
@@ -30,7 +31,7 @@ from pipeline.scenarios.faults import (
     with_values,
 )
 from pipeline.scenarios.satellites import Selection, refix, select
-from pipeline.scenarios.windows import Window, in_any, place_windows
+from pipeline.scenarios.windows import in_any, place_windows
 
 log = logging.getLogger(__name__)
 

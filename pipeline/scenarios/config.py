@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from ingest.typed import FieldError
+from pipeline.estimation.windows import WindowMetricsParams
 
 Placement = Literal["explicit", "random", "periodic"]
 Policy = Literal["highest_elevation", "lowest_elevation", "random", "best_dop", "worst_dop"]
@@ -169,32 +170,6 @@ class ScenarioSpec:
     def __post_init__(self) -> None:
         if self.satellites is not None and self.windows is None:
             raise FieldError("satellites", "a partial outage needs windows")
-
-
-@dataclass(frozen=True)
-class WindowMetricsParams:
-    """Definitions of the outage-window metrics (``estimation.outage_metrics``).
-
-    Attributes:
-        reconverge_factor: re-converged once the 3-D error is below this factor times its
-            RMS over the ``pre_window_s`` before the window ...
-        reconverge_floor_m: ... or below this, whichever is larger, m ...
-        reconverge_hold_s: ... and stays there this long, s.
-        pre_window_s: the span before a window that sets the error level to return to, s.
-        min_distance_m: drift as a percentage of distance is undefined below this, m.
-    """
-
-    reconverge_factor: float = 2.0
-    reconverge_floor_m: float = 1.0
-    reconverge_hold_s: float = 5.0
-    pre_window_s: float = 30.0
-    min_distance_m: float = 1.0
-
-    def __post_init__(self) -> None:
-        if self.reconverge_factor < 1:
-            raise FieldError("reconverge_factor", "must be >= 1")
-        if min(self.reconverge_floor_m, self.reconverge_hold_s, self.pre_window_s) <= 0:
-            raise FieldError("reconverge_floor_m", "floor, hold and pre-window must be > 0")
 
 
 @dataclass(frozen=True)

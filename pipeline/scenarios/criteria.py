@@ -34,12 +34,12 @@ import pyarrow as pa
 from scipy.stats import chi2
 
 from pipeline.estimation.config import FILTER_KINDS
-from pipeline.estimation.metrics import error_states
 from pipeline.estimation.models import measurement as me
 from pipeline.estimation.replay import RunResult
+from pipeline.estimation.truth import error_states
+from pipeline.estimation.windows import NS, Window
 from pipeline.nav.earth import F64
 from pipeline.scenarios.apply import AppliedScenario
-from pipeline.scenarios.windows import NS, Window
 
 
 @dataclass(frozen=True)

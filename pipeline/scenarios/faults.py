@@ -25,11 +25,11 @@ import pyarrow as pa
 
 from ingest.schema import FixType
 from pipeline.errors import PipelineError
+from pipeline.estimation.windows import NS, Window
 from pipeline.nav import earth
 from pipeline.nav.earth import F64, I64
 from pipeline.scenarios.config import FaultSpec
 from pipeline.scenarios.satellites import los_rows
-from pipeline.scenarios.windows import NS, Window
 
 Tables = dict[str, pa.Table]
 Record = dict[str, Any]

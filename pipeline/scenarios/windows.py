@@ -7,55 +7,14 @@ Times are int64 ns on the log's time base; a window is the half-open interval
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.estimation.windows import NS
 from pipeline.nav.earth import I64
 from pipeline.scenarios.config import WindowsSpec
 
 log = logging.getLogger(__name__)
-
-NS = 1_000_000_000
-
-
-@dataclass(frozen=True)
-class Window:
-    """One window of a scenario, as written into the run's metadata.
-
-    Attributes:
-        start_ns, end_ns: ``[start, end)`` on the log's time base, ns.
-        kind: ``outage`` (no GNSS), ``partial`` (``sats`` satellites kept), or the fault
-            kind (``F1`` ...) for fault windows.
-        sats: satellites available inside (0 for outages; None for faults that keep them).
-        label: human-readable description.
-    """
-
-    start_ns: int
-    end_ns: int
-    kind: str
-    sats: int | None
-    label: str
-
-    @property
-    def duration_s(self) -> float:
-        return (self.end_ns - self.start_ns) / NS
-
-    def contains(self, t_ns: I64) -> np.ndarray:
-        """Boolean mask of the times inside the window."""
-        return np.asarray((t_ns >= self.start_ns) & (t_ns < self.end_ns))
-
-    def to_json(self, t0_ns: int) -> dict[str, object]:
-        """The window for metrics.json: absolute ns and seconds from ``t0_ns``."""
-        return {
-            "kind": self.kind,
-            "label": self.label,
-            "start_t_ns": self.start_ns,
-            "end_t_ns": self.end_ns,
-            "start_s": (self.start_ns - t0_ns) / NS,
-            "duration_s": self.duration_s,
-            "sats": self.sats,
-        }
 
 
 def place_windows(spec: WindowsSpec, t0_ns: int, t_end_ns: int) -> list[tuple[int, int]]:

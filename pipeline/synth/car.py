@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -48,9 +48,6 @@ from pipeline.nav.local import LocalFrame
 from pipeline.synth import SynthResult
 from pipeline.synth.bicycle import COLUMNS, VehicleParams, simulate
 from pipeline.synth.output import dataset_rng, write_dataset_dir
-
-if TYPE_CHECKING:
-    from pipeline.params import SynthParams
 
 F64 = npt.NDArray[np.float64]
 
@@ -353,7 +350,18 @@ def write(params: CarSpeedRampParams, seed: int, out_dir: str | Path) -> list[Pa
     return write_dataset_dir(out_dir, DATASET, result, write_logs, params=plain)
 
 
-def write_dataset(name: str, synth: SynthParams, out_dir: Path) -> list[Path]:
+class SynthSection(Protocol):
+    """What ``write_dataset`` reads of ``params.synth`` (``pipeline.params.SynthParams``): the
+    seed and this dataset's section."""
+
+    @property
+    def seed(self) -> int: ...
+
+    @property
+    def car_speed_ramp(self) -> CarSpeedRampParams: ...
+
+
+def write_dataset(name: str, synth: SynthSection, out_dir: Path) -> list[Path]:
     """The synth registry's entry point: ``car_speed_ramp`` from ``params.synth``."""
     if name != DATASET:
         raise ValueError(f"{__name__} makes {DATASET!r}, not {name!r}")

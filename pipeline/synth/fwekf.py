@@ -36,7 +36,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -53,9 +53,6 @@ from pipeline.nav.mechanization import NAV_DIM, imu_from_motion
 from pipeline.nav.rotations import euler_to_quat
 from pipeline.synth import SynthResult
 from pipeline.synth.output import dataset_rng, write_dataset_dir
-
-if TYPE_CHECKING:
-    from pipeline.params import SynthParams
 
 F64 = npt.NDArray[np.float64]
 
@@ -344,7 +341,18 @@ def write(
     )
 
 
-def write_dataset(name: str, synth: SynthParams, out_dir: Path) -> list[Path]:
+class SynthSection(Protocol):
+    """What ``write_dataset`` reads of ``params.synth`` (``pipeline.params.SynthParams``): the
+    seed and this dataset's section."""
+
+    @property
+    def seed(self) -> int: ...
+
+    @property
+    def fwekf_reference(self) -> FwekfReferenceParams: ...
+
+
+def write_dataset(name: str, synth: SynthSection, out_dir: Path) -> list[Path]:
     """The synth registry's entry point: either noise case from ``params.synth``."""
     if name not in (DATASET, NOISE_FREE_DATASET):
         raise ValueError(f"{__name__} makes {DATASET!r} and {NOISE_FREE_DATASET!r}, not {name!r}")

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -26,9 +26,6 @@ from ingest.schema import from_columns
 from pipeline.synth import SynthResult, constellation, gnss, imu, trajectory
 from pipeline.synth.seoul_params import NO_IMU_ERRORS, SeoulCampusParams
 from pipeline.synth.trajectory import Leg
-
-if TYPE_CHECKING:
-    from pipeline.params import SynthParams
 
 __all__ = ["ROUTE", "SeoulCampusParams", "route", "simulate", "write_dataset"]
 
@@ -152,7 +149,18 @@ def simulate(params: SeoulCampusParams, *, seed: int, variant: Variant) -> Synth
     return SynthResult(tables=tables, sensors=sensors, ephemeris=eph, time_base="gps")
 
 
-def write_dataset(name: str, synth: SynthParams, out_dir: Path) -> list[Path]:
+class SynthSection(Protocol):
+    """What ``write_dataset`` reads of ``params.synth`` (``pipeline.params.SynthParams``): the
+    seed and this dataset's section."""
+
+    @property
+    def seed(self) -> int: ...
+
+    @property
+    def seoul_campus(self) -> SeoulCampusParams: ...
+
+
+def write_dataset(name: str, synth: SynthSection, out_dir: Path) -> list[Path]:
     """Simulate ``seoul_campus_cw`` or ``seoul_campus_ccw`` and write its files into
     ``out_dir`` (``pipeline.synth.files``); returns the paths written."""
     from pipeline.synth.files import write_result

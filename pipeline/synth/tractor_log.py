@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -40,9 +40,6 @@ from pipeline.synth.tractor import (
     TractorState,
     TractorStraightParams,
 )
-
-if TYPE_CHECKING:
-    from pipeline.params import SynthParams
 
 F64 = npt.NDArray[np.float64]
 
@@ -223,7 +220,18 @@ def write(params: TractorStraightParams, seed: int, out_dir: str | Path) -> list
     return write_dataset_dir(out_dir, DATASET, result, write_logs, params=plain)
 
 
-def write_dataset(name: str, synth: SynthParams, out_dir: Path) -> list[Path]:
+class SynthSection(Protocol):
+    """What ``write_dataset`` reads of ``params.synth`` (``pipeline.params.SynthParams``): the
+    seed and this dataset's section."""
+
+    @property
+    def seed(self) -> int: ...
+
+    @property
+    def tractor_straight(self) -> TractorStraightParams: ...
+
+
+def write_dataset(name: str, synth: SynthSection, out_dir: Path) -> list[Path]:
     """The synth registry's entry point: ``tractor_straight`` from ``params.synth``."""
     if name != DATASET:
         raise ValueError(f"{__name__} makes {DATASET!r}, not {name!r}")

@@ -12,9 +12,10 @@ from mcap.reader import NonSeekingReader, make_reader
 from mcap.writer import CompressionType, IndexType
 
 from ingest.api import ingest
+from ingest.damage import Completeness, DamageLog
 from ingest.detect import detect
 from ingest.errors import CorruptLogError
-from ingest.readers.base import Completeness, DamageLog, ReadContext, Selection
+from ingest.readers.base import ReadContext, Selection
 from ingest.readers.mcap import McapReader
 from ingest.readers.rosmsg import DefinitionError
 from ingest.schema import TableName

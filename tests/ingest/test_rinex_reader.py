@@ -13,10 +13,10 @@ import pyarrow.parquet as pq
 import pytest
 
 from ingest.api import IngestOptions, ingest
+from ingest.damage import DamageLog
 from ingest.errors import CorruptLogError, IngestError, UnsupportedFormatError
 from ingest.gnss import C_MPS, select, transmit_state
 from ingest.gpstime import NS_PER_WEEK
-from ingest.readers.base import DamageLog
 from ingest.rinexobs import from_georinex, read_obs
 from ingest.writers import rinex
 

@@ -11,9 +11,10 @@ import pytest
 from rosbags.rosbag1 import Writer as Bag1Writer
 
 from ingest.api import ingest, inspect
+from ingest.damage import Completeness, DamageLog
 from ingest.detect import detect
 from ingest.errors import CorruptLogError
-from ingest.readers.base import Completeness, DamageLog, ReadContext, Selection
+from ingest.readers.base import ReadContext, Selection
 from ingest.readers.ros1bag import Ros1BagReader
 from ingest.readers.rosmsg import DefinitionError
 from ingest.schema import TableName

@@ -16,9 +16,10 @@ from pymavlink import mavutil
 
 from ingest.api import IngestOptions, IngestResult, ingest
 from ingest.config import parse_dataset_config
+from ingest.damage import DamageLog
 from ingest.detect import Detected, Format
 from ingest.errors import CorruptLogError, PlausibilityError, UnsupportedFormatError
-from ingest.readers.base import DamageLog, ReadContext
+from ingest.readers.base import ReadContext
 from ingest.readers.mavclock import ROLLOVER_NS
 from ingest.readers.tlog import TlogReader
 from ingest.readers.tlogclock import decode

@@ -11,13 +11,15 @@ Two six-state filters in cascade (paper 000, section 6):
 
 Filters (``filters.<name>`` in params.yaml): ``cascaded_ekf`` (both filters EKF, Euler time
 update, eq. 21-23), ``cascaded_ukf`` (both UKF, eq. 24-27, alpha 1e-3, beta 2, kappa 0) and
-``cascaded_hybrid`` (the paper's future-work hybrid; see ``filters``).
+``cascaded_hybrid`` (the paper's future-work hybrid; see ``filters``). Their sections are
+typed in ``estimation.cascaded_config``, beside ``estimation.config``, which holds them.
 
 Layout: ``model`` (the physics as pure functions: f, F, h, H, Q, R), ``numerics`` (small
 generic pieces the INS kernels do not provide for a six-state filter), ``filters``
 (compiled predict/update of the three estimators), ``cascade`` (one sample of the cascade and
 the compiled replay loop), ``reference`` (the same model through filterpy), ``engine`` (run
-set-up and the backend-neutral stepper), ``inputs``/``outputs``/``metrics``/``run`` (tables
+set-up, run state and the compiled stepper), ``backends`` (a stepper of either backend by
+name, and the open-loop replay), ``inputs``/``outputs``/``metrics``/``run`` (tables
 in, run directory out), ``closed_loop`` (the LQR steering the simulator from the estimates)
 and ``experiments``/``figures`` (the paper's scenario, Monte Carlo, outages).
 """

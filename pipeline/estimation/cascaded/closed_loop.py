@@ -1,7 +1,7 @@
 """Closed loop: the paper's LQR steers the simulated tractor from a filter's estimates.
 
 Each sample (paper 000 sections 5-6, 9): the simulator's readings at ``t`` go through the
-cascade (``engine`` stepper, either backend); the straight-line LQR of eq. 8-14
+cascade (a ``backends`` stepper, either backend); the straight-line LQR of eq. 8-14
 (``pipeline.control.lqr``, gain from the plant model discretized with eq. 14 at the sample
 period) computes ``u = -K_c X_c_hat`` from the *estimates* (``X_c_hat`` from the navigation
 filter's East, North and heading and the control filter's yaw rate, yaw acceleration, steer
@@ -25,12 +25,8 @@ import numpy as np
 
 from pipeline.control.lqr import lqr_command, tractor_lqr_gain
 from pipeline.estimation.cascaded import cascade as cs
-from pipeline.estimation.cascaded.engine import (
-    Backend,
-    CascadedResult,
-    CascadeSetup,
-    make_stepper,
-)
+from pipeline.estimation.cascaded.backends import Backend, make_stepper
+from pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup
 from pipeline.estimation.cascaded.model import (
     CTL_DEL,
     CTL_DELD,

@@ -1,4 +1,4 @@
-"""Run set-up and the backend-neutral stepper of the cascaded filters.
+"""Run set-up, run state and the compiled stepper of the cascaded filters.
 
 ``make_setup`` packs a ``filters.cascaded_*`` section into the arrays the kernels take;
 ``CascadeState`` allocates one run's state and logs; a *stepper* processes one sample at a
@@ -8,7 +8,8 @@ time, which is what the closed loop needs (the plant is stepped in Python betwee
 - ``reference.FilterpyStepper`` does the same with filterpy's filters.
 
 Both expose ``x`` (the current estimate, (12,)), ``ok``, ``sample(t_ns, veh, gps)``,
-``nav_epoch(t_ns, gps)``, ``set_command(u)`` and ``result()``. ``replay`` runs a whole
+``nav_epoch(t_ns, gps)``, ``set_command(u)`` and ``result()`` (``backends.Stepper``).
+``backends.make_stepper`` picks one by backend name and ``backends.replay`` runs a whole
 recording through either.
 """
 
@@ -17,26 +18,24 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Literal, Protocol
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2
 
 from pipeline.errors import DivergenceError
 from pipeline.estimation.cascaded import cascade as cs
-from pipeline.estimation.cascaded.config import (
+from pipeline.estimation.cascaded.filters import EST_EKF, EST_HYBRID, EST_UKF
+from pipeline.estimation.cascaded.model import NX, ctl_discretize, model_params
+from pipeline.estimation.cascaded_config import (
     CASCADED_KINDS,
     NAV_STATE_NAMES,
     CascadedFilterParams,
 )
-from pipeline.estimation.cascaded.filters import EST_EKF, EST_HYBRID, EST_UKF
-from pipeline.estimation.cascaded.model import NX, ctl_discretize, model_params
 from pipeline.estimation.inputs import Event
 from pipeline.estimation.kernels import common as cm
 from pipeline.estimation.kernels.unscented import ukf_weights
 from pipeline.nav.earth import F64, I64
-
-Backend = Literal["numba", "filterpy"]
 
 _EST_CODE = {"ekf": EST_EKF, "ukf": EST_UKF, "hybrid": EST_HYBRID}
 EVENT_NAMES = {**cm.EVENT_NAMES, cs.EV_GAP: "input_gap"}
@@ -216,24 +215,6 @@ class CascadeState:
         )
 
 
-class Stepper(Protocol):
-    """One cascaded filter, one sample at a time (either backend)."""
-
-    @property
-    def x(self) -> F64: ...
-
-    @property
-    def ok(self) -> bool: ...
-
-    def sample(self, t_ns: int, veh: F64, gps: F64) -> None: ...
-
-    def nav_epoch(self, t_ns: int, gps: F64) -> None: ...
-
-    def set_command(self, u: float) -> None: ...
-
-    def result(self) -> CascadedResult: ...
-
-
 class NumbaStepper:
     """The compiled backend, one ``cascade_sample`` per call (``x`` is live, not a copy).
 
@@ -290,43 +271,3 @@ def raise_if_diverged(setup: CascadeSetup, result: CascadedResult) -> None:
             f"filter {setup.name} ({result.backend}) diverged: {result.failure}; set "
             f"filters.{setup.name}.divergence.on_divergence: flag to keep the output up to it"
         )
-
-
-def make_stepper(setup: CascadeSetup, capacity: int, backend: Backend, n_gps: int = 0
-                 ) -> Stepper:  # fmt: skip
-    """A stepper of ``backend`` for up to ``capacity`` samples (and ``n_gps`` extra fixes)."""
-    if backend == "numba":
-        return NumbaStepper(setup, capacity, n_gps)
-    from pipeline.estimation.cascaded.reference import FilterpyStepper
-
-    return FilterpyStepper(setup, capacity, n_gps)
-
-
-def replay(
-    setup: CascadeSetup, veh_t: I64, veh: F64, gps_t: I64, gps: F64, backend: Backend
-) -> CascadedResult:
-    """Run a recording open loop: every vehicle sample with the GPS fix of the same time,
-    GPS fixes between samples as ``nav_epoch``, the recorded command (``veh[:, V_CMD]``,
-    NaN = 0) applied after each sample. Raises ``DivergenceError`` on divergence unless the
-    section says ``flag`` (the result then ends there)."""
-    t0 = time.perf_counter()
-    stepper = make_stepper(setup, veh_t.size, backend, gps_t.size)
-    nan3 = np.full(cs.GPS_COLS, math.nan)
-    j, m = 0, gps_t.size
-    for k in range(veh_t.size):
-        t = int(veh_t[k])
-        while j < m and gps_t[j] < t:
-            stepper.nav_epoch(int(gps_t[j]), gps[j])
-            j += 1
-        g = nan3
-        if j < m and gps_t[j] == t:
-            g = gps[j]
-            j += 1
-        stepper.sample(t, veh[k], g)
-        if not stepper.ok:
-            break
-        cmd = float(veh[k, cs.V_CMD])
-        stepper.set_command(cmd if math.isfinite(cmd) else 0.0)
-    result = stepper.result()
-    result.runtime_s = time.perf_counter() - t0
-    return result

@@ -32,7 +32,7 @@ from pipeline.nav.local import LocalFrame
 
 @dataclass(frozen=True)
 class CascadedInputs:
-    """Arrays for ``engine.replay``.
+    """Arrays for ``backends.replay``.
 
     Attributes:
         veh_t (K,), veh (K, 4): vehicle samples (``cascade.V_*`` columns).

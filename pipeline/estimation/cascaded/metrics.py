@@ -23,10 +23,10 @@ import numpy as np
 import pyarrow as pa
 
 from pipeline.estimation.cascaded.cascade import STREAM_NAMES
-from pipeline.estimation.cascaded.config import ConvergenceBand
 from pipeline.estimation.cascaded.engine import CascadedResult
 from pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, NX
 from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
+from pipeline.estimation.cascaded_config import ConvergenceBand
 from pipeline.estimation.metrics import nis_by_stream
 from pipeline.nav.earth import F64
 from pipeline.nav.local import LocalFrame

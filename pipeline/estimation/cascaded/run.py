@@ -21,11 +21,12 @@ from ingest.meta import META_NAME, read_meta
 from ingest.schema import TableName
 from ingest.tables import Provenance, read_table, write_table
 from ingest.typed import to_plain
-from pipeline.estimation.cascaded.config import CascadedFilterParams
-from pipeline.estimation.cascaded.engine import Backend, CascadedResult, make_setup, replay
+from pipeline.estimation.cascaded.backends import Backend, replay
+from pipeline.estimation.cascaded.engine import CascadedResult, make_setup
 from pipeline.estimation.cascaded.inputs import prepare_inputs
 from pipeline.estimation.cascaded.metrics import compute_metrics, truth_from_table
 from pipeline.estimation.cascaded.outputs import estimate_table, events_table, innovations_table
+from pipeline.estimation.cascaded_config import CascadedFilterParams
 from pipeline.estimation.outputs import write_parquet
 from pipeline.nav.local import LocalFrame
 

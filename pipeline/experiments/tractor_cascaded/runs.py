@@ -36,13 +36,13 @@ import numpy as np
 from scipy import stats
 
 from pipeline.estimation.cascaded.closed_loop import ClosedLoopRun, run_closed_loop_scenarios
-from pipeline.estimation.cascaded.config import (
-    CascadedFilterParams,
-    LinearizationParams,
-)
 from pipeline.estimation.cascaded.engine import make_setup
 from pipeline.estimation.cascaded.metrics import BIASES, bias_convergence
 from pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, NAV_RB, NX
+from pipeline.estimation.cascaded_config import (
+    CascadedFilterParams,
+    LinearizationParams,
+)
 from pipeline.experiments.tractor_cascaded.config import (
     BASELINE,
     NOMINAL,

@@ -29,9 +29,10 @@ import pytest
 from scipy.stats import chi2
 
 from pipeline.estimation.config import FILTER_KINDS, FiltersParams
-from pipeline.estimation.metrics import error_states, nees
+from pipeline.estimation.metrics import nees
 from pipeline.estimation.models import measurement as me
 from pipeline.estimation.replay import run_filter
+from pipeline.estimation.truth import error_states
 from tests.pipeline.estimation.conftest import ALL_FILTERS, drawn_start, seoul
 
 N_RUNS = 20

@@ -8,8 +8,8 @@ import pytest
 
 from ingest.meta import SensorMeta
 from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.metrics import error_states
 from pipeline.estimation.replay import RunResult, run_filter
+from pipeline.estimation.truth import error_states
 from tests.pipeline.estimation.conftest import Tables, seoul, t0_ns
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.estimation.cascaded.config import CASCADED_KINDS, CascadedFilterParams
+from pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams
 from pipeline.experiments.tractor_cascaded.artifacts import write_experiment
 from pipeline.experiments.tractor_cascaded.config import TractorExperimentParams
 from pipeline.experiments.tractor_cascaded.runs import (

@@ -16,9 +16,9 @@ from pipeline.estimation.outage_metrics import (
     window_metrics,
 )
 from pipeline.estimation.replay import run_filter
+from pipeline.estimation.windows import NS, Window, WindowMetricsParams
 from pipeline.scenarios.apply import apply_scenario
-from pipeline.scenarios.config import ScenarioSpec, WindowMetricsParams, WindowsSpec
-from pipeline.scenarios.windows import NS, Window
+from pipeline.scenarios.config import ScenarioSpec, WindowsSpec
 from tests.pipeline.scenarios.drives import drive, params
 
 

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from pipeline.report.experiments import load_experiments
-from pipeline.report.inputs import ReportInputError, load_dataset
+from pipeline.report.input_files import ReportInputError
+from pipeline.report.inputs import load_dataset
 from pipeline.report.render import render_dataset
 from pipeline.report.summary import paired, ranking, render_summary
 from pipeline.report.svg import decimate_minmax

@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from pipeline.cli import main
-from pipeline.report.inputs import ReportInputError, load_dataset
+from pipeline.report.input_files import ReportInputError
+from pipeline.report.inputs import load_dataset
 from pipeline.report.render import render_dataset
 from tests.pipeline.report.conftest import OUTAGE_S
 

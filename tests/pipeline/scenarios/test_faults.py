@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from ingest.schema import validate
+from pipeline.estimation.windows import NS
 from pipeline.nav import earth
 from pipeline.scenarios.apply import apply_scenario
 from pipeline.scenarios.config import FaultSpec, ScenarioSpec, WindowsSpec
 from pipeline.scenarios.faults import ScenarioError, column
-from pipeline.scenarios.windows import NS
 from tests.pipeline.scenarios.drives import Tables, drive
 
 

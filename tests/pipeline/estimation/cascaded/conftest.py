@@ -8,7 +8,7 @@ from pathlib import Path
 import pyarrow as pa
 import pytest
 
-from pipeline.estimation.cascaded.config import CASCADED_KINDS, CascadedFilterParams
+from pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams
 from pipeline.params import Params, load_params
 from pipeline.synth.tractor import TractorStraightParams
 from pipeline.synth.tractor_log import synthesize

@@ -15,10 +15,10 @@ from pipeline.estimation.cascaded.closed_loop import (
     run_closed_loop,
     run_closed_loop_scenarios,
 )
-from pipeline.estimation.cascaded.config import CascadedFilterParams
 from pipeline.estimation.cascaded.engine import make_setup
 from pipeline.estimation.cascaded.metrics import BIASES, bias_convergence
 from pipeline.estimation.cascaded.model import NAV_PSI, NAV_RB
+from pipeline.estimation.cascaded_config import CascadedFilterParams
 from pipeline.synth.tractor import TractorStraightParams
 from tests.pipeline.estimation.cascaded.conftest import CASCADED
 

@@ -15,10 +15,11 @@ import pytest
 from ingest.schema import TableName
 from ingest.tables import read_table
 from pipeline.cli import main
-from pipeline.estimation.cascaded.config import CascadedFilterParams
-from pipeline.estimation.cascaded.engine import make_setup, replay
+from pipeline.estimation.cascaded.backends import replay
+from pipeline.estimation.cascaded.engine import make_setup
 from pipeline.estimation.cascaded.inputs import prepare_inputs
 from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
+from pipeline.estimation.cascaded_config import CascadedFilterParams
 from pipeline.estimation.families import runner
 from pipeline.synth.tractor import TractorStraightParams
 from pipeline.synth.tractor_log import synthesize, write
