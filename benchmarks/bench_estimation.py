@@ -149,7 +149,7 @@ def _python_reference(tables_dir: Path, name: str) -> float:
     code = (
         "import json, resource; from pathlib import Path\n"
         "from benchmarks.bench_estimation import _params\n"
-        "from pipeline.estimation.run import run_tables\n"
+        "from pipeline.estimation.families import run_tables\n"
         "def cpu():\n"
         "    r = resource.getrusage(resource.RUSAGE_SELF)\n"
         "    return r.ru_utime + r.ru_stime\n"

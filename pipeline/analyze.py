@@ -110,8 +110,9 @@ def analyze(
     progress: Progress = lambda _: None,
 ) -> AnalysisResult:
     """Ingest, run and report one log (see the module docstring)."""
-    from pipeline.estimation.run import write_run
-    from pipeline.outages.runs import Inputs, run_scenarios
+    from pipeline.estimation.contract import RunInputs, write_run
+    from pipeline.estimation.run import INPUTS
+    from pipeline.outages.runs import run_scenarios
     from pipeline.report.inputs import load_dataset
     from pipeline.report.render import render_dataset
 
@@ -135,7 +136,7 @@ def analyze(
     runnable, skipped = plan(tables_dir, filters)
     runs_dir = out_dir / "runs"
     todo = [(f, s) for f in runnable for s in scenarios]
-    inputs = Inputs.read(tables_dir) if todo else None
+    inputs = RunInputs.read(tables_dir, INPUTS) if todo else None
     for i, (f, sc) in enumerate(todo, start=1):
         assert inputs is not None  # read above whenever there is something to run
         run_dir = runs_dir / f / sc

@@ -3,7 +3,7 @@
 A cold first run of a filter spends 10-30 s compiling its replay loop; later runs load it from
 numba's cache (``pipeline._numba_cache``) in about a second. ``warm`` pays that cost once, up
 front: it replays every filter over a short synthesized drive of its family, through the same
-path a real run takes (tables written and read back, ``estimation.families.runner``), so the
+path a real run takes (tables written and read back, ``estimation.families.run_tables``), so the
 argument types it compiles for are exactly those of a real run. Nothing but numba's public
 API is involved: each kernel is compiled by calling it.
 
@@ -55,22 +55,22 @@ def groups(names: Sequence[str] | None = None) -> list[tuple[str, ...]]:
         if name not in known:
             raise KeyError(f"unknown filter {name!r} (known: {', '.join(known)})")
     keyed: dict[tuple[str, ...], list[str]] = {}
-    for family, (members, _) in FAMILIES.items():
-        for name in members:
+    for family in FAMILIES:
+        for name in family.filters:
             if name not in wanted:
                 continue
-            key: tuple[str, ...] = (family,)
-            if family == "ins":
+            key: tuple[str, ...] = (family.name,)
+            if family.name == "ins":
                 kind = FILTER_KINDS[name]
-                key = (family, kind.numba_kernel, kind.coupling)
+                key = (family.name, kind.numba_kernel, kind.coupling)
             keyed.setdefault(key, []).append(name)
     return [tuple(v) for v in keyed.values()]
 
 
 def _family(name: str) -> str:
-    from pipeline.estimation.families import FAMILIES
+    from pipeline.estimation.families import family_of
 
-    return next(f for f, (members, _) in FAMILIES.items() if name in members)
+    return family_of(name).name
 
 
 def _drive(family: str, params: Params, out: Path) -> Path:
@@ -104,7 +104,7 @@ def warm_here(names: Sequence[str], params: Params) -> None:
         PipelineError: a filter could not run on its warm-up drive (the message names it).
     """
     from pipeline.errors import DivergenceError
-    from pipeline.estimation.families import runner
+    from pipeline.estimation.families import family_of, run_tables
 
     with tempfile.TemporaryDirectory(prefix="navreplay-warm-") as tmp:
         drives: dict[str, Path] = {}
@@ -112,9 +112,9 @@ def warm_here(names: Sequence[str], params: Params) -> None:
             family = _family(name)
             if family not in drives:
                 drives[family] = _drive(family, params, Path(tmp) / family)
-            out = Path(tmp) / name
             try:
-                runner(name)(drives[family], name, params.filters, "numba", out, "nominal")
+                section = family_of(name).section(params.filters, name)
+                run_tables(drives[family], name, section, "numba")
             except DivergenceError:
                 pass  # the kernel compiled and ran; a short drive may end off its limits
             except PipelineError as err:

@@ -1,74 +1,41 @@
-"""Filter families: which replay runs a filter name, in one small table.
+"""The filter families, in one small table, and a run from a tables directory.
 
-``navreplay run --filter NAME`` looks the name up here. Each family runs a filter over a
-tables directory and writes the run directory (same contract for every family:
-``estimate.parquet``, ``innovations.parquet``, ``events.parquet``, ``metrics.json``) and
-returns the run's metrics.
+``navreplay run --filter NAME`` looks the name up here (``family_of``). Every family
+implements the run contract (``estimation.contract.Family``): the INS/GNSS filters
+(``estimation.run``), the vehicle-model filters (``estimation.vehicle_run``) and the cascaded
+filters (``estimation.cascaded.run``). Their runs are written by one writer
+(``contract.write_run``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
-from pipeline.estimation.cascaded_config import CASCADED_KINDS
-from pipeline.estimation.config import FILTER_KINDS, FiltersParams
-from pipeline.estimation.vehicle_config import VEHICLE_FILTERS
+from pipeline.estimation.cascaded.run import CASCADED
+from pipeline.estimation.contract import Backend, Family, RunInputs, RunOutput
+from pipeline.estimation.run import INS
+from pipeline.estimation.vehicle_run import VEHICLE
 
-Backend = Literal["numba", "filterpy"]
-RunFn = Callable[[Path, str, FiltersParams, Backend, Path, str], dict[str, Any]]
-
-
-def _run_ins(
-    tables: Path, name: str, filters: FiltersParams, backend: Backend, out: Path, scenario: str
-) -> dict[str, Any]:
-    from pipeline.estimation.run import run_tables, write_run
-
-    section = filters.get(name)
-    run = run_tables(tables, name, section, backend)
-    write_run(out, run, section, scenario)
-    return run.metrics
-
-
-def _run_vehicle(
-    tables: Path, name: str, filters: FiltersParams, backend: Backend, out: Path, scenario: str
-) -> dict[str, Any]:
-    from pipeline.estimation.vehicle_run import run_tables, write_run
-
-    section = filters.vehicle(name)
-    run = run_tables(tables, name, section, backend)
-    write_run(out, run, section, scenario)
-    return run.metrics
-
-
-def _run_cascaded(
-    tables: Path, name: str, filters: FiltersParams, backend: Backend, out: Path, scenario: str
-) -> dict[str, Any]:
-    from pipeline.estimation.cascaded.run import run_tables, write_run
-
-    section = filters.cascaded(name)
-    run = run_tables(tables, name, section, backend)
-    write_run(out, run, section, scenario)
-    return run.metrics
-
-
-#: family name -> (its filter names, its runner)
-FAMILIES: dict[str, tuple[tuple[str, ...], RunFn]] = {
-    "ins": (tuple(FILTER_KINDS), _run_ins),
-    "vehicle": (VEHICLE_FILTERS, _run_vehicle),
-    "cascaded": (tuple(CASCADED_KINDS), _run_cascaded),
-}
+#: every family, in the order of the reports and the ranking
+FAMILIES: tuple[Family, ...] = (INS, VEHICLE, CASCADED)
 
 
 def filter_names() -> tuple[str, ...]:
     """Every filter name, in family order."""
-    return tuple(n for names, _ in FAMILIES.values() for n in names)
+    return tuple(n for family in FAMILIES for n in family.filters)
 
 
-def runner(name: str) -> RunFn:
-    """The runner of filter ``name``; KeyError naming the known filters otherwise."""
-    for names, run in FAMILIES.values():
-        if name in names:
-            return run
+def family_of(name: str) -> Family:
+    """The family of filter ``name``; KeyError naming the known filters otherwise."""
+    for family in FAMILIES:
+        if name in family.filters:
+            return family
     raise KeyError(f"unknown filter {name!r} (known: {', '.join(filter_names())})")
+
+
+def run_tables(tables_dir: Path, name: str, section: Any, backend: Backend) -> RunOutput:
+    """Replay filter ``name`` with its parameter ``section`` over the tables in
+    ``tables_dir`` (``family_of(name).section(params.filters, name)``)."""
+    family = family_of(name)
+    return family.run(RunInputs.read(tables_dir, family.inputs), name, section, backend)

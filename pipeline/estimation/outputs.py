@@ -30,12 +30,8 @@ velocity, one satellite's pseudorange and rate, the NHC pair): ``t_ns``, ``strea
 
 from __future__ import annotations
 
-import math
-from pathlib import Path
-
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from ingest.schema import from_columns
 from pipeline.estimation.models import ins
@@ -143,27 +139,4 @@ def innovations_table(result: RunResult) -> pa.Table:
             **{f"innov_{j}": pa.array(ff[:, 2 + j], pa.float64()) for j in range(3)},
             **{f"innov_sigma_{j}": pa.array(ff[:, 5 + j], pa.float64()) for j in range(3)},
         }
-    )
-
-
-def events_table(result: RunResult) -> pa.Table:
-    """``events.parquet``: skips, rejections, resets, repairs and data defects, by time."""
-    ev = result.events
-    return pa.table(
-        {
-            "t_ns": pa.array([e.t_ns for e in ev], pa.int64()),
-            "kind": pa.array([e.kind for e in ev], pa.string()),
-            "stream": pa.array([e.stream for e in ev], pa.string()),
-            "sv": pa.array([e.sv for e in ev], pa.string()),
-            "value": pa.array(
-                [e.value if math.isfinite(e.value) else None for e in ev], pa.float64()
-            ),
-        }
-    )
-
-
-def write_parquet(path: Path, table: pa.Table, metadata: dict[bytes, bytes]) -> None:
-    """Write a non-canonical run table with the run's provenance in its metadata."""
-    pq.write_table(
-        table.replace_schema_metadata(metadata), path, compression="zstd", write_page_index=True
     )

@@ -22,7 +22,7 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any, Literal
+from typing import Any
 
 import numba as nb
 import numpy as np
@@ -36,6 +36,7 @@ from pipeline.errors import DivergenceError, PipelineError
 from pipeline.estimation import inputs as inp
 from pipeline.estimation.alignment import Alignment, align
 from pipeline.estimation.config import FILTER_KINDS, FilterKind, InsFilterParams
+from pipeline.estimation.contract import Backend
 from pipeline.estimation.kernels import common as cm
 from pipeline.estimation.kernels.unscented import ukf_weights
 from pipeline.estimation.models import ins, ins_errors
@@ -43,8 +44,6 @@ from pipeline.estimation.models import measurement as me
 from pipeline.nav.earth import F64, I64
 
 log = logging.getLogger(__name__)
-
-Backend = Literal["numba", "filterpy"]
 
 
 class ReplayInputError(PipelineError):

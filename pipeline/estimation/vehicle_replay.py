@@ -22,7 +22,7 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -30,6 +30,7 @@ from scipy.stats import chi2
 
 from pipeline.errors import DivergenceError
 from pipeline.estimation import inputs as inp
+from pipeline.estimation.contract import Backend
 from pipeline.estimation.kernels import common as cm
 from pipeline.estimation.kernels import vehicle as kv
 from pipeline.estimation.models import vehicle as vm
@@ -40,7 +41,6 @@ from pipeline.nav.local import LocalFrame
 
 log = logging.getLogger(__name__)
 
-Backend = Literal["numba", "filterpy"]
 MAX_STEER_RAD = 0.6
 
 

@@ -1,6 +1,5 @@
-"""One vehicle-filter run from a tables directory to a run directory (same contract as
-``estimation.run``: ``estimate.parquet``, ``innovations.parquet``, ``events.parquet``,
-``metrics.json``, written atomically).
+"""The vehicle-model family (paper 003: kinematic, dynamic, switched, IMM) under the run
+contract (``estimation.contract``).
 
 ``estimate.parquet`` is a canonical ``estimator`` table: ``lat_deg``, ``lon_deg`` (the local
 north/east mapped back through the run's origin), ``alt_m`` (the origin's height: the models
@@ -15,37 +14,22 @@ columns ``lat_sigma_m``, ``lon_sigma_m``, ``vel_{n,e}_sigma_mps``, ``yaw_sigma_r
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pyarrow as pa
 
-from ingest.atomic import atomic_directory, atomic_write_json
-from ingest.meta import META_NAME, read_meta
 from ingest.schema import TableName, from_columns
-from ingest.tables import Provenance, read_table, write_table
-from ingest.typed import to_plain
+from pipeline.estimation.config import FiltersParams
+from pipeline.estimation.contract import Backend, RunInputs, RunOutput, RunTables, events_table
 from pipeline.estimation.kernels import vehicle as kv
 from pipeline.estimation.models import vehicle as vm
-from pipeline.estimation.outputs import events_table, write_parquet
-from pipeline.estimation.vehicle_config import VehicleFilterParams
+from pipeline.estimation.vehicle_config import VEHICLE_FILTERS, VehicleFilterParams
 from pipeline.estimation.vehicle_metrics import compute_metrics
-from pipeline.estimation.vehicle_replay import Backend, VehicleRunResult, run_vehicle_filter
+from pipeline.estimation.vehicle_replay import VehicleRunResult, run_vehicle_filter
 
 log = logging.getLogger(__name__)
 
-_INPUTS = (TableName.VEHICLE, TableName.GNSS, TableName.TRUTH)
-
-
-@dataclass(frozen=True)
-class VehicleRunOutput:
-    """A finished vehicle-filter run: result, metrics, the input files read."""
-
-    result: VehicleRunResult
-    metrics: dict[str, Any]
-    sources: tuple[Path, ...]
+INPUTS = (TableName.VEHICLE, TableName.GNSS, TableName.TRUTH)
 
 
 def estimate_columns(result: VehicleRunResult) -> dict[str, np.ndarray]:
@@ -102,44 +86,34 @@ def innovations_table(result: VehicleRunResult) -> pa.Table:
     )
 
 
-def run_tables(
-    tables_dir: Path, name: str, params: VehicleFilterParams, backend: Backend
-) -> VehicleRunOutput:
-    """Replay vehicle filter ``name`` over the tables in ``tables_dir``."""
-    meta = read_meta(tables_dir)
-    tables: dict[str, pa.Table] = {}
-    sources: list[Path] = []
-    for tname in _INPUTS:
-        path = tables_dir / f"{tname.value}.parquet"
-        if path.is_file():
-            tables[tname.value] = read_table(path, tname).table
-            sources.append(path)
-    wb = meta.sensors.wheelbase_m
-    model_wb = params.vehicle.wheelbase_m
-    if wb is not None and abs(wb - model_wb) > 0.05:
-        log.warning("dataset wheelbase %.2f m differs from the filter's %.2f m", wb, model_wb)
-    result = run_vehicle_filter(tables, name, params, backend=backend)
-    metrics = compute_metrics(result, tables.get("truth"))
-    metrics["dataset"] = meta.dataset
-    return VehicleRunOutput(result, metrics, (*sources, tables_dir / META_NAME))
+class VehicleFamily:
+    """The vehicle-model EKFs of paper 003 over wheel speed, steering and GNSS fixes."""
+
+    name = "vehicle"
+    filters = VEHICLE_FILTERS
+    inputs = INPUTS
+
+    def section(self, filters: FiltersParams, name: str) -> VehicleFilterParams:
+        return filters.vehicle(name)
+
+    def run(
+        self, inputs: RunInputs, name: str, section: VehicleFilterParams, backend: Backend
+    ) -> RunOutput:
+        wb = inputs.sensors.wheelbase_m if inputs.sensors is not None else None
+        model_wb = section.vehicle.wheelbase_m
+        if wb is not None and abs(wb - model_wb) > 0.05:
+            log.warning("dataset wheelbase %.2f m differs from the filter's %.2f m", wb, model_wb)
+        result = run_vehicle_filter(inputs.tables, name, section, backend=backend)
+        metrics = compute_metrics(result, inputs.tables.get("truth"))
+        metrics["dataset"] = inputs.dataset
+        tables = RunTables(
+            from_columns("estimator", estimate_columns(result)),
+            innovations_table(result),
+            events_table(result.events),
+        )
+        return RunOutput(
+            result.filter, result.backend, result.status, tables, metrics, inputs.sources, result
+        )
 
 
-def write_run(
-    out_dir: Path, run: VehicleRunOutput, params: VehicleFilterParams, scenario: str
-) -> None:
-    """Write the run directory atomically (all files appear together, or none)."""
-    prov = Provenance.create(
-        TableName.ESTIMATOR,
-        sources=run.sources,
-        params=to_plain(params),
-        extra={"filter": run.result.filter, "scenario": scenario, "backend": run.result.backend},
-    )
-    meta = {b"navreplay": prov.to_json().encode()}
-    metrics = dict(run.metrics, scenario=scenario, params_hash=prov.params_hash)
-    table = from_columns("estimator", estimate_columns(run.result))
-    with atomic_directory(out_dir) as tmp:
-        write_table(tmp / "estimate.parquet", TableName.ESTIMATOR, table, prov)
-        write_parquet(tmp / "innovations.parquet", innovations_table(run.result), meta)
-        write_parquet(tmp / "events.parquet", events_table(run.result), meta)  # type: ignore[arg-type]
-        atomic_write_json(tmp / "metrics.json", metrics)
-    log.info("wrote %s (%s, %s)", out_dir, run.result.filter, run.result.status)
+VEHICLE = VehicleFamily()

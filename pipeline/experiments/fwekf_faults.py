@@ -33,8 +33,9 @@ import pyarrow as pa
 
 from ingest.meta import SensorMeta
 from pipeline.estimation.config import FiltersParams, InsFilterParams
+from pipeline.estimation.contract import Backend
 from pipeline.estimation.metrics import nis_summary
-from pipeline.estimation.replay import Backend, run_filter
+from pipeline.estimation.replay import run_filter
 from pipeline.estimation.truth import error_states
 from pipeline.experiments.gnss_outages import Window, drop_fixes, in_windows, periodic_windows
 from pipeline.nav.earth import radii

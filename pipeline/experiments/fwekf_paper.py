@@ -45,8 +45,9 @@ import pyarrow as pa
 from ingest.meta import SensorMeta
 from pipeline.estimation.alignment import Alignment
 from pipeline.estimation.config import FiltersParams
+from pipeline.estimation.contract import Backend
 from pipeline.estimation.models import ins
-from pipeline.estimation.replay import Backend, RunResult, run_filter
+from pipeline.estimation.replay import RunResult, run_filter
 from pipeline.estimation.truth import error_states, truth_at
 from pipeline.nav.earth import radii
 from pipeline.nav.rotations import euler_to_quat

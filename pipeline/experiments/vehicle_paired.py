@@ -37,8 +37,8 @@ import pyarrow as pa
 from scipy import stats
 
 from pipeline.estimation.config import FiltersParams
+from pipeline.estimation.contract import Backend
 from pipeline.estimation.vehicle_config import VEHICLE_FILTERS, SwitchingParams
-from pipeline.estimation.vehicle_replay import Backend
 from pipeline.experiments.vehicle_bands import band_table
 from pipeline.experiments.vehicle_bands_config import VehicleBandsParams
 from pipeline.nav.earth import F64

@@ -34,9 +34,10 @@ import pyarrow as pa
 
 from ingest.schema import FixType, from_columns
 from pipeline.estimation.config import FiltersParams
+from pipeline.estimation.contract import Backend
 from pipeline.estimation.vehicle_config import VEHICLE_FILTERS, VehicleFilterParams
 from pipeline.estimation.vehicle_metrics import errors, per_band, summarize
-from pipeline.estimation.vehicle_replay import Backend, run_vehicle_filter
+from pipeline.estimation.vehicle_replay import run_vehicle_filter
 from pipeline.experiments.gnss_outages import drop_fixes, in_windows, periodic_windows
 from pipeline.nav.earth import dcm_ecef_to_ned, ecef_to_geodetic, geodetic_to_ecef
 

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.vehicle_replay import Backend
+from pipeline.estimation.contract import Backend
 from pipeline.experiments.vehicle_bands import SPEED_EDGES_MPS, band_table
 from pipeline.experiments.vehicle_bands_config import VehicleBandsParams
 from pipeline.experiments.vehicle_paired import SINGLE, mean_ci

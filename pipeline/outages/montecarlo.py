@@ -31,8 +31,9 @@ import pyarrow as pa
 from ingest.meta import SensorMeta
 from pipeline.estimation.alignment import Alignment
 from pipeline.estimation.config import InsFilterParams
+from pipeline.estimation.contract import Backend
 from pipeline.estimation.outage_metrics import ErrorTrack, fixes_track, truth_track, window_metrics
-from pipeline.estimation.replay import Backend, RunResult, run_filter
+from pipeline.estimation.replay import RunResult, run_filter
 from pipeline.estimation.windows import NS, WindowMetricsParams
 from pipeline.nav.earth import I64
 from pipeline.scenarios.apply import apply_scenario, log_span

@@ -15,16 +15,13 @@ import multiprocessing
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
-import pyarrow as pa
-
-from ingest.meta import META_NAME, SensorMeta, read_meta
 from pipeline.estimation.config import InsFilterParams
+from pipeline.estimation.contract import Backend, RunInputs, RunOutput
 from pipeline.estimation.metrics import compute_metrics
-from pipeline.estimation.replay import Backend, RunResult, run_filter
-from pipeline.estimation.run import RunOutput, read_inputs
+from pipeline.estimation.replay import RunResult, run_filter
+from pipeline.estimation.run import decode
 from pipeline.scenarios.apply import AppliedScenario, apply_scenario
 from pipeline.scenarios.config import ScenariosParams, ScenarioSpec
 from pipeline.scenarios.criteria import check_fault
@@ -32,31 +29,8 @@ from pipeline.scenarios.criteria import check_fault
 log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
-class Inputs:
-    """A dataset's tables as read once for many runs."""
-
-    dataset: str
-    tables: dict[str, pa.Table]
-    sensors: SensorMeta | None
-    sources: tuple[Path, ...]
-
-    @classmethod
-    def read(cls, tables_dir: Path) -> Inputs:
-        meta = read_meta(tables_dir)
-        tables, sources = read_inputs(tables_dir)
-        return cls(meta.dataset, tables, meta.sensors, (*sources, tables_dir / META_NAME))
-
-    @property
-    def lever_b(self) -> tuple[float, float, float]:
-        if self.sensors is None:
-            return (0.0, 0.0, 0.0)
-        lx, ly, lz = self.sensors.lever_arm_m
-        return (float(lx), float(ly), float(lz))
-
-
 def scenario_metrics(
-    inputs: Inputs,
+    inputs: RunInputs,
     applied: AppliedScenario,
     result: RunResult,
     scenarios: ScenariosParams,
@@ -79,7 +53,7 @@ def scenario_metrics(
 
 
 def run_scenarios(
-    inputs: Inputs,
+    inputs: RunInputs,
     name: str,
     params: InsFilterParams,
     scenarios: ScenariosParams,
@@ -128,14 +102,14 @@ def run_scenarios(
             metrics["fault_checks"] = [c.to_json() for c in checks]
             metrics["fault_checks_passed"] = all(c.passed for c in checks)
         log.info("%s under %s: %s", name, sname, result.status)
-        yield sname, RunOutput(result, metrics, inputs.sources), applied
+        yield sname, decode(result, metrics, inputs.sources), applied
 
 
 @dataclass(frozen=True)
 class _Job:
     """One filter over one dataset's tables: applies a scenario and replays it."""
 
-    inputs: Inputs
+    inputs: RunInputs
     name: str
     params: InsFilterParams
     scenarios: ScenariosParams

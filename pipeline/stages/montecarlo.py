@@ -49,6 +49,8 @@ def run(args: argparse.Namespace) -> int:
 
     from ingest.atomic import atomic_directory, atomic_write_json
     from ingest.typed import to_plain
+    from pipeline.estimation.contract import RunInputs
+    from pipeline.estimation.run import INPUTS
     from pipeline.outages.montecarlo import (
         SKIPPED,
         cases_for,
@@ -56,7 +58,6 @@ def run(args: argparse.Namespace) -> int:
         run_montecarlo,
         windows_table,
     )
-    from pipeline.outages.runs import Inputs
     from pipeline.params import load_params
     from pipeline.scenarios.apply import log_span
 
@@ -80,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
                 )
             print(f"{args.filter}: skipped ({reason}) -> {args.out}")
             return 0
-    inputs = Inputs.read(args.tables)
+    inputs = RunInputs.read(args.tables, INPUTS)
     t0, t_end = log_span(inputs.tables)
     cases = cases_for(o.sats, o.sats_window_s, o.lengths_s)
     longest = max(c.length_s for c in cases)

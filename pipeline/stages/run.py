@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 from pipeline.errors import NotBuiltError, ParamsError
 
 if TYPE_CHECKING:
-    from pipeline.estimation.replay import Backend
+    from pipeline.estimation.contract import Backend
     from pipeline.params import Params
 
 log = logging.getLogger(__name__)
@@ -98,13 +98,13 @@ def _run(
 ) -> int:
     from ingest.atomic import atomic_directory
     from pipeline.analyze import Skipped, plan, write_skip
-    from pipeline.estimation.config import FILTER_KINDS
-    from pipeline.estimation.families import runner
-    from pipeline.estimation.run import write_run
-    from pipeline.outages.runs import Inputs, run_scenarios
+    from pipeline.estimation.contract import RunInputs, write_run
+    from pipeline.estimation.families import family_of
+    from pipeline.estimation.run import INS
+    from pipeline.outages.runs import run_scenarios
 
     try:
-        run_family = runner(args.filter)
+        family = family_of(args.filter)
     except KeyError as err:
         raise ParamsError(
             f"filters.{args.filter}", str(err.args[0]), source=str(args.params)
@@ -118,15 +118,18 @@ def _run(
                 source=str(args.params),
             )
     single = len(asked) == 1 and asked != ["all"]
-    if args.filter not in FILTER_KINDS:
-        # the vehicle-model filters (paper 003) replay the tables as they are
+    section = family.section(params.filters, args.filter)
+    inputs = RunInputs.read(args.tables, family.inputs)
+    if family is not INS:
+        # the vehicle-model and cascaded filters replay the tables as they are
         if names != ["nominal"]:
             raise NotBuiltError(
                 f"scenario {names!r} for {args.filter}: the scenario engine drives the "
-                "INS/GNSS filters; vehicle-model filters run the nominal scenario only"
+                f"INS/GNSS filters; {family.name} filters run the nominal scenario only"
             )
-        m = run_family(args.tables, args.filter, params.filters, backend, args.out, "nominal")
-        _summary(args.filter, backend, "nominal", m, args.out)
+        out = family.run(inputs, args.filter, section, backend)
+        write_run(args.out, out, section, "nominal")
+        _summary(args.filter, backend, "nominal", out.metrics, args.out)
         return 0
     if args.skip_unfit:
         _, unfit = plan(args.tables, [args.filter])
@@ -137,8 +140,6 @@ def _run(
                     write_skip(tmp if single else tmp / name, Skipped(args.filter, name, reason))
             print(f"{args.filter}: skipped ({reason}) -> {args.out}")
             return 0
-    section = params.filters.get(args.filter)
-    inputs = Inputs.read(args.tables)
     runs = run_scenarios(
         inputs, args.filter, section, params.scenarios, names, backend, params.run.workers
     )

@@ -8,15 +8,14 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Literal, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from pipeline.estimation.cascaded import cascade as cs
 from pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup, NumbaStepper
+from pipeline.estimation.contract import Backend
 from pipeline.nav.earth import F64, I64
-
-Backend = Literal["numba", "filterpy"]
 
 
 class Stepper(Protocol):

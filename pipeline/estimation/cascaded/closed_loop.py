@@ -25,7 +25,7 @@ import numpy as np
 
 from pipeline.control.lqr import lqr_command, tractor_lqr_gain
 from pipeline.estimation.cascaded import cascade as cs
-from pipeline.estimation.cascaded.backends import Backend, make_stepper
+from pipeline.estimation.cascaded.backends import make_stepper
 from pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup
 from pipeline.estimation.cascaded.model import (
     CTL_DEL,
@@ -37,6 +37,7 @@ from pipeline.estimation.cascaded.model import (
     NAV_PSI,
     NX,
 )
+from pipeline.estimation.contract import Backend
 from pipeline.nav.earth import F64
 from pipeline.synth.tractor import TractorSim, TractorState, TractorStraightParams
 

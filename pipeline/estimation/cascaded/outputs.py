@@ -20,8 +20,6 @@ filters' file (``pipeline.estimation.outputs``).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pyarrow as pa
 
@@ -98,21 +96,5 @@ def innovations_table(result: CascadedResult) -> pa.Table:
             "accepted": pa.array(ii[:, 4].astype(bool), pa.bool_()),
             **{f"innov_{j}": pa.array(ff[:, 2 + j], pa.float64()) for j in range(3)},
             **{f"innov_sigma_{j}": pa.array(ff[:, 5 + j], pa.float64()) for j in range(3)},
-        }
-    )
-
-
-def events_table(result: CascadedResult) -> pa.Table:
-    """``events.parquet``: rejections, resets, repairs, gaps and data events, by time."""
-    ev = sorted(result.events, key=lambda e: e.t_ns)
-    return pa.table(
-        {
-            "t_ns": pa.array([e.t_ns for e in ev], pa.int64()),
-            "kind": pa.array([e.kind for e in ev], pa.string()),
-            "stream": pa.array([e.stream for e in ev], pa.string()),
-            "sv": pa.array([e.sv for e in ev], pa.string()),
-            "value": pa.array(
-                [e.value if math.isfinite(e.value) else None for e in ev], pa.float64()
-            ),
         }
     )

@@ -21,7 +21,8 @@ import pytest
 from ingest.meta import DatasetMeta, SourceRecord, write_meta
 from ingest.schema import TableName
 from ingest.tables import Provenance, write_table
-from pipeline.estimation.run import run_tables, write_run
+from pipeline.estimation.contract import write_run
+from pipeline.estimation.families import run_tables
 from pipeline.params import load_params
 from pipeline.synth.seoul_campus import simulate
 

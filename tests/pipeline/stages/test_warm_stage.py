@@ -24,12 +24,12 @@ from dataclasses import replace
 from pathlib import Path
 from pipeline.params import load_params
 from pipeline.warm import _drive
-from pipeline.estimation.families import runner
+from pipeline.estimation.families import run_tables
 from pipeline.estimation.kernels.ekf import run_ekf
 params = load_params(Path(sys.argv[1]))
 with tempfile.TemporaryDirectory() as tmp:
     tables = _drive("ins", params, Path(tmp) / "t")
-    runner("lc_ekf")(tables, "lc_ekf", params.filters, "numba", Path(tmp) / "o", "nominal")
+    run_tables(tables, "lc_ekf", params.filters.get("lc_ekf"), "numba")
 st = run_ekf.stats
 print(json.dumps({"hits": sum(st.cache_hits.values()), "misses": sum(st.cache_misses.values())}))
 """

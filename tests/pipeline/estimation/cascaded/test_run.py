@@ -20,7 +20,7 @@ from pipeline.estimation.cascaded.engine import make_setup
 from pipeline.estimation.cascaded.inputs import prepare_inputs
 from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
 from pipeline.estimation.cascaded_config import CascadedFilterParams
-from pipeline.estimation.families import runner
+from pipeline.estimation.families import FAMILIES, family_of
 from pipeline.synth.tractor import TractorStraightParams
 from pipeline.synth.tractor_log import synthesize, write
 from tests.pipeline.estimation.cascaded.conftest import REPO
@@ -69,11 +69,13 @@ def test_navreplay_run_writes_the_run_directory_contract(
 
 
 def test_the_dispatch_routes_each_family_to_its_own_runner() -> None:
-    assert runner("cascaded_ekf") is runner("cascaded_hybrid")
-    assert runner("cascaded_ukf") is not runner("lc_ekf")
-    assert runner("lc_ekf") is runner("tc_ukf_nhc")
+    assert family_of("cascaded_ekf") is family_of("cascaded_hybrid")
+    assert family_of("cascaded_ukf") is not family_of("lc_ekf")
+    assert family_of("lc_ekf") is family_of("tc_ukf_nhc")
+    assert family_of("vehicle_imm").name == "vehicle"
+    assert [f.name for f in FAMILIES] == ["ins", "vehicle", "cascaded"]
     with pytest.raises(KeyError, match="cascaded_hybrid"):
-        runner("cascaded_pf")
+        family_of("cascaded_pf")
 
 
 def test_an_unknown_filter_is_a_params_error_naming_the_known_ones(
