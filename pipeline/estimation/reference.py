@@ -1,6 +1,6 @@
 """The filterpy reference backend: the same model driven by filterpy's EKF and UKF.
 
-``run_ekf_filterpy`` and ``run_ukf_filterpy`` take exactly the arguments of the compiled
+``run_ekf_filterpy`` and ``run_ukf_filterpy`` take exactly the records of the compiled
 ``kernels.ekf.run_ekf`` / ``kernels.ukf.run_ukf`` and fill the same outputs. Everything that
 is model or bookkeeping is the *same* code: the span propagation and transition
 (``models.ins``, ``models.ins_errors``), the measurement rows (``models.measurement``), the
@@ -26,6 +26,7 @@ from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, Unscen
 
 from pipeline.estimation.kernels import common as cm
 from pipeline.estimation.kernels.ekf import ekf_prepare
+from pipeline.estimation.kernels.records import RunLog, Schedule, Settings
 from pipeline.estimation.kernels.unscented import sigma_h
 from pipeline.estimation.models import ins, ins_errors
 from pipeline.estimation.models import measurement as me
@@ -34,48 +35,32 @@ from pipeline.nav.earth import F64, I64
 
 @dataclass
 class _Run:
-    """The arrays of one replay (kernel arguments) and the loop state of the driver."""
+    """A replay's records (the kernel's arguments) and the loop state of the driver."""
 
-    n: int
-    imu_t: I64
-    imu: F64
+    sched: Schedule
     fix: F64 | None
     obs: F64 | None
-    obs_start: I64
-    cfg: F64
-    noise: F64
-    lever_b: F64
-    nhc_sigma: F64
-    gate: F64
-    logs: tuple[I64, F64, F64, I64, F64, I64, F64, I64]  # out_t, out_x, out_P, inn, ev, counts
-    t_cur: int
-    i: int
-    u: F64
-    m_max: int
+    cfg: Settings
+    log: RunLog
 
     def __post_init__(self) -> None:
-        self.u = self.u.copy()
+        n, m_max = self.cfg.n, self.sched.m_max
+        self.t_cur = int(self.sched.t0)
+        self.i = int(self.sched.i0)
+        self.u = self.sched.u0.copy()
         self.u_end = np.empty(6)
         self.work = np.zeros((9, 10))
         self.acc = np.zeros(ins.ACC_DIM)
-        self.L = np.empty((self.n, self.n))
-        self.rows = np.empty((self.m_max, 2), np.int64)
-        self.blocks = np.empty((self.m_max, 4), np.int64)
-        self.reject_since = -np.ones(cm.N_STREAMS, np.int64)
-        self.nhc_on = bool(self.cfg[cm.CFG_NHC_ON] > 0.0)
-
-    @property
-    def inn_ev(self) -> tuple[I64, F64, I64, F64, I64]:
-        _, _, _, inn_i, inn_f, ev_i, ev_f, counts = self.logs
-        return inn_i, inn_f, ev_i, ev_f, counts
+        self.L = np.empty((n, n))
+        self.buf = cm.epoch_buffers(m_max, n)
 
     def span(self, X: F64, t: int, accumulate: bool) -> int:
         """Propagate ``X`` to ``t`` from the cursor (the cursor does not move)."""
-        cfg = self.cfg
+        cfg, sched = self.cfg, self.sched
         return int(
             ins.propagate_span(
-                X, self.imu_t, self.imu, self.i, self.t_cur, self.u, t,
-                int(cfg[cm.CFG_SUBSTEPS]), cfg[cm.CFG_MAX_STEP], cfg[cm.CFG_GAP_S],
+                X, sched.imu_t, sched.imu, self.i, self.t_cur, self.u, t,
+                cfg.substeps, cfg.max_step_s, cfg.gap_s,
                 self.u_end, self.work, self.acc, accumulate,
             )
         )  # fmt: skip
@@ -87,96 +72,57 @@ class _Run:
 
     def layout(self, stop: I64) -> tuple[int, int]:
         m, nb_ = me.epoch_layout(
-            stop, self.fix, self.obs, self.obs_start, self.nhc_on, self.rows, self.blocks
-        )
+            stop, self.fix, self.obs, self.sched.obs_start, self.cfg.nhc_on, self.buf.rows,
+            self.buf.blocks,
+        )  # fmt: skip
         return int(m), int(nb_)
 
     def finish(self, t: int, stop: I64, X: F64, P: F64, P_err: F64, scale: F64) -> int:
         """Positive definiteness, the NaN barrier and the output of one stop."""
-        out_t, out_x, out_P, _, _, ev_i, ev_f, counts = self.logs
-        ok = cm.keep_pd(P, self.n, self.L, t, ev_i, ev_f, counts)
-        status = int(cm.check_state(X, P, self.n, scale, self.cfg)) if ok else 3
+        log = self.log
+        ok = cm.keep_pd(P, self.cfg.n, self.L, t, log.ev_i, log.ev_f, log.counts)
+        status = int(cm.check_state(X, P, scale, self.cfg)) if ok else 3
         if status != cm.STATUS_OK:
-            return int(cm.fail(t, status, ev_i, ev_f, counts))
+            return int(cm.fail(t, status, log.ev_i, log.ev_f, log.counts))
         if stop[me.ST_OUT] > 0:
-            cm.record_output(t, X, P_err, self.n, out_t, out_x, out_P, counts)
+            cm.record_output(t, X, P_err, log)
         return cm.STATUS_OK
 
 
-def _run(
-    args: tuple[Any, ...], n: int, t0: int, i0: int, u0: F64, m_max: int, logs: tuple[Any, ...]
-) -> _Run:
-    imu_t, imu, fix, obs, obs_start, cfg, noise, lever_b, nhc_sigma, gate = args
-    return _Run(n, imu_t, imu, fix, obs, obs_start, cfg, noise, lever_b, nhc_sigma, gate,
-                logs, t0, i0, u0, m_max)  # fmt: skip
-
-
 def run_ekf_filterpy(
-    x0: F64,
-    P0: F64,
-    n: int,
-    t0: int,
-    i0: int,
-    u0: F64,
-    imu_t: I64,
-    imu: F64,
-    stops: I64,
-    fix: F64 | None,
-    obs: F64 | None,
-    obs_start: I64,
-    cfg: F64,
-    noise: F64,
-    lever_b: F64,
-    nhc_sigma: F64,
-    gate: F64,
-    m_max: int,
-    out_t: I64,
-    out_x: F64,
-    out_P: F64,
-    inn_i: I64,
-    inn_f: F64,
-    ev_i: I64,
-    ev_f: F64,
-    counts: I64,
+    x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
 ) -> int:
     """``kernels.ekf.run_ekf`` with filterpy's ``ExtendedKalmanFilter`` doing predict/update."""
-    run = _run((imu_t, imu, fix, obs, obs_start, cfg, noise, lever_b, nhc_sigma, gate), n, t0,
-               i0, u0, m_max, (out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts))  # fmt: skip
+    run = _Run(sched, fix, obs, cfg, log)
+    n, buf = cfg.n, run.buf
     ekf = ExtendedKalmanFilter(dim_x=n, dim_z=1)
     ekf.x = np.zeros(n)
     ekf.P = np.array(P0, dtype=float)
     X = x0.copy()
     Phi, Qd = np.empty((n, n)), np.empty((n, n))
-    z, r, nu = np.empty(m_max), np.empty(m_max), np.empty(m_max)
-    H, S = np.empty((m_max, n)), np.empty((m_max, m_max))
-    acc_rows = np.empty(m_max, np.int64)
     ones = np.ones(n)
-    cm.record_output(t0, X, ekf.P, n, out_t, out_x, out_P, counts)
+    cm.record_output(sched.t0, X, ekf.P, log)
+    stops = sched.stops
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = int(stop[me.ST_T])
         run.advance(run.span(X, t, True), t)
-        ins_errors.transition(X, run.acc, noise, n, Phi, Qd)
+        ins_errors.transition(X, run.acc, cfg.noise, n, Phi, Qd)
         ekf.F, ekf.Q = Phi, Qd
         ekf.x = np.zeros(n)
         ekf.predict()
         m, nb_ = run.layout(stop)
         if m > 0:
             P = np.ascontiguousarray(ekf.P)
-            ma = int(
-                ekf_prepare(
-                    t, X, P, n, run.rows, m, run.blocks, nb_, fix, obs, run.u[3:6].copy(),
-                    lever_b, nhc_sigma, gate, cfg, run.reject_since, z, r, nu, H, S, acc_rows,
-                    *run.inn_ev,
-                )
-            )  # fmt: skip
+            ma = int(ekf_prepare(t, X, P, m, nb_, fix, obs, run.u[3:6].copy(), cfg, buf, log))
             ekf.P = P
             if ma > 0:
-                a = acc_rows[:ma]
-                Ha, hx = H[a, :n].copy(), z[a] - nu[a]
+                a = buf.acc_rows[:ma]
+                Ha, hx = buf.H[a, :n].copy(), buf.z[a] - buf.nu[a]
                 ekf.update(
-                    z[a], HJacobian=lambda _x, h=Ha: h, Hx=lambda _x, v=hx: v, R=np.diag(r[a])
-                )
+                    buf.z[a], HJacobian=lambda _x, h=Ha: h, Hx=lambda _x, v=hx: v,
+                    R=np.diag(buf.r[a]),
+                )  # fmt: skip
                 ins.inject(X, np.asarray(ekf.x, dtype=float), n)
                 ekf.x = np.zeros(n)
         P = np.ascontiguousarray(ekf.P)
@@ -184,47 +130,20 @@ def run_ekf_filterpy(
         ekf.P = P
         if status != cm.STATUS_OK:
             return status
-        counts[cm.CNT_STOP] = k + 1
+        log.counts[cm.CNT_STOP] = k + 1
     return cm.STATUS_OK
 
 
 def run_ukf_filterpy(
-    x0: F64,
-    P0: F64,
-    n: int,
-    t0: int,
-    i0: int,
-    u0: F64,
-    imu_t: I64,
-    imu: F64,
-    stops: I64,
-    fix: F64 | None,
-    obs: F64 | None,
-    obs_start: I64,
-    cfg: F64,
-    noise: F64,
-    lever_b: F64,
-    nhc_sigma: F64,
-    gate: F64,
-    wm: F64,
-    wc: F64,
-    m_max: int,
-    out_t: I64,
-    out_x: F64,
-    out_P: F64,
-    inn_i: I64,
-    inn_f: F64,
-    ev_i: I64,
-    ev_f: F64,
-    counts: I64,
+    x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
 ) -> int:
     """``kernels.ukf.run_ukf`` with filterpy's ``UnscentedKalmanFilter`` doing the UT."""
-    run = _run((imu_t, imu, fix, obs, obs_start, cfg, noise, lever_b, nhc_sigma, gate), n, t0,
-               i0, u0, m_max, (out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts))  # fmt: skip
-    points = MerweScaledSigmaPoints(
-        n, alpha=cfg[cm.CFG_UKF_ALPHA], beta=cfg[cm.CFG_UKF_BETA], kappa=cfg[cm.CFG_UKF_KAPPA]
-    )
-    if not (np.allclose(points.Wm, wm, rtol=1e-12) and np.allclose(points.Wc, wc, rtol=1e-12)):
+    run = _Run(sched, fix, obs, cfg, log)
+    n = cfg.n
+    points = MerweScaledSigmaPoints(n, alpha=cfg.ukf_alpha, beta=cfg.ukf_beta, kappa=cfg.ukf_kappa)
+    if not (
+        np.allclose(points.Wm, cfg.wm, rtol=1e-12) and np.allclose(points.Wc, cfg.wc, rtol=1e-12)
+    ):
         raise ValueError("filterpy's sigma-point weights differ from the kernel's")
     ukf = UnscentedKalmanFilter(dim_x=n, dim_z=1, dt=1.0, hx=None, fx=None, points=points)
     q_ref = x0[ins.X_Q : ins.X_Q + 4].copy()
@@ -235,7 +154,7 @@ def run_ukf_filterpy(
     ukf.P = P0 * np.outer(sc, sc)
     Phi, Qd = np.empty((n, n)), np.empty((n, n))
     X = np.empty(ins.FULL_DIM)
-    cm.record_output(t0, x0, P0, n, out_t, out_x, out_P, counts)
+    cm.record_output(sched.t0, x0, P0, log)
 
     def fx(s: F64, dt: float, t_end: int, q_old: F64, q_new: F64) -> F64:
         Xs = np.empty(ins.FULL_DIM)
@@ -245,13 +164,14 @@ def run_ukf_filterpy(
         ins.from_full(Xs, q_new, n, out)
         return out
 
+    stops = sched.stops
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = int(stop[me.ST_T])
         # the central sigma point carries the process-noise accumulation and the new reference
         ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, X)
         i_next = run.span(X, t, True)
-        ins_errors.transition(X, run.acc, noise, n, Phi, Qd)
+        ins_errors.transition(X, run.acc, cfg.noise, n, Phi, Qd)
         ins.coords_scale(X, n, sc)
         q_new = X[ins.X_Q : ins.X_Q + 4].copy()
         ukf.Q = Qd * np.outer(sc, sc)
@@ -259,69 +179,65 @@ def run_ukf_filterpy(
         q_ref = q_new
         run.advance(i_next, t)
         P = np.ascontiguousarray(ukf.P)
-        ok = cm.keep_pd(P, n, run.L, t, ev_i, ev_f, counts)
+        ok = cm.keep_pd(P, n, run.L, t, log.ev_i, log.ev_f, log.counts)
         ukf.P = P
         m, nb_ = run.layout(stop)
         if ok and m > 0:
-            _ukf_update(ukf, points, run, t, q_ref, m, nb_, wm, wc)
+            _ukf_update(ukf, points, run, t, q_ref, m, nb_)
         ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, X)
         ins.coords_scale(X, n, sc)
         P = np.ascontiguousarray(ukf.P)
         status = run.finish(t, stop, X, P, P / np.outer(sc, sc), sc) if ok else 3
         ukf.P = P
         if status != cm.STATUS_OK:
-            return status if ok else int(cm.fail(t, status, ev_i, ev_f, counts))
-        counts[cm.CNT_STOP] = k + 1
+            return status if ok else int(cm.fail(t, status, log.ev_i, log.ev_f, log.counts))
+        log.counts[cm.CNT_STOP] = k + 1
     return cm.STATUS_OK
 
 
-def _ukf_update(
-    ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb_: int, wm: F64, wc: F64
-) -> None:
+def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb_: int) -> None:
     """Gate with the shared code, then let filterpy update with the accepted rows."""
-    n, rows, blocks = run.n, run.rows, run.blocks
-    inn_i, inn_f, ev_i, ev_f, counts = run.inn_ev
+    cfg, (_, _, _, inn_i, inn_f, ev_i, ev_f, counts) = run.cfg, run.log
+    n, rows, blocks, wm, wc = cfg.n, run.buf.rows, run.buf.blocks, cfg.wm, cfg.wc
     Xm = np.empty(ins.FULL_DIM)
     ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, Xm)
     ref = Xm[:3].copy()
     sc = np.empty(n)
     ins.coords_scale(Xm, n, sc)
     z, r = np.empty(m), np.empty(m)
-    me.epoch_z(rows, m, run.fix, run.obs, ref, run.nhc_sigma, z, r)
+    me.epoch_z(rows, m, run.fix, run.obs, ref, cfg.nhc_sigma, z, r)
     dr = np.empty(m)
     me.gate_shift(rows, m, run.fix, r, dr)
     w_ib = run.u[3:6].copy()
     h_ref = np.empty(m)  # as the kernel: rows relative to the mean's prediction
-    me.epoch_h(Xm, rows, m, run.obs, ref, w_ib, run.lever_b, h_ref)
+    me.epoch_h(Xm, rows, m, run.obs, ref, w_ib, cfg.lever_b, h_ref)
     z -= h_ref
     nis, accepted = np.empty(nb_), np.empty(nb_, np.int64)
     Z = np.empty((2 * n + 1, m))
     for attempt in range(2):
         sig = points.sigma_points(ukf.x, ukf.P)
-        sigma_h(sig, q_ref, n, rows, m, run.obs, ref, w_ib, run.lever_b, h_ref,
+        sigma_h(sig, q_ref, n, rows, m, run.obs, ref, w_ib, cfg.lever_b, h_ref,
                 np.empty(ins.FULL_DIM), Z)  # fmt: skip
         zp = wm @ Z
         dz = Z - zp
         S = np.ascontiguousarray(dz.T @ (wc[:, None] * dz) + np.diag(r))
         nu = z - zp
         Sg = cm.gating_cov(S, dr, m)
-        cm.gate_blocks(nu, Sg, blocks, nb_, run.gate, nis, accepted, np.empty((3, 6)))
+        cm.gate_blocks(nu, Sg, blocks, nb_, cfg.gate, nis, accepted, np.empty((3, 6)))
         if attempt == 1:
             break
-        reset = cm.streams_to_reset(
-            t, blocks, nb_, accepted, run.reject_since, run.cfg[cm.CFG_TIMEOUT_S]
-        )
+        reset = cm.streams_to_reset(t, blocks, nb_, accepted, run.buf.reject_since, cfg.timeout_s)
         if reset.sum() == 0:
             break
         P = np.ascontiguousarray(ukf.P)
         for st in np.flatnonzero(reset):
-            big = cm.inflate_for_stream(P, n, int(st), nu, blocks, nb_, sc, run.cfg)
+            big = cm.inflate_for_stream(P, int(st), nu, blocks, nb_, sc, cfg)
             cm.record_event(ev_i, ev_f, counts, t, cm.EV_RESET, int(st), -1, big)
         ukf.P = P
     cm.record_innovations(
-        t, nu, Sg, blocks, nb_, nis, accepted, run.gate, inn_i, inn_f, counts, ev_i, ev_f
+        t, nu, Sg, blocks, nb_, nis, accepted, cfg.gate, inn_i, inn_f, counts, ev_i, ev_f
     )
-    cm.update_reject_since(t, blocks, nb_, accepted, run.reject_since)
+    cm.update_reject_since(t, blocks, nb_, accepted, run.buf.reject_since)
     a = np.empty(m, np.int64)
     a = a[: cm.accepted_rows(blocks, nb_, accepted, a)]
     if a.size == 0:
@@ -332,7 +248,7 @@ def _ukf_update(
         Xs = np.empty(ins.FULL_DIM)
         ins.to_full(np.asarray(s, dtype=float), q_ref, n, Xs)
         out = np.empty(m)
-        me.epoch_h(Xs, rows, m, run.obs, ref, w_ib, run.lever_b, out)
+        me.epoch_h(Xs, rows, m, run.obs, ref, w_ib, cfg.lever_b, out)
         return (out - h_ref)[a]
 
     ukf.update(z[a], R=np.diag(r[a]), hx=hx)

@@ -1,6 +1,6 @@
 """The filterpy reference backend of the FWEKF (paper 004).
 
-``run_fwekf_filterpy`` takes the arguments of ``kernels.fwekf.run_fwekf``. The span
+``run_fwekf_filterpy`` takes the records of ``kernels.fwekf.run_fwekf``. The span
 propagation, transition, measurement front end (gating, resets, recording), residual ring and
 fuzzy system are the shared code; filterpy's ``KalmanFilter`` on the error state does the
 estimator arithmetic of paper 004 eq. 24-27 (see ``kernels.fwekf``): its predict is given
@@ -20,64 +20,43 @@ from pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
 from pipeline.estimation.kernels import common as cm
 from pipeline.estimation.kernels.ekf import ekf_prepare
 from pipeline.estimation.kernels.fwekf import RING_COLS, push_residuals
+from pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
 from pipeline.estimation.models import ins, ins_errors
 from pipeline.estimation.models import measurement as me
-from pipeline.estimation.reference import _run
+from pipeline.estimation.reference import _Run
 from pipeline.nav.earth import F64, I64
 
 
 def run_fwekf_filterpy(
     x0: F64,
     P0: F64,
-    n: int,
-    t0: int,
-    i0: int,
-    u0: F64,
-    imu_t: I64,
-    imu: F64,
-    stops: I64,
+    sched: Schedule,
     fix: F64 | None,
     obs: F64 | None,
-    obs_start: I64,
-    cfg: F64,
-    noise: F64,
-    lever_b: F64,
-    nhc_sigma: F64,
-    gate: F64,
-    fz: F64,
-    rules: I64,
-    out_alpha: F64,
-    m_max: int,
-    out_t: I64,
-    out_x: F64,
-    out_P: F64,
-    inn_i: I64,
-    inn_f: F64,
-    ev_i: I64,
-    ev_f: F64,
-    counts: I64,
+    cfg: Settings,
+    fading: Fading,
+    log: RunLog,
 ) -> int:
     """``kernels.fwekf.run_fwekf`` with filterpy's fading-memory ``KalmanFilter``."""
-    run = _run((imu_t, imu, fix, obs, obs_start, cfg, noise, lever_b, nhc_sigma, gate), n, t0,
-               i0, u0, m_max, (out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts))  # fmt: skip
+    run = _Run(sched, fix, obs, cfg, log)
+    n, buf, counts = cfg.n, run.buf, log.counts
+    fz, out_alpha = fading.fz, fading.out_alpha
     kf = KalmanFilter(dim_x=n, dim_z=1)
     kf.x = np.zeros(n)
     kf.P = np.array(P0, dtype=float)
     X = x0.copy()
     Phi, Qd = np.empty((n, n)), np.empty((n, n))
-    z, r, nu = np.empty(m_max), np.empty(m_max), np.empty(m_max)
-    H, S = np.empty((m_max, n)), np.empty((m_max, m_max))
-    acc_rows = np.empty(m_max, np.int64)
     ones = np.ones(n)
     ring = np.full((int(fz[FZ_WINDOW]), RING_COLS), np.nan)
     n_ring, alpha = 0, 1.0
     out_alpha[0] = alpha
-    cm.record_output(t0, X, kf.P, n, out_t, out_x, out_P, counts)
+    cm.record_output(sched.t0, X, kf.P, log)
+    stops = sched.stops
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = int(stop[me.ST_T])
         run.advance(run.span(X, t, True), t)
-        ins_errors.transition(X, run.acc, noise, n, Phi, Qd)
+        ins_errors.transition(X, run.acc, cfg.noise, n, Phi, Qd)
         a_k = alpha if stop[me.ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
         kf.F, kf.Q = a_k * Phi, Qd.copy()  # eq. 26: (a Phi) P (a Phi)^T + Q
         kf.x = np.zeros(n)
@@ -85,24 +64,19 @@ def run_fwekf_filterpy(
         m, nb_ = run.layout(stop)
         if m > 0:
             P = np.ascontiguousarray(kf.P)
-            ma = int(
-                ekf_prepare(
-                    t, X, P, n, run.rows, m, run.blocks, nb_, fix, obs, run.u[3:6].copy(),
-                    lever_b, nhc_sigma, gate, cfg, run.reject_since, z, r, nu, H, S, acc_rows,
-                    *run.inn_ev,
-                )
-            )  # fmt: skip
+            ma = int(ekf_prepare(t, X, P, m, nb_, fix, obs, run.u[3:6].copy(), cfg, buf, log))
             kf.P = P
             if ma > 0:
-                a = acc_rows[:ma]
+                a = buf.acc_rows[:ma]
                 kf.dim_z = ma
-                R_w = np.diag(r[a]) / (a_k * a_k)  # eq. 24: R / alpha^2 in gain and Joseph
-                kf.update(nu[a].copy(), R=R_w, H=H[a, :n].copy())
+                R_w = np.diag(buf.r[a]) / (a_k * a_k)  # eq. 24: R / alpha^2 in gain and Joseph
+                kf.update(buf.nu[a].copy(), R=R_w, H=buf.H[a, :n].copy())
                 ins.inject(X, np.asarray(kf.x, dtype=float).reshape(n), n)
                 kf.x = np.zeros(n)
             if stop[me.ST_FIX] >= 0:
-                n_ring = int(push_residuals(ring, n_ring, run.rows, nu, S, m))
-                alpha = float(infer_alpha(*residual_inputs(ring, n_ring), fz, fuzzy_rules(rules)))
+                n_ring = int(push_residuals(ring, n_ring, buf.rows, buf.nu, buf.S, m))
+                rules = fuzzy_rules(fading.rules)
+                alpha = float(infer_alpha(*residual_inputs(ring, n_ring), fz, rules))
         P = np.ascontiguousarray(kf.P)
         if stop[me.ST_OUT] > 0 and counts[cm.CNT_OUT] < out_alpha.shape[0]:
             out_alpha[counts[cm.CNT_OUT]] = alpha

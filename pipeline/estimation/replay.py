@@ -38,6 +38,7 @@ from pipeline.estimation.alignment import Alignment, align
 from pipeline.estimation.config import FILTER_KINDS, FilterKind, InsFilterParams
 from pipeline.estimation.contract import Backend
 from pipeline.estimation.kernels import common as cm
+from pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
 from pipeline.estimation.kernels.unscented import ukf_weights
 from pipeline.estimation.models import ins, ins_errors
 from pipeline.estimation.models import measurement as me
@@ -52,19 +53,22 @@ class ReplayInputError(PipelineError):
 
 @dataclass(frozen=True)
 class FilterSetup:
-    """Everything a backend needs besides the data: the packed settings of one filter."""
+    """Everything a backend needs besides the data: one filter's resolved settings."""
 
     name: str
-    n: int
     estimator: str
-    cfg: F64
-    noise: F64
-    lever_b: F64
-    nhc_sigma: F64
-    gate: F64
-    wm: F64
-    wc: F64
+    settings: Settings
     fuzzy: F64 | None = None
+
+    @property
+    def n(self) -> int:
+        """The error-state dimension."""
+        return self.settings.n
+
+    @property
+    def lever_b(self) -> F64:
+        """The antenna lever arm, body FRD, m (3,)."""
+        return self.settings.lever_b
 
 
 @dataclass
@@ -124,24 +128,11 @@ def make_setup(
         )
     lever = np.array(sensors.lever_arm_m if sensors is not None else (0.0, 0.0, 0.0), float)
     st, g = params.step, params.gating
-    cfg = np.zeros(cm.CFG_DIM)
-    cfg[cm.CFG_SUBSTEPS] = st.substeps
-    cfg[cm.CFG_MAX_STEP] = st.max_rk4_step_s
-    cfg[cm.CFG_GAP_S] = st.imu_gap_s
-    cfg[cm.CFG_NHC_ON] = 1.0 if kind.nhc else 0.0
-    cfg[cm.CFG_TIMEOUT_S] = g.timeout_s
-    cfg[cm.CFG_RESET_POS] = g.reset_pos_sigma_m
-    cfg[cm.CFG_RESET_VEL] = g.reset_vel_sigma_mps
-    cfg[cm.CFG_RESET_CLK] = g.reset_clock_sigma_m
-    cfg[cm.CFG_MAX_POS_SIGMA] = params.divergence.max_pos_sigma_m
-    cfg[cm.CFG_MAX_SPEED] = params.divergence.max_speed_mps
     wm = wc = np.ones(1)
+    gamma = 0.0
+    ukf = (params.ukf.alpha, params.ukf.beta, params.ukf.kappa) if params.ukf else (0.0, 0.0, 0.0)
     if params.ukf is not None:
-        wm, wc, gamma = ukf_weights(n, params.ukf.alpha, params.ukf.beta, params.ukf.kappa)
-        cfg[cm.CFG_UKF_GAMMA] = gamma
-        cfg[cm.CFG_UKF_ALPHA] = params.ukf.alpha
-        cfg[cm.CFG_UKF_BETA] = params.ukf.beta
-        cfg[cm.CFG_UKF_KAPPA] = params.ukf.kappa
+        wm, wc, gamma = ukf_weights(n, *ukf)
     noise = ins_errors.noise_vector(
         noise_model.accel_noise_mps2_rthz,
         noise_model.gyro_noise_radps_rthz,
@@ -158,7 +149,30 @@ def make_setup(
     )
     gate = np.array([math.inf] + [float(chi2.ppf(g.probability, d)) for d in (1, 2, 3)])
     fz = params.fuzzy.vector() if kind.fading and params.fuzzy is not None else None
-    return FilterSetup(name, n, kind.estimator, cfg, noise, lever, nhc_sigma, gate, wm, wc, fz)
+    settings = Settings(
+        n=n,
+        substeps=int(st.substeps),
+        max_step_s=float(st.max_rk4_step_s),
+        gap_s=float(st.imu_gap_s),
+        nhc_on=bool(kind.nhc),
+        timeout_s=float(g.timeout_s),
+        reset_pos_sigma_m=float(g.reset_pos_sigma_m),
+        reset_vel_sigma_mps=float(g.reset_vel_sigma_mps),
+        reset_clock_sigma_m=float(g.reset_clock_sigma_m),
+        max_pos_sigma_m=float(params.divergence.max_pos_sigma_m),
+        max_speed_mps=float(params.divergence.max_speed_mps),
+        ukf_gamma=float(gamma),
+        ukf_alpha=float(ukf[0]),
+        ukf_beta=float(ukf[1]),
+        ukf_kappa=float(ukf[2]),
+        noise=noise,
+        lever_b=lever,
+        nhc_sigma=nhc_sigma,
+        gate=gate,
+        wm=wm,
+        wc=wc,
+    )
+    return FilterSetup(name, kind.estimator, settings, fz)
 
 
 def _table(tables: Mapping[str, pa.Table], name: str, filt: str) -> pa.Table:
@@ -370,57 +384,33 @@ def _run_segment(
     i0, u0 = inp.interpolate_input(imu_t, imu_d, al.t_ns)
     n = setup.n
     n_out = int(stops[:, me.ST_OUT].sum()) + 1
-    n_inn = len(stops) * (m_max // 1)
+    n_inn = len(stops) * m_max
     n_ev = n_inn + 2 * len(stops) + 16
-    out_t = np.zeros(n_out, np.int64)
-    out_x = np.zeros((n_out, ins.FULL_DIM))
-    out_P = np.zeros((n_out, n, n))
-    inn_i = np.zeros((n_inn, cm.INN_I_COLS), np.int64)
-    inn_f = np.zeros((n_inn, cm.INN_F_COLS))
-    ev_i = np.zeros((n_ev, 4), np.int64)
-    ev_f = np.zeros(n_ev)
-    counts = np.zeros(cm.CNT_DIM, np.int64)
-    common = (
-        al.x0,
-        al.P0,
-        n,
-        al.t_ns,
-        i0,
-        u0,
-        imu_t,
-        imu_d,
-        stops,
-        fix_arr,
-        obs_arr,
-        obs_start,
-        setup.cfg,
-        setup.noise,
-        setup.lever_b,
-        setup.nhc_sigma,
-        setup.gate,
-    )
-    tail = (m_max, out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts)
-    out_alpha = np.ones(n_out)  # fwekf: the fading factor at each output row
-    if setup.fuzzy is not None:
-        from pipeline.estimation.fuzzy import RULES
-
-        args: tuple[object, ...] = (*common, setup.fuzzy, RULES, out_alpha, *tail)
-    elif setup.estimator == "ukf":
-        args = (*common, setup.wm, setup.wc, *tail)
-    else:
-        args = (*common, *tail)
+    sched = Schedule(int(al.t_ns), int(i0), u0, imu_t, imu_d, stops, obs_start, int(m_max))
     compile_s = 0.0
-    if hasattr(kernel, "compile"):  # a numba dispatcher: compile or load it outside the timing
-        t0 = time.perf_counter()
-        with fewer_gc_passes():
-            kernel.compile(tuple(_typeof(a) for a in args))
-        compile_s = time.perf_counter() - t0
-    code = kernel(*args)
-    k_out, k_inn, k_ev = (int(counts[c]) for c in (cm.CNT_OUT, cm.CNT_INN, cm.CNT_EV))
-    if k_inn > n_inn or k_ev > n_ev or k_out > n_out:
-        log.warning(
-            "log capacity exceeded: %d/%d innovations, %d/%d events", k_inn, n_inn, k_ev, n_ev
-        )
+    log_ = RunLog.allocate(n_out, n_inn, n_ev, n, ins.FULL_DIM)
+    while True:  # a log too small for the run is grown and the run made again
+        out_alpha = np.ones(log_.capacity()[0])  # fwekf: the fading factor at each output row
+        args: tuple[object, ...] = (al.x0, al.P0, sched, fix_arr, obs_arr, setup.settings)
+        if setup.fuzzy is not None:
+            from pipeline.estimation.fuzzy import RULES
+
+            args = (*args, Fading(setup.fuzzy, RULES, out_alpha))
+        args = (*args, log_)
+        if hasattr(kernel, "compile") and compile_s == 0.0:
+            # a numba dispatcher: compile or load it outside the timing
+            t0 = time.perf_counter()
+            with fewer_gc_passes():
+                kernel.compile(tuple(_typeof(a) for a in args))
+            compile_s = time.perf_counter() - t0
+        code = kernel(*args)
+        bigger = log_.grown()
+        if bigger is None:
+            break
+        log.info("run log full (%s wanted, %s held): growing it", log_.wanted(), log_.capacity())
+        log_ = bigger
+    out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts = log_
+    k_out, k_inn, k_ev = log_.wanted()
     seg_events = [
         inp.Event(
             int(ev_i[j, 0]),
@@ -429,8 +419,7 @@ def _run_segment(
             me.sv_name(int(ev_i[j, 3])),
             float(ev_f[j]),
         )
-        for j in range(min(k_ev, n_ev))
+        for j in range(k_ev)
     ]
-    k_out, k_inn = min(k_out, n_out), min(k_inn, n_inn)
     out = (out_t[:k_out], out_x[:k_out], out_P[:k_out], inn_i[:k_inn], inn_f[:k_inn])
     return out, int(code), int(counts[cm.CNT_T_FAIL]), seg_events, compile_s, out_alpha[:k_out]

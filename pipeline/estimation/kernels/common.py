@@ -5,9 +5,9 @@ Everything here is a plain function over arrays, so the compiled replay loops
 timeout-reset, positive-definiteness, recording and NaN-barrier code: the backends differ only
 in who performs the Kalman predict and update arithmetic.
 
-``cfg`` is a float64 vector with the scalar settings at the ``CFG_*`` indices (filled by
-``pipeline.estimation.replay``); events and innovations go into preallocated arrays, with the
-counters in ``counts`` (``CNT_*``).
+The INS kernels' settings and run log are records (``kernels.records``); events and
+innovations go into preallocated arrays, with the counters in ``counts`` (``CNT_*``): a row
+past the capacity is counted, not written, and the driver re-runs with a larger log.
 """
 
 from __future__ import annotations
@@ -18,18 +18,18 @@ import numba as nb
 import numpy as np
 
 from pipeline._jit import njit
+from pipeline.estimation.kernels.records import CNT_DIM as CNT_DIM
+from pipeline.estimation.kernels.records import CNT_EV as CNT_EV
+from pipeline.estimation.kernels.records import CNT_INN as CNT_INN
+from pipeline.estimation.kernels.records import CNT_OUT as CNT_OUT
+from pipeline.estimation.kernels.records import CNT_STOP as CNT_STOP
+from pipeline.estimation.kernels.records import CNT_T_FAIL as CNT_T_FAIL
+from pipeline.estimation.kernels.records import INN_F_COLS as INN_F_COLS
+from pipeline.estimation.kernels.records import INN_I_COLS as INN_I_COLS
+from pipeline.estimation.kernels.records import EpochBuffers, RunLog, Settings
 from pipeline.estimation.models.ins import E_CB, E_POS, E_VEL, N_LOOSE, X_VEL
 from pipeline.estimation.models.measurement import S_NHC, S_OBS, S_VEL
 from pipeline.nav.earth import F64, I64
-
-CFG_SUBSTEPS, CFG_MAX_STEP, CFG_GAP_S, CFG_NHC_ON = 0, 1, 2, 3
-CFG_TIMEOUT_S, CFG_RESET_POS, CFG_RESET_VEL, CFG_RESET_CLK = 4, 5, 6, 7
-CFG_MAX_POS_SIGMA, CFG_MAX_SPEED = 8, 9
-CFG_UKF_GAMMA, CFG_UKF_ALPHA, CFG_UKF_BETA, CFG_UKF_KAPPA = 10, 11, 12, 13
-CFG_DIM = 14
-
-CNT_OUT, CNT_INN, CNT_EV, CNT_STOP, CNT_T_FAIL = 0, 1, 2, 3, 4
-CNT_DIM = 5
 
 EV_REJECT, EV_RESET, EV_REPAIR, EV_DIVERGED = 1, 2, 3, 4
 EVENT_NAMES = {EV_REJECT: "gate_reject", EV_RESET: "gate_reset", EV_REPAIR: "cov_repair"}
@@ -53,8 +53,6 @@ _F2C = nb.float64[:, ::1]
 _F1C = nb.float64[::1]
 _I2C = nb.int64[:, ::1]
 _I1C = nb.int64[::1]
-INN_I_COLS = 5  # t_ns, stream, sv, dim, accepted
-INN_F_COLS = 8  # nis, gate, innovation[3], innovation sigma[3]
 
 
 @njit(nb.boolean(_F2, nb.int64, _F2), cache=True, error_model="numpy")
@@ -92,6 +90,22 @@ def cho_solve(L: F64, n: int, B: F64, k: int) -> None:
             for j in range(i + 1, n):
                 s -= L[j, i] * B[j, c]
             B[i, c] = s / L[i, i]
+
+
+@njit(cache=True, error_model="numpy")
+def epoch_buffers(m_max: int, n: int) -> EpochBuffers:
+    """The measurement scratch for epochs of up to ``m_max`` rows and ``n`` error states."""
+    return EpochBuffers(
+        np.empty((m_max, 2), np.int64),
+        np.empty((m_max, 4), np.int64),
+        np.empty(m_max),
+        np.empty(m_max),
+        np.empty(m_max),
+        np.empty((m_max, n)),
+        np.empty((m_max, m_max)),
+        np.empty(m_max, np.int64),
+        -np.ones(N_STREAMS, np.int64),
+    )
 
 
 @njit(cache=True, error_model="numpy")
@@ -316,7 +330,7 @@ def update_reject_since(t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_
 
 @njit(cache=True, error_model="numpy")
 def inflate_for_stream(
-    P: F64, n: int, stream: int, nu: F64, blocks: I64, nb_: int, scale: F64, cfg: F64
+    P: F64, stream: int, nu: F64, blocks: I64, nb_: int, scale: F64, s: Settings
 ) -> float:
     """Reset the covariance of the states a timed-out stream observes; returns the largest
     innovation magnitude of that stream (logged with the reset event).
@@ -332,13 +346,14 @@ def inflate_for_stream(
             continue
         for r in range(blocks[b, 0], blocks[b, 0] + blocks[b, 1]):
             big = max(big, abs(nu[r]))
+    n = s.n
     if stream == S_VEL:
-        first, count, sig = E_VEL, 3, max(cfg[CFG_RESET_VEL], big)
+        first, count, sig = E_VEL, 3, max(s.reset_vel_sigma_mps, big)
     else:
-        first, count, sig = E_POS, 3, max(cfg[CFG_RESET_POS], big)
+        first, count, sig = E_POS, 3, max(s.reset_pos_sigma_m, big)
     _reset_block(P, n, first, count, sig, scale)
     if stream == S_OBS and n > N_LOOSE:
-        _reset_block(P, n, E_CB, 1, max(cfg[CFG_RESET_CLK], big), scale)
+        _reset_block(P, n, E_CB, 1, max(s.reset_clock_sigma_m, big), scale)
     return big
 
 
@@ -362,7 +377,7 @@ def _reset_block(P: F64, n: int, first: int, count: int, sigma: float, scale: F6
 def record_event(
     ev_i: I64, ev_f: F64, counts: I64, t_ns: int, kind: int, stream: int, sv: int, value: float
 ) -> None:
-    """Append an event (silently counted past the preallocated capacity)."""
+    """Append an event (past the preallocated capacity it is counted, not written)."""
     k = counts[CNT_EV]
     if k < ev_i.shape[0]:
         ev_i[k, 0], ev_i[k, 1], ev_i[k, 2], ev_i[k, 3] = t_ns, kind, stream, sv
@@ -386,11 +401,15 @@ def record_innovations(
     ev_i: I64,
     ev_f: F64,
 ) -> None:
-    """Append one innovation row per block, and a ``gate_reject`` event per rejected block."""
+    """Append one innovation row per block, and a ``gate_reject`` event per rejected block
+    (rows past the capacity are counted, not written)."""
     for b in range(nb_):
         k = counts[CNT_INN]
+        counts[CNT_INN] = k + 1
+        if not accepted[b]:
+            record_event(ev_i, ev_f, counts, t_ns, EV_REJECT, blocks[b, 2], blocks[b, 3], nis[b])
         if k >= inn_i.shape[0]:
-            break
+            continue
         r0, d = blocks[b, 0], blocks[b, 1]
         inn_i[k, 0], inn_i[k, 1], inn_i[k, 2] = t_ns, blocks[b, 2], blocks[b, 3]
         inn_i[k, 3], inn_i[k, 4] = d, accepted[b]
@@ -398,40 +417,36 @@ def record_innovations(
         for j in range(3):
             inn_f[k, 2 + j] = nu[r0 + j] if j < d else math.nan
             inn_f[k, 5 + j] = math.sqrt(S[r0 + j, r0 + j]) if j < d else math.nan
-        counts[CNT_INN] = k + 1
-        if not accepted[b]:
-            record_event(ev_i, ev_f, counts, t_ns, EV_REJECT, blocks[b, 2], blocks[b, 3], nis[b])
 
 
 @njit(cache=True, error_model="numpy")
-def check_state(X: F64, P: F64, n: int, scale: F64, cfg: F64) -> int:
+def check_state(X: F64, P: F64, scale: F64, s: Settings) -> int:
     """The NaN barrier and divergence limits; returns a ``STATUS_*`` code."""
     for j in range(X.shape[0]):
         if not math.isfinite(X[j]):
             return STATUS_NONFINITE
-    for i in range(n):
+    for i in range(s.n):
         if not math.isfinite(P[i, i]) or not P[i, i] > 0.0:
             return STATUS_NONFINITE
     v = X[X_VEL : X_VEL + 3]
-    if math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) > cfg[CFG_MAX_SPEED]:
+    if math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) > s.max_speed_mps:
         return STATUS_LIMIT
     var_h = P[0, 0] / scale[0] ** 2 + P[1, 1] / scale[1] ** 2
-    if math.sqrt(var_h) > cfg[CFG_MAX_POS_SIGMA]:
+    if math.sqrt(var_h) > s.max_pos_sigma_m:
         return STATUS_LIMIT
     return STATUS_OK
 
 
 @njit(cache=True, error_model="numpy")
-def record_output(
-    t_ns: int, X: F64, P_err: F64, n: int, out_t: I64, out_x: F64, out_P: F64, counts: I64
-) -> None:
+def record_output(t_ns: int, X: F64, P_err: F64, log: RunLog) -> None:
     """Append an output row: full state and its error-coordinate covariance."""
-    k = counts[CNT_OUT]
-    if k < out_t.shape[0]:
-        out_t[k] = t_ns
+    k = log.counts[CNT_OUT]
+    if k < log.out_t.shape[0]:
+        log.out_t[k] = t_ns
         for j in range(X.shape[0]):
-            out_x[k, j] = X[j]
+            log.out_x[k, j] = X[j]
+        n = log.out_P.shape[1]
         for r in range(n):
             for c in range(n):
-                out_P[k, r, c] = P_err[r, c]
-    counts[CNT_OUT] = k + 1
+                log.out_P[k, r, c] = P_err[r, c]
+    log.counts[CNT_OUT] = k + 1

@@ -20,11 +20,6 @@ import numpy as np
 
 from pipeline._jit import njit
 from pipeline.estimation.kernels.common import (
-    CFG_GAP_S,
-    CFG_MAX_STEP,
-    CFG_NHC_ON,
-    CFG_SUBSTEPS,
-    CFG_TIMEOUT_S,
     CNT_STOP,
     EV_RESET,
     N_STREAMS,
@@ -34,6 +29,7 @@ from pipeline.estimation.kernels.common import (
     check_state,
     cho_solve,
     cholesky,
+    epoch_buffers,
     fail,
     gate_blocks,
     gating_cov,
@@ -47,6 +43,7 @@ from pipeline.estimation.kernels.common import (
     streams_to_reset,
     update_reject_since,
 )
+from pipeline.estimation.kernels.records import EpochBuffers, RunLog, Schedule, Settings
 from pipeline.estimation.models.ins import ACC_DIM, inject, propagate_span
 from pipeline.estimation.models.ins_errors import transition
 from pipeline.estimation.models.measurement import (
@@ -66,30 +63,14 @@ def ekf_prepare(
     t_ns: int,
     X: F64,
     P: F64,
-    n: int,
-    rows: I64,
     m: int,
-    blocks: I64,
     nb_: int,
     fix: F64 | None,
     obs: F64 | None,
     w_ib_b: F64,
-    lever_b: F64,
-    nhc_sigma: F64,
-    gate: F64,
-    cfg: F64,
-    reject_since: I64,
-    z: F64,
-    r: F64,
-    nu: F64,
-    H: F64,
-    S: F64,
-    acc_rows: I64,
-    inn_i: I64,
-    inn_f: F64,
-    ev_i: I64,
-    ev_f: F64,
-    counts: I64,
+    cfg: Settings,
+    buf: EpochBuffers,
+    log: RunLog,
 ) -> int:
     """Measurement front end of one EKF epoch: values, Jacobians, gating, timeout resets.
 
@@ -101,8 +82,10 @@ def ekf_prepare(
     Returns:
         the number of accepted rows.
     """
+    n, lever_b, gate = cfg.n, cfg.lever_b, cfg.gate
+    rows, blocks, z, r, nu, H, S = buf.rows, buf.blocks, buf.z, buf.r, buf.nu, buf.H, buf.S
     ref = X[:3].copy()
-    epoch_z(rows, m, fix, obs, ref, nhc_sigma, z, r)
+    epoch_z(rows, m, fix, obs, ref, cfg.nhc_sigma, z, r)
     dr = np.empty(m)
     gate_shift(rows, m, fix, r, dr)
     hx = np.empty(m)
@@ -121,18 +104,19 @@ def ekf_prepare(
         gate_blocks(nu, Sg, blocks, nb_, gate, nis, accepted, gwork)
         if attempt == 1:
             break
-        reset = streams_to_reset(t_ns, blocks, nb_, accepted, reject_since, cfg[CFG_TIMEOUT_S])
+        reset = streams_to_reset(t_ns, blocks, nb_, accepted, buf.reject_since, cfg.timeout_s)
         if reset.sum() == 0:
             break
-        for s in range(N_STREAMS):
-            if reset[s]:
-                big = inflate_for_stream(P, n, s, nu, blocks, nb_, ones, cfg)
-                record_event(ev_i, ev_f, counts, t_ns, EV_RESET, s, -1, big)
+        for st in range(N_STREAMS):
+            if reset[st]:
+                big = inflate_for_stream(P, st, nu, blocks, nb_, ones, cfg)
+                record_event(log.ev_i, log.ev_f, log.counts, t_ns, EV_RESET, st, -1, big)
     record_innovations(
-        t_ns, nu, Sg, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts, ev_i, ev_f
-    )
-    update_reject_since(t_ns, blocks, nb_, accepted, reject_since)
-    return accepted_rows(blocks, nb_, accepted, acc_rows)
+        t_ns, nu, Sg, blocks, nb_, nis, accepted, gate, log.inn_i, log.inn_f, log.counts,
+        log.ev_i, log.ev_f,
+    )  # fmt: skip
+    update_reject_since(t_ns, blocks, nb_, accepted, buf.reject_since)
+    return accepted_rows(blocks, nb_, accepted, buf.acc_rows)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -196,50 +180,21 @@ def joseph_update(
 
 @njit(cache=True, error_model="numpy")
 def run_ekf(
-    x0: F64,
-    P0: F64,
-    n: int,
-    t0: int,
-    i0: int,
-    u0: F64,
-    imu_t: I64,
-    imu: F64,
-    stops: I64,
-    fix: F64 | None,
-    obs: F64 | None,
-    obs_start: I64,
-    cfg: F64,
-    noise: F64,
-    lever_b: F64,
-    nhc_sigma: F64,
-    gate: F64,
-    m_max: int,
-    out_t: I64,
-    out_x: F64,
-    out_P: F64,
-    inn_i: I64,
-    inn_f: F64,
-    ev_i: I64,
-    ev_f: F64,
-    counts: I64,
+    x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
 ) -> int:
-    """Replay the error-state EKF from ``x0, P0`` at ``t0`` over every stop.
+    """Replay the error-state EKF from ``x0, P0`` at ``sched.t0`` over every stop.
 
     Args:
         x0: initial full state (18,); P0: initial error covariance (n, n).
-        n: error-state dimension (15 loose, 17 tight).
-        t0: start time, ns; i0: first IMU sample after t0; u0: IMU input at t0 (6,).
-        imu_t, imu: the IMU samples (see ``ins.propagate_span``).
-        stops, fix, obs, obs_start: schedule and measurements (``models.measurement``).
-        cfg: settings (``common.CFG_*``); noise: ``ins.noise_vector``; lever_b: antenna lever
-            arm (3,); nhc_sigma: NHC 1-sigma (2,); gate: chi-square threshold by dimension.
-        m_max: most rows of one epoch.
-        out_t, out_x, out_P: outputs at the stops flagged for output (and at t0).
-        inn_i, inn_f, ev_i, ev_f: innovation and event logs; counts: ``common.CNT_*``.
+        sched: the segment's IMU samples and stops (``records.Schedule``).
+        fix, obs: the measurements (``models.measurement``); the one the filter does not read
+            is None, and the kernel compiled for it carries no code for it.
+        cfg: the settings (``records.Settings``); log: what the run writes (``records.RunLog``).
 
     Returns:
-        a ``common.STATUS_*`` code (``counts[CNT_T_FAIL]`` holds the time of a failure).
+        a ``common.STATUS_*`` code (``log.counts[CNT_T_FAIL]`` holds the time of a failure).
     """
+    n, m_max = cfg.n, sched.m_max
     X = x0.copy()
     P = P0.copy()
     ones = np.ones(n)
@@ -249,86 +204,37 @@ def run_ekf(
     tmp = np.empty((n, n))
     work = np.zeros((9, 10))
     acc = np.zeros(ACC_DIM)
-    u = u0.copy()
+    u = sched.u0.copy()
     u_end = np.empty(6)
-    rows = np.empty((m_max, 2), np.int64)
-    blocks = np.empty((m_max, 4), np.int64)
-    z = np.empty(m_max)
-    r = np.empty(m_max)
-    nu = np.empty(m_max)
-    H = np.empty((m_max, n))
-    S = np.empty((m_max, m_max))
-    acc_rows = np.empty(m_max, np.int64)
-    reject_since = -np.ones(N_STREAMS, np.int64)
-    substeps = int(cfg[CFG_SUBSTEPS])
-    nhc_on = cfg[CFG_NHC_ON] > 0.0
-    record_output(t0, X, P, n, out_t, out_x, out_P, counts)
-    t_cur = t0
-    i = i0
+    buf = epoch_buffers(m_max, n)
+    record_output(sched.t0, X, P, log)
+    t_cur = sched.t0
+    i = sched.i0
+    stops = sched.stops
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
         i = propagate_span(
-            X,
-            imu_t,
-            imu,
-            i,
-            t_cur,
-            u,
-            t,
-            substeps,
-            cfg[CFG_MAX_STEP],
-            cfg[CFG_GAP_S],
-            u_end,
-            work,
-            acc,
-            True,
-        )
+            X, sched.imu_t, sched.imu, i, t_cur, u, t, cfg.substeps, cfg.max_step_s, cfg.gap_s,
+            u_end, work, acc, True,
+        )  # fmt: skip
         for j in range(6):
             u[j] = u_end[j]
         t_cur = t
-        transition(X, acc, noise, n, Phi, Qd)
+        transition(X, acc, cfg.noise, n, Phi, Qd)
         propagate_cov(P, Phi, Qd, n, tmp)
-        m, nb_ = epoch_layout(stop, fix, obs, obs_start, nhc_on, rows, blocks)
+        m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
         if m > 0:
-            ma = ekf_prepare(
-                t,
-                X,
-                P,
-                n,
-                rows,
-                m,
-                blocks,
-                nb_,
-                fix,
-                obs,
-                u[3:6],
-                lever_b,
-                nhc_sigma,
-                gate,
-                cfg,
-                reject_since,
-                z,
-                r,
-                nu,
-                H,
-                S,
-                acc_rows,
-                inn_i,
-                inn_f,
-                ev_i,
-                ev_f,
-                counts,
-            )
+            ma = ekf_prepare(t, X, P, m, nb_, fix, obs, u[3:6], cfg, buf, log)
             if ma > 0:
-                dx, ok = joseph_update(P, n, H, S, r, nu, acc_rows, ma)
+                dx, ok = joseph_update(P, n, buf.H, buf.S, buf.r, buf.nu, buf.acc_rows, ma)
                 if ok:
                     inject(X, dx, n)
-        ok = keep_pd(P, n, L, t, ev_i, ev_f, counts)
-        status = check_state(X, P, n, ones, cfg) if ok else STATUS_INDEFINITE
+        ok = keep_pd(P, n, L, t, log.ev_i, log.ev_f, log.counts)
+        status = check_state(X, P, ones, cfg) if ok else STATUS_INDEFINITE
         if status != STATUS_OK:
-            return fail(t, status, ev_i, ev_f, counts)
+            return fail(t, status, log.ev_i, log.ev_f, log.counts)
         if stop[ST_OUT] > 0:
-            record_output(t, X, P, n, out_t, out_x, out_P, counts)
-        counts[CNT_STOP] = k + 1
+            record_output(t, X, P, log)
+        log.counts[CNT_STOP] = k + 1
     return STATUS_OK

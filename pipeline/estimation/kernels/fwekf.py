@@ -47,21 +47,18 @@ import numpy as np
 from pipeline._jit import njit
 from pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
 from pipeline.estimation.kernels.common import (
-    CFG_GAP_S,
-    CFG_MAX_STEP,
-    CFG_NHC_ON,
-    CFG_SUBSTEPS,
     CNT_OUT,
     CNT_STOP,
-    N_STREAMS,
     STATUS_INDEFINITE,
     STATUS_OK,
     check_state,
+    epoch_buffers,
     fail,
     keep_pd,
     record_output,
 )
 from pipeline.estimation.kernels.ekf import ekf_prepare, joseph_update
+from pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
 from pipeline.estimation.models.ins import ACC_DIM, inject, propagate_span
 from pipeline.estimation.models.ins_errors import transition
 from pipeline.estimation.models.measurement import K_PR, ST_FIX, ST_OUT, ST_T, epoch_layout
@@ -123,43 +120,22 @@ def push_residuals(ring: F64, count: int, rows: I64, nu: F64, S: F64, m: int) ->
 def run_fwekf(
     x0: F64,
     P0: F64,
-    n: int,
-    t0: int,
-    i0: int,
-    u0: F64,
-    imu_t: I64,
-    imu: F64,
-    stops: I64,
+    sched: Schedule,
     fix: F64 | None,
     obs: F64 | None,
-    obs_start: I64,
-    cfg: F64,
-    noise: F64,
-    lever_b: F64,
-    nhc_sigma: F64,
-    gate: F64,
-    fz: F64,
-    rules: I64,
-    out_alpha: F64,
-    m_max: int,
-    out_t: I64,
-    out_x: F64,
-    out_P: F64,
-    inn_i: I64,
-    inn_f: F64,
-    ev_i: I64,
-    ev_f: F64,
-    counts: I64,
+    cfg: Settings,
+    fading: Fading,
+    log: RunLog,
 ) -> int:
-    """Replay the FWEKF: ``kernels.ekf.run_ekf``'s arguments plus the fuzzy system.
-
-    Args:
-        fz: ``FuzzyParams.vector()``; rules: ``fuzzy.RULES``.
-        out_alpha: out, the alpha in force at each output row.
+    """Replay the FWEKF: ``kernels.ekf.run_ekf``'s arguments plus the fuzzy system
+    (``records.Fading``: its parameters, rules, and the alpha in force at each output row).
 
     Returns:
         a ``common.STATUS_*`` code.
     """
+    n = cfg.n
+    fz, rules, out_alpha = fading.fz, fading.rules, fading.out_alpha
+    ev_i, ev_f, counts = log.ev_i, log.ev_f, log.counts
     X = x0.copy()
     P = P0.copy()
     ones = np.ones(n)
@@ -168,58 +144,48 @@ def run_fwekf(
     Qd = np.empty((n, n))
     work = np.zeros((9, 10))
     acc = np.zeros(ACC_DIM)
-    u = u0.copy()
+    u = sched.u0.copy()
     u_end = np.empty(6)
-    rows = np.empty((m_max, 2), np.int64)
-    blocks = np.empty((m_max, 4), np.int64)
-    z, r, nu = np.empty(m_max), np.empty(m_max), np.empty(m_max)
-    H = np.empty((m_max, n))
-    S = np.empty((m_max, m_max))
-    acc_rows = np.empty(m_max, np.int64)
-    reject_since = -np.ones(N_STREAMS, np.int64)
+    buf = epoch_buffers(sched.m_max, n)
     ring = np.full((int(fz[FZ_WINDOW]), RING_COLS), math.nan)
     n_ring = 0
     alpha = 1.0
-    substeps = int(cfg[CFG_SUBSTEPS])
-    nhc_on = cfg[CFG_NHC_ON] > 0.0
     out_alpha[0] = alpha
-    record_output(t0, X, P, n, out_t, out_x, out_P, counts)
-    t_cur = t0
-    i = i0
+    record_output(sched.t0, X, P, log)
+    t_cur = sched.t0
+    i = sched.i0
+    stops = sched.stops
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
         i = propagate_span(
-            X, imu_t, imu, i, t_cur, u, t, substeps, cfg[CFG_MAX_STEP], cfg[CFG_GAP_S], u_end,
-            work, acc, True,
+            X, sched.imu_t, sched.imu, i, t_cur, u, t, cfg.substeps, cfg.max_step_s, cfg.gap_s,
+            u_end, work, acc, True,
         )  # fmt: skip
         u[:] = u_end
         t_cur = t
-        transition(X, acc, noise, n, Phi, Qd)
+        transition(X, acc, cfg.noise, n, Phi, Qd)
         a_k = alpha if stop[ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
         fade_prior(P, Phi, Qd, a_k)
-        m, nb_ = epoch_layout(stop, fix, obs, obs_start, nhc_on, rows, blocks)
+        m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
         if m > 0:
-            ma = ekf_prepare(
-                t, X, P, n, rows, m, blocks, nb_, fix, obs, u[3:6], lever_b, nhc_sigma, gate,
-                cfg, reject_since, z, r, nu, H, S, acc_rows, inn_i, inn_f, ev_i, ev_f, counts,
-            )  # fmt: skip
+            ma = ekf_prepare(t, X, P, m, nb_, fix, obs, u[3:6], cfg, buf, log)
             if ma > 0:
-                dx, ok = weighted_update(P, n, H, S, r, nu, acc_rows, ma, a_k)
+                dx, ok = weighted_update(P, n, buf.H, buf.S, buf.r, buf.nu, buf.acc_rows, ma, a_k)
                 if ok:
                     inject(X, dx, n)
             if stop[ST_FIX] >= 0:
-                n_ring = push_residuals(ring, n_ring, rows, nu, S, m)
+                n_ring = push_residuals(ring, n_ring, buf.rows, buf.nu, buf.S, m)
                 mean_in, cov_in = residual_inputs(ring, n_ring)
                 alpha = infer_alpha(mean_in, cov_in, fz, rules)
         ok = keep_pd(P, n, L, t, ev_i, ev_f, counts)
-        status = check_state(X, P, n, ones, cfg) if ok else STATUS_INDEFINITE
+        status = check_state(X, P, ones, cfg) if ok else STATUS_INDEFINITE
         if status != STATUS_OK:
             return fail(t, status, ev_i, ev_f, counts)
         if stop[ST_OUT] > 0:
             j = counts[CNT_OUT]
             if j < out_alpha.shape[0]:
                 out_alpha[j] = alpha
-            record_output(t, X, P, n, out_t, out_x, out_P, counts)
+            record_output(t, X, P, log)
         counts[CNT_STOP] = k + 1
     return STATUS_OK

@@ -42,12 +42,6 @@ import numpy as np
 
 from pipeline._jit import njit
 from pipeline.estimation.kernels.common import (
-    CFG_GAP_S,
-    CFG_MAX_STEP,
-    CFG_NHC_ON,
-    CFG_SUBSTEPS,
-    CFG_TIMEOUT_S,
-    CFG_UKF_GAMMA,
     CNT_STOP,
     EV_RESET,
     N_STREAMS,
@@ -57,6 +51,7 @@ from pipeline.estimation.kernels.common import (
     check_state,
     cho_solve,
     cholesky,
+    epoch_buffers,
     fail,
     gate_blocks,
     gating_cov,
@@ -67,6 +62,13 @@ from pipeline.estimation.kernels.common import (
     record_output,
     streams_to_reset,
     update_reject_since,
+)
+from pipeline.estimation.kernels.records import (
+    EpochBuffers,
+    RunLog,
+    Schedule,
+    Settings,
+    SigmaWork,
 )
 from pipeline.estimation.kernels.unscented import (
     cross_cov,
@@ -113,34 +115,21 @@ def ukf_predict(
     s: F64,
     P: F64,
     q_ref: F64,
-    n: int,
-    wm: F64,
-    wc: F64,
-    gamma: float,
-    imu_t: I64,
-    imu: F64,
+    sched: Schedule,
     i: int,
-    t_start: int,
+    span: tuple[int, int],
     u: F64,
-    t_end: int,
-    cfg: F64,
-    noise: F64,
-    sig: F64,
-    sigX: F64,
-    L: F64,
-    u_end: F64,
-    work: F64,
-    acc: F64,
-    Phi: F64,
-    Qd: F64,
-    sc: F64,
-    lanes: I64,
-    Y: F64,
+    cfg: Settings,
+    ws: SigmaWork,
 ) -> int:
-    """Steps 1-3 of the module docstring over one span; ``s``, ``P``, ``q_ref`` updated in
-    place (the other arrays are workspace; ``lanes`` and ``Y`` those of
+    """Steps 1-3 of the module docstring over one span ``(t_start, t_end)``, ns; ``s``,
+    ``P``, ``q_ref`` updated in place (``ws``: the workspace; its ``lanes`` and ``Y`` those of
     ``ins.propagate_sigmas``, which integrates the span's sigma points together). Returns the
     next IMU index, or -1 if ``P`` is not positive definite."""
+    n, wm, wc, gamma, noise = cfg.n, cfg.wm, cfg.wc, cfg.ukf_gamma, cfg.noise
+    sig, sigX, L, u_end, work, acc = ws.sig, ws.sigX, ws.L, ws.u_end, ws.work, ws.acc
+    Phi, Qd, sc, lanes, Y = ws.Phi, ws.Qd, ws.sc, ws.lanes, ws.Y
+    t_start, t_end = span
     if not draw_sigmas(s, P, n, gamma, L, sig):
         return -1
     ns = 2 * n + 1
@@ -156,15 +145,15 @@ def ukf_predict(
         sigX,
         lanes,
         int(m),
-        imu_t,
-        imu,
+        sched.imu_t,
+        sched.imu,
         i,
         t_start,
         u,
         t_end,
-        int(cfg[CFG_SUBSTEPS]),
-        cfg[CFG_MAX_STEP],
-        cfg[CFG_GAP_S],
+        cfg.substeps,
+        cfg.max_step_s,
+        cfg.gap_s,
         u_end,
         work,
         acc,
@@ -199,31 +188,19 @@ def ukf_update(
     s: F64,
     P: F64,
     q_ref: F64,
-    n: int,
-    wm: F64,
-    wc: F64,
-    gamma: float,
-    rows: I64,
     m: int,
-    blocks: I64,
     nb_: int,
     fix: F64 | None,
     obs: F64 | None,
     w_ib_b: F64,
-    lever_b: F64,
-    nhc_sigma: F64,
-    gate: F64,
-    cfg: F64,
-    reject_since: I64,
-    sig: F64,
-    L: F64,
-    inn_i: I64,
-    inn_f: F64,
-    ev_i: I64,
-    ev_f: F64,
-    counts: I64,
+    cfg: Settings,
+    buf: EpochBuffers,
+    ws: SigmaWork,
+    log: RunLog,
 ) -> bool:
     """Step 4 of the module docstring; False if ``P`` was not positive definite."""
+    n, wm, wc, gamma, gate = cfg.n, cfg.wm, cfg.wc, cfg.ukf_gamma, cfg.gate
+    lever_b, rows, blocks, sig, L = cfg.lever_b, buf.rows, buf.blocks, ws.sig, ws.L
     ns = 2 * n + 1
     Xm = np.empty(FULL_DIM)
     to_full(s, q_ref, n, Xm)
@@ -232,7 +209,7 @@ def ukf_update(
     coords_scale(Xm, n, sc)
     z = np.empty(m)
     r = np.empty(m)
-    epoch_z(rows, m, fix, obs, ref, nhc_sigma, z, r)
+    epoch_z(rows, m, fix, obs, ref, cfg.nhc_sigma, z, r)
     dr = np.empty(m)
     gate_shift(rows, m, fix, r, dr)
     # predictions relative to the mean's: pseudoranges are ~2e7 m and their unscented average
@@ -260,14 +237,15 @@ def ukf_update(
         Sg = gating_cov(S, dr, m)
         gate_blocks(nu, Sg, blocks, nb_, gate, nis, accepted, gwork)
         if attempt == 1 or not _reset_streams(
-            t_ns, P, n, nu, blocks, nb_, accepted, reject_since, sc, cfg, ev_i, ev_f, counts
+            t_ns, P, nu, blocks, nb_, accepted, buf.reject_since, sc, cfg, log
         ):
             break
     cross_cov(sig, s, Z, zp, wc, n, m, Pxz)
     record_innovations(
-        t_ns, nu, Sg, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts, ev_i, ev_f
-    )
-    update_reject_since(t_ns, blocks, nb_, accepted, reject_since)
+        t_ns, nu, Sg, blocks, nb_, nis, accepted, gate, log.inn_i, log.inn_f, log.counts,
+        log.ev_i, log.ev_f,
+    )  # fmt: skip
+    update_reject_since(t_ns, blocks, nb_, accepted, buf.reject_since)
     a = np.empty(m, np.int64)
     ma = accepted_rows(blocks, nb_, accepted, a)
     if ma > 0:
@@ -279,24 +257,21 @@ def ukf_update(
 def _reset_streams(
     t_ns: int,
     P: F64,
-    n: int,
     nu: F64,
     blocks: I64,
     nb_: int,
     accepted: I64,
     reject_since: I64,
     sc: F64,
-    cfg: F64,
-    ev_i: I64,
-    ev_f: F64,
-    counts: I64,
+    cfg: Settings,
+    log: RunLog,
 ) -> bool:
     """Reset the streams that timed out (``common.streams_to_reset``); True if any was."""
-    reset = streams_to_reset(t_ns, blocks, nb_, accepted, reject_since, cfg[CFG_TIMEOUT_S])
+    reset = streams_to_reset(t_ns, blocks, nb_, accepted, reject_since, cfg.timeout_s)
     for st in range(N_STREAMS):
         if reset[st]:
-            big = inflate_for_stream(P, n, st, nu, blocks, nb_, sc, cfg)
-            record_event(ev_i, ev_f, counts, t_ns, EV_RESET, st, -1, big)
+            big = inflate_for_stream(P, st, nu, blocks, nb_, sc, cfg)
+            record_event(log.ev_i, log.ev_f, log.counts, t_ns, EV_RESET, st, -1, big)
     return bool(reset.sum() > 0)
 
 
@@ -337,44 +312,35 @@ def _error_cov(P: F64, sc: F64, n: int, out: F64) -> None:
 
 
 @njit(cache=True, error_model="numpy")
+def sigma_work(n: int) -> SigmaWork:
+    """The UKF workspace for ``n`` error states."""
+    ns = 2 * n + 1
+    return SigmaWork(
+        np.empty((ns, n)),
+        np.empty((ns, FULL_DIM)),
+        np.empty((n, n)),
+        np.empty(6),
+        np.zeros((9, 10)),
+        np.zeros(ACC_DIM),
+        np.empty((n, n)),
+        np.empty((n, n)),
+        np.empty(n),
+        np.empty(ns, np.int64),
+        np.zeros(LN_DIM * LANES),
+    )
+
+
+@njit(cache=True, error_model="numpy")
 def run_ukf(
-    x0: F64,
-    P0: F64,
-    n: int,
-    t0: int,
-    i0: int,
-    u0: F64,
-    imu_t: I64,
-    imu: F64,
-    stops: I64,
-    fix: F64 | None,
-    obs: F64 | None,
-    obs_start: I64,
-    cfg: F64,
-    noise: F64,
-    lever_b: F64,
-    nhc_sigma: F64,
-    gate: F64,
-    wm: F64,
-    wc: F64,
-    m_max: int,
-    out_t: I64,
-    out_x: F64,
-    out_P: F64,
-    inn_i: I64,
-    inn_f: F64,
-    ev_i: I64,
-    ev_f: F64,
-    counts: I64,
+    x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
 ) -> int:
     """Replay the total-state UKF from ``x0`` (full state) and ``P0`` (error coordinates).
 
-    Arguments as ``kernels.ekf.run_ekf``, plus the unscented weights ``wm``, ``wc`` (2n+1,);
-    the sigma spread is ``cfg[CFG_UKF_GAMMA]``. Outputs carry the full state and the
+    Arguments as ``kernels.ekf.run_ekf``; the unscented weights and sigma spread are
+    ``cfg.wm``, ``cfg.wc`` and ``cfg.ukf_gamma``. Outputs carry the full state and the
     covariance converted to error coordinates (NED metres for position), like the EKF's.
     """
-    gamma = cfg[CFG_UKF_GAMMA]
-    ns = 2 * n + 1
+    n = cfg.n
     q_ref = x0[X_Q : X_Q + 4].copy()
     s = np.empty(n)
     from_full(x0, q_ref, n, s)
@@ -384,103 +350,39 @@ def run_ukf(
     for r in range(n):
         for c in range(n):
             P[r, c] = P0[r, c] * sc[r] * sc[c]
-    sig = np.empty((ns, n))
-    sigX = np.empty((ns, FULL_DIM))
-    L = np.empty((n, n))
     Pe = np.empty((n, n))
     X = np.empty(FULL_DIM)
-    u = u0.copy()
-    u_end = np.empty(6)
-    work = np.zeros((9, 10))
-    acc = np.zeros(ACC_DIM)
-    Phi = np.empty((n, n))
-    Qd = np.empty((n, n))
-    sc_q = np.empty(n)
-    lanes = np.empty(ns, np.int64)
-    Y = np.zeros(LN_DIM * LANES)
-    rows = np.empty((m_max, 2), np.int64)
-    blocks = np.empty((m_max, 4), np.int64)
-    reject_since = -np.ones(N_STREAMS, np.int64)
-    nhc_on = cfg[CFG_NHC_ON] > 0.0
-    record_output(t0, x0, P0, n, out_t, out_x, out_P, counts)
-    t_cur = t0
-    i = i0
+    u = sched.u0.copy()
+    ws = sigma_work(n)
+    buf = epoch_buffers(sched.m_max, n)
+    ev_i, ev_f, counts = log.ev_i, log.ev_f, log.counts
+    record_output(sched.t0, x0, P0, log)
+    t_cur = sched.t0
+    i = sched.i0
+    stops = sched.stops
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
-        i_next = ukf_predict(
-            s,
-            P,
-            q_ref,
-            n,
-            wm,
-            wc,
-            gamma,
-            imu_t,
-            imu,
-            i,
-            t_cur,
-            u,
-            t,
-            cfg,
-            noise,
-            sig,
-            sigX,
-            L,
-            u_end,
-            work,
-            acc,
-            Phi,
-            Qd,
-            sc_q,
-            lanes,
-            Y,
-        )
+        i_next = ukf_predict(s, P, q_ref, sched, i, (t_cur, t), u, cfg, ws)
         ok = i_next >= 0
         if ok:
             i = i_next
             for j in range(6):
-                u[j] = u_end[j]
+                u[j] = ws.u_end[j]
             t_cur = t
-            ok = keep_pd(P, n, L, t, ev_i, ev_f, counts)
-        m, nb_ = epoch_layout(stop, fix, obs, obs_start, nhc_on, rows, blocks)
+            ok = keep_pd(P, n, ws.L, t, ev_i, ev_f, counts)
+        m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
         if ok and m > 0:
             ok = ukf_update(
-                t,
-                s,
-                P,
-                q_ref,
-                n,
-                wm,
-                wc,
-                gamma,
-                rows,
-                m,
-                blocks,
-                nb_,
-                fix,
-                obs,
-                u[3:6],
-                lever_b,
-                nhc_sigma,
-                gate,
-                cfg,
-                reject_since,
-                sig,
-                L,
-                inn_i,
-                inn_f,
-                ev_i,
-                ev_f,
-                counts,
-            ) and keep_pd(P, n, L, t, ev_i, ev_f, counts)
+                t, s, P, q_ref, m, nb_, fix, obs, u[3:6], cfg, buf, ws, log
+            ) and keep_pd(P, n, ws.L, t, ev_i, ev_f, counts)
         to_full(s, q_ref, n, X)
         coords_scale(X, n, sc)
-        status = check_state(X, P, n, sc, cfg) if ok else STATUS_INDEFINITE
+        status = check_state(X, P, sc, cfg) if ok else STATUS_INDEFINITE
         if status != STATUS_OK:
             return fail(t, status, ev_i, ev_f, counts)
         if stop[ST_OUT] > 0:
             _error_cov(P, sc, n, Pe)
-            record_output(t, X, Pe, n, out_t, out_x, out_P, counts)
+            record_output(t, X, Pe, log)
         counts[CNT_STOP] = k + 1
     return STATUS_OK
