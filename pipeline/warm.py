@@ -7,10 +7,10 @@ path a real run takes (tables written and read back, ``estimation.families.run_t
 argument types it compiles for are exactly those of a real run. Nothing but numba's public
 API is involved: each kernel is compiled by calling it.
 
-Filters that share one compiled kernel (a filter and its ``_nhc`` variant; the vehicle-model
-filters; the cascaded filters) are one *group* and are warmed one after the other in one
-process: the second loads what the first compiled. Groups compile independently, one process
-each, ``jobs`` at a time.
+Filters that share one compiled kernel (the EKFs, loose or tight, with or without NHC; the
+UKFs; the vehicle-model filters; the cascaded filters) are one *group* and are warmed one
+after the other in one process: the later ones load what the first compiled. Groups compile
+independently, one process each, ``jobs`` at a time.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def groups(names: Sequence[str] | None = None) -> list[tuple[str, ...]]:
             key: tuple[str, ...] = (family.name,)
             if family.name == "ins":
                 kind = FILTER_KINDS[name]
-                key = (family.name, kind.numba_kernel, kind.coupling)
+                key = (family.name, kind.numba_kernel)  # loose and tight share it
             keyed.setdefault(key, []).append(name)
     return [tuple(v) for v in keyed.values()]
 

@@ -339,26 +339,23 @@ def resolve_imu_noise(
 
 def _measurements(
     coupling: str, fixes: inp.FixData | None, obs: inp.ObsData | None
-) -> tuple[F64 | None, I64 | None, F64 | None, I64, I64 | None]:
+) -> tuple[F64, I64 | None, F64, I64, I64 | None]:
     """(fix rows, fix times, obs rows, obs epoch starts, obs epoch times) for a kernel.
 
-    The table a filter does not read is passed as None: the kernel compiled for it then
-    carries no code for it (``models.measurement``).
+    The table a filter does not read is passed empty, so loose and tight coupling share one
+    compiled kernel (the measurement code skips a table whose epochs the schedule never
+    names).
     """
+    no_fix, no_obs = np.zeros((0, me.FIX_COLS)), np.zeros((0, me.OBS_COLS))
     if coupling == "loose":
         if fixes is None:
-            return np.zeros((0, me.FIX_COLS)), None, None, np.zeros(1, np.int64), None
+            return no_fix, None, no_obs, np.zeros(1, np.int64), None
         fix_t = fixes.t_ns[fixes.usable]
-        return (
-            np.ascontiguousarray(fixes.fix[fixes.usable]),
-            fix_t,
-            None,
-            np.zeros(1, np.int64),
-            None,
-        )
+        fix = np.ascontiguousarray(fixes.fix[fixes.usable])
+        return fix, fix_t, no_obs, np.zeros(1, np.int64), None
     if obs is None:
-        return None, None, np.zeros((0, me.OBS_COLS)), np.zeros(1, np.int64), None
-    return None, None, obs.obs, obs.start, obs.epoch_t_ns
+        return no_fix, None, no_obs, np.zeros(1, np.int64), None
+    return no_fix, None, np.ascontiguousarray(obs.obs), obs.start, obs.epoch_t_ns
 
 
 def _run_segment(

@@ -22,10 +22,10 @@ Array layouts shared with ``pipeline.estimation.inputs`` (which fills them) and 
 - ``rows`` (m, 2): kind (``K_*``) and the fix or obs row it reads.
 - ``blocks`` (b, 4): first row, dimension, stream (``S_*``) and satellite code (-1 = none).
 
-A filter that reads no fixes (tight coupling) passes ``fix=None`` and one that reads no
-pseudoranges (loose coupling) ``obs=None``: numba then prunes the ``is not None`` branches
-while compiling, so a loosely coupled kernel carries no pseudorange code and compiles
-seconds faster (issue 5's cold-compile budget); the arithmetic is the same either way.
+The replay passes the table a filter does not read as an empty array (no stop names one of
+its epochs), so loosely and tightly coupled filters share one compiled kernel. ``None`` is
+accepted too: numba then prunes the ``is not None`` branches while compiling (a separate,
+smaller kernel); the arithmetic is the same either way.
 """
 
 from __future__ import annotations

@@ -47,11 +47,11 @@ def _stats(cache: Path) -> dict[str, int]:
 
 def test_groups_put_filters_that_share_a_kernel_together() -> None:
     every = groups()
-    assert ("lc_ekf", "lc_ekf_nhc") in every
+    assert ("lc_ekf", "tc_ekf", "lc_ekf_nhc", "tc_ekf_nhc") in every  # one kernel
     assert ("tc_ukf", "tc_ukf_nhc") in every
     assert ("fwekf",) in every
     assert sorted(n for g in every for n in g) == sorted(filter_names())  # each once
-    assert groups(["tc_ekf_nhc", "lc_ekf"]) == [("lc_ekf",), ("tc_ekf_nhc",)]
+    assert groups(["tc_ukf", "lc_ekf"]) == [("lc_ekf",), ("tc_ukf",)]
     with pytest.raises(KeyError, match="unknown filter 'nope'"):
         groups(["nope"])
 
@@ -63,15 +63,15 @@ def test_after_warm_the_first_run_loads_the_kernel_and_compiles_nothing(tmp_path
     stamp = tmp_path / "warm.json"
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
     done = subprocess.run(
-        [sys.executable, "-m", "pipeline.cli", "warm", "--filter", "lc_ekf",
+        [sys.executable, "-m", "pipeline.cli", "warm", "--filter", "tc_ekf",
          "--filter", "lc_ekf_nhc", "--stamp", str(stamp)],
         env=env, capture_output=True, text=True, check=False, cwd=REPO,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
-    assert "[1/1] lc_ekf, lc_ekf_nhc: compiled" in done.stdout
+    assert "[1/1] tc_ekf, lc_ekf_nhc: compiled" in done.stdout
     assert json.loads(stamp.read_text()) == {
         "numba_source_digest": installed_digest(),
-        "filters": [["lc_ekf", "lc_ekf_nhc"]],
+        "filters": [["tc_ekf", "lc_ekf_nhc"]],
     }
     assert _stats(cache) == {"hits": 1, "misses": 0}
 
