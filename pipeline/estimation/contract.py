@@ -141,6 +141,51 @@ class Family(Protocol):
         ...
 
 
+class ResultLike(Protocol):
+    """What every family's result holds that ``run_metrics`` reads."""
+
+    @property
+    def filter(self) -> str: ...
+    @property
+    def backend(self) -> str: ...
+    @property
+    def status(self) -> str: ...
+    @property
+    def failure(self) -> str | None: ...
+    @property
+    def runtime_s(self) -> float: ...
+    @property
+    def duration_s(self) -> float: ...
+    @property
+    def t_ns(self) -> Any: ...
+    @property
+    def events(self) -> Sequence[EventLike]: ...
+
+
+def run_metrics(result: ResultLike, nis: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The ``metrics.json`` keys every family shares: what ran and how it ended, its cost,
+    NIS per stream (``nis``: the family's per-stream summary), gate decisions and events."""
+    kinds: dict[str, int] = {}
+    for e in result.events:
+        kinds[e.kind] = kinds.get(e.kind, 0) + 1
+    return {
+        "filter": result.filter,
+        "backend": result.backend,
+        "status": result.status,
+        "failure": result.failure,
+        "runtime_s": result.runtime_s,
+        "duration_s": result.duration_s,
+        "realtime_factor": result.duration_s / result.runtime_s if result.runtime_s else None,
+        "epochs": int(result.t_ns.size),
+        "nis": nis,
+        "nis_mean": {k: v["nis_mean"] for k, v in nis.items()},
+        "gate_rejections": int(sum(v["rejected"] for v in nis.values())),
+        "gate_resets": kinds.get("gate_reset", 0),
+        "cov_repairs": kinds.get("cov_repair", 0),
+        "events": kinds,
+    }
+
+
 class EventLike(Protocol):
     """What ``events_table`` reads of an event."""
 

@@ -24,6 +24,7 @@ import numpy.typing as npt
 import pyarrow as pa
 from scipy.stats import chi2
 
+from pipeline.estimation.contract import run_metrics
 from pipeline.estimation.models import measurement as me
 from pipeline.estimation.outage_metrics import outage_windows
 from pipeline.estimation.replay import RunResult
@@ -91,29 +92,14 @@ def compute_metrics(
     ``windows`` (from ``t0_ns``) add ``outage_windows``; ``fixes`` (the unmodified GNSS fixes)
     are their reference when there is no truth, with the antenna ``lever_b``.
     """
-    kinds: dict[str, int] = {}
-    for e in result.events:
-        kinds[e.kind] = kinds.get(e.kind, 0) + 1
-    nis = nis_summary(result)
-    m: dict[str, Any] = {
-        "filter": result.filter,
-        "backend": result.backend,
-        "status": result.status,
-        "failure": result.failure,
-        "runtime_s": result.runtime_s,
-        "compile_s": result.compile_s,
-        "duration_s": result.duration_s,
-        "realtime_factor": result.duration_s / result.runtime_s if result.runtime_s else None,
-        "epochs": int(result.t_ns.size),
-        "nis": nis,
-        "nis_mean": {k: v["nis_mean"] for k, v in nis.items()},
-        "gate_rejections": int(sum(v["rejected"] for v in nis.values())),
-        "gate_resets": kinds.get("gate_reset", 0),
-        "cov_repairs": kinds.get("cov_repair", 0),
-        "events": kinds,
-        "alignment": [a.summary() for a in result.alignments],
-        "imu_noise": result.imu_noise,
-    }
+    m = run_metrics(result, nis_summary(result))
+    m.update(
+        {
+            "compile_s": result.compile_s,
+            "alignment": [a.summary() for a in result.alignments],
+            "imu_noise": result.imu_noise,
+        }
+    )
     if windows:
         params = window_params or WindowMetricsParams()
         m["outage_windows"] = outage_windows(result, truth, fixes, lever_b, windows, t0_ns, params)

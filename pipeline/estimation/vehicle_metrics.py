@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from pipeline.estimation.contract import run_metrics
 from pipeline.estimation.kernels import vehicle as kv
 from pipeline.estimation.metrics import nis_by_stream
 from pipeline.estimation.models import vehicle as vm
@@ -94,28 +95,10 @@ def nis_summary(result: VehicleRunResult) -> dict[str, dict[str, Any]]:
 
 def compute_metrics(result: VehicleRunResult, truth: pa.Table | None) -> dict[str, Any]:
     """``metrics.json`` of a vehicle-filter run."""
-    kinds: dict[str, int] = {}
-    for ev in result.events:
-        kinds[ev.kind] = kinds.get(ev.kind, 0) + 1
-    nis = nis_summary(result)
-    m: dict[str, Any] = {
-        "filter": result.filter,
-        "backend": result.backend,
-        "status": result.status,
-        "failure": result.failure,
-        "runtime_s": result.runtime_s,
-        "duration_s": result.duration_s,
-        "realtime_factor": result.duration_s / result.runtime_s if result.runtime_s else None,
-        "epochs": int(result.t_ns.size),
-        "steer_source": result.steer_source,
-        "init": result.init,
-        "nis": nis,
-        "nis_mean": {k: v["nis_mean"] for k, v in nis.items()},
-        "gate_rejections": int(sum(v["rejected"] for v in nis.values())),
-        "cov_repairs": kinds.get("cov_repair", 0),
-        "events": kinds,
-        "dynamic_share": float(np.mean(result.aux)) if result.aux.size else None,
-    }
+    m = run_metrics(result, nis_summary(result))
+    m["steer_source"] = result.steer_source
+    m["init"] = result.init
+    m["dynamic_share"] = float(np.mean(result.aux)) if result.aux.size else None
     if truth is None or truth.num_rows == 0 or result.t_ns.size == 0:
         m["truth"] = False
         return m

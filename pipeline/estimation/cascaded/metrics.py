@@ -27,6 +27,7 @@ from pipeline.estimation.cascaded.engine import CascadedResult
 from pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, NX
 from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
 from pipeline.estimation.cascaded_config import ConvergenceBand
+from pipeline.estimation.contract import run_metrics
 from pipeline.estimation.metrics import nis_by_stream
 from pipeline.nav.earth import F64
 from pipeline.nav.local import LocalFrame
@@ -116,26 +117,7 @@ def compute_metrics(
     result: CascadedResult, truth_x: F64 | None, band: ConvergenceBand
 ) -> dict[str, Any]:
     """The metrics of one run (module docstring); accuracy needs ``truth_x`` (K, 12)."""
-    kinds: dict[str, int] = {}
-    for e in result.events:
-        kinds[e.kind] = kinds.get(e.kind, 0) + 1
-    nis = nis_summary(result)
-    m: dict[str, Any] = {
-        "filter": result.filter,
-        "backend": result.backend,
-        "status": result.status,
-        "failure": result.failure,
-        "runtime_s": result.runtime_s,
-        "duration_s": result.duration_s,
-        "realtime_factor": result.duration_s / result.runtime_s if result.runtime_s else None,
-        "epochs": int(result.t_ns.size),
-        "nis": nis,
-        "nis_mean": {k: v["nis_mean"] for k, v in nis.items()},
-        "gate_rejections": int(sum(v["rejected"] for v in nis.values())),
-        "gate_resets": kinds.get("gate_reset", 0),
-        "cov_repairs": kinds.get("cov_repair", 0),
-        "events": kinds,
-    }
+    m = run_metrics(result, nis_summary(result))
     if truth_x is None or result.t_ns.size == 0:
         m["truth"] = False
         return m
