@@ -27,8 +27,9 @@ from filterpy.kalman import ExtendedKalmanFilter, IMMEstimator
 
 from pipeline.estimation.kernels import common as cm
 from pipeline.estimation.kernels import vehicle as kv
+from pipeline.estimation.kernels.records import RunLog
 from pipeline.estimation.models import vehicle as vm
-from pipeline.nav.earth import F64, I64
+from pipeline.nav.earth import F64
 
 
 class _ModelEKF(ExtendedKalmanFilter):  # type: ignore[misc]
@@ -93,11 +94,13 @@ class _ModelEKF(ExtendedKalmanFilter):  # type: ignore[misc]
 
 
 def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.run_vehicle
-    x0: F64, P0: F64, u0: F64, t0: int, stops: I64, veh: F64, fix: F64, vp: F64, q: F64,
-    cfg: F64, gate: F64, out_t: I64, out_x: F64, out_P: F64, out_aux: F64, inn_i: I64,
-    inn_f: F64, ev_i: I64, ev_f: F64, counts: I64,
+    x0: F64, P0: F64, sched: kv.VehicleSchedule, vs: kv.VehicleSettings, log: RunLog,
+    out_aux: F64,
 ) -> int:  # fmt: skip
     """``kernels.vehicle.run_vehicle`` with filterpy's EKF / IMMEstimator doing the arithmetic."""
+    t0, u0, stops, veh, fix = sched
+    vp, q, cfg, gate = vs
+    _, _, _, inn_i, inn_f, ev_i, ev_f, counts = log
     mode = int(cfg[kv.VC_MODE])
     imm_on = mode == kv.MODE_IMM
     if imm_on:
@@ -124,7 +127,7 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
     work = np.empty((3, 6))
     reject_since = -np.ones(cm.N_STREAMS, np.int64)
     x, P = x0.copy(), P0.copy()
-    kv._record(t0, x, P, aux, out_t, out_x, out_P, out_aux, counts)
+    kv._record(t0, x, P, aux, log, out_aux)
     t_cur = t0
     for k in range(stops.shape[0]):
         t = int(stops[k, kv.VS_T])
@@ -205,7 +208,6 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
         if status != cm.STATUS_OK:
             return int(cm.fail(t, status, ev_i, ev_f, counts))
         if stops[k, kv.VS_OUT] > 0:
-            kv._record(t, np.ascontiguousarray(x), np.ascontiguousarray(P), aux, out_t, out_x,
-                       out_P, out_aux, counts)  # fmt: skip
+            kv._record(t, np.ascontiguousarray(x), np.ascontiguousarray(P), aux, log, out_aux)
         counts[cm.CNT_STOP] = k + 1
     return cm.STATUS_OK

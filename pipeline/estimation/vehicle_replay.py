@@ -33,6 +33,7 @@ from pipeline.estimation import inputs as inp
 from pipeline.estimation.contract import Backend
 from pipeline.estimation.kernels import common as cm
 from pipeline.estimation.kernels import vehicle as kv
+from pipeline.estimation.kernels.records import RunLog
 from pipeline.estimation.models import vehicle as vm
 from pipeline.estimation.replay import ReplayInputError
 from pipeline.estimation.vehicle_config import VehicleFilterParams
@@ -321,16 +322,19 @@ def run_vehicle_filter(
     n_out = int(stops[:, kv.VS_OUT].sum()) + 1
     n_inn = len(stops) * kv.M_MAX
     n_ev = n_inn + 2 * len(stops) + 16
-    out_t, out_x = np.zeros(n_out, np.int64), np.zeros((n_out, vm.NX))
-    out_P, out_aux = np.zeros((n_out, vm.NX, vm.NX)), np.zeros(n_out)
-    inn_i, inn_f = np.zeros((n_inn, cm.INN_I_COLS), np.int64), np.zeros((n_inn, cm.INN_F_COLS))
-    ev_i, ev_f = np.zeros((n_ev, 4), np.int64), np.zeros(n_ev)
-    counts = np.zeros(cm.CNT_DIM, np.int64)
-    code = _kernel(backend)(
-        x0, P0, data.veh[i0].copy(), t0, stops, data.veh, data.fix, vehicle_vector(params), q,
-        cfg, gate, out_t, out_x, out_P, out_aux, inn_i, inn_f, ev_i, ev_f, counts,
-    )  # fmt: skip
-    k_out, k_inn, k_ev = (int(counts[c]) for c in (cm.CNT_OUT, cm.CNT_INN, cm.CNT_EV))
+    sched = kv.VehicleSchedule(int(t0), data.veh[i0].copy(), stops, data.veh, data.fix)
+    vs = kv.VehicleSettings(vehicle_vector(params), q, cfg, gate)
+    log_ = RunLog.allocate(n_out, n_inn, n_ev, vm.NX, vm.NX)
+    while True:  # a log too small for the run is grown and the run made again
+        out_aux = np.zeros(log_.capacity()[0])
+        code = _kernel(backend)(x0, P0, sched, vs, log_, out_aux)
+        bigger = log_.grown()
+        if bigger is None:
+            break
+        log.info("run log full (%s wanted, %s held): growing it", log_.wanted(), log_.capacity())
+        log_ = bigger
+    out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts = log_
+    k_out, k_inn, k_ev = log_.wanted()
     events = list(data.events) + [
         inp.Event(
             int(ev_i[j, 0]),
@@ -339,7 +343,7 @@ def run_vehicle_filter(
             "",
             float(ev_f[j]),
         )
-        for j in range(min(k_ev, n_ev))
+        for j in range(k_ev)
     ]
     events.sort(key=lambda e: e.t_ns)
     status, failure = "ok", None
@@ -349,7 +353,6 @@ def run_vehicle_filter(
         if params.on_divergence == "raise":
             raise DivergenceError(f"filter {name} ({backend}) diverged: {failure}")
         log.warning("filter %s diverged: %s", name, failure)
-    k_out, k_inn = min(k_out, n_out), min(k_inn, n_inn)
     return VehicleRunResult(
         filter=name,
         backend=backend,

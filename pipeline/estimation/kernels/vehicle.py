@@ -30,6 +30,7 @@ applies the same rows to both models.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -54,8 +55,39 @@ from pipeline.estimation.kernels.common import (
     update_reject_since,
 )
 from pipeline.estimation.kernels.ekf import joseph_update
+from pipeline.estimation.kernels.records import RunLog
 from pipeline.estimation.models import vehicle as vm
 from pipeline.nav.earth import F64, I64
+
+
+class VehicleSchedule(NamedTuple):
+    """What a vehicle-filter run replays: its start, the stops and the data.
+
+    Attributes:
+        t0: start time, ns; u0: the vehicle input row at ``t0``.
+        stops, veh, fix: the schedule, vehicle rows and GNSS fixes (module docstring).
+    """
+
+    t0: int
+    u0: F64
+    stops: I64
+    veh: F64
+    fix: F64
+
+
+class VehicleSettings(NamedTuple):
+    """A vehicle filter's model and settings.
+
+    Attributes:
+        vp: the vehicle (``models.vehicle.VP_*``); q: model-error densities (5,).
+        cfg: settings (``VC_*``); gate: chi-square threshold by block dimension.
+    """
+
+    vp: F64
+    q: F64
+    cfg: F64
+    gate: F64
+
 
 MODE_KINEMATIC, MODE_DYNAMIC, MODE_SWITCHED, MODE_IMM = 0, 1, 2, 3
 MODE_NAMES = {
@@ -343,41 +375,23 @@ def switch_model(current: int, v_whl: float, cfg: F64) -> int:
 
 @njit(cache=True)
 def run_vehicle(
-    x0: F64,
-    P0: F64,
-    u0: F64,
-    t0: int,
-    stops: I64,
-    veh: F64,
-    fix: F64,
-    vp: F64,
-    q: F64,
-    cfg: F64,
-    gate: F64,
-    out_t: I64,
-    out_x: F64,
-    out_P: F64,
-    out_aux: F64,
-    inn_i: I64,
-    inn_f: F64,
-    ev_i: I64,
-    ev_f: F64,
-    counts: I64,
+    x0: F64, P0: F64, sched: VehicleSchedule, vs: VehicleSettings, log: RunLog, out_aux: F64
 ) -> int:
-    """Replay a vehicle-model filter from ``x0, P0`` at ``t0`` over every stop.
+    """Replay a vehicle-model filter from ``x0, P0`` at ``sched.t0`` over every stop.
 
     Args:
-        x0: initial state (5,); P0: its covariance (5, 5); u0: vehicle input row at t0.
-        stops, veh, fix: schedule and data (module docstring).
-        vp: vehicle (``models.vehicle.VP_*``); q: model-error densities (5,).
-        cfg: settings (``VC_*``); gate: chi-square threshold by dimension.
-        out_t, out_x, out_P: outputs at flagged stops (and t0); out_aux: the probability of the
-            dynamic model (IMM) or the model in use (1 = dynamic).
-        inn_i, inn_f, ev_i, ev_f, counts: logs (``kernels.common``).
+        x0: initial state (5,); P0: its covariance (5, 5).
+        sched: start, schedule and data; vs: the model and settings.
+        log: outputs at flagged stops (and t0), innovations and events (``records.RunLog``).
+        out_aux: out, per output row, the probability of the dynamic model (IMM) or the model
+            in use (1 = dynamic).
 
     Returns:
         a ``common.STATUS_*`` code.
     """
+    t0, u0, stops, veh, fix = sched
+    vp, q, cfg, gate = vs
+    _, _, _, inn_i, inn_f, ev_i, ev_f, counts = log
     mode = int(cfg[VC_MODE])
     sig_u = np.array([cfg[VC_SIG_VWHL], cfg[VC_SIG_DELTA]])
     max_step = cfg[VC_MAX_STEP]
@@ -412,7 +426,7 @@ def run_vehicle(
     Hs = np.empty((nmod, M_MAX, vm.NX))
     Ss = np.empty((nmod, M_MAX, M_MAX))
     aux = mu[1] if mode == MODE_IMM else float(model)
-    _record(t0, x, P, aux, out_t, out_x, out_P, out_aux, counts)
+    _record(t0, x, P, aux, log, out_aux)
     t_cur = t0
     for k in range(stops.shape[0]):
         t = stops[k, VS_T]
@@ -500,20 +514,18 @@ def run_vehicle(
         if status != STATUS_OK:
             return fail(t, status, ev_i, ev_f, counts)
         if stops[k, VS_OUT] > 0:
-            _record(t, x, P, aux, out_t, out_x, out_P, out_aux, counts)
+            _record(t, x, P, aux, log, out_aux)
         counts[CNT_STOP] = k + 1
     return STATUS_OK
 
 
 @njit(cache=True)
-def _record(
-    t: int, x: F64, P: F64, aux: float, out_t: I64, out_x: F64, out_P: F64, out_aux: F64,
-    counts: I64,
-) -> None:  # fmt: skip
-    k = counts[CNT_OUT]
-    if k < out_t.shape[0]:
-        out_t[k] = t
-        out_x[k] = x
-        out_P[k] = P
+def _record(t: int, x: F64, P: F64, aux: float, log: RunLog, out_aux: F64) -> None:
+    """Append an output row (counted, not written, past the capacity)."""
+    k = log.counts[CNT_OUT]
+    if k < log.out_t.shape[0]:
+        log.out_t[k] = t
+        log.out_x[k] = x
+        log.out_P[k] = P
         out_aux[k] = aux
-    counts[CNT_OUT] = k + 1
+    log.counts[CNT_OUT] = k + 1
