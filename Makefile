@@ -32,7 +32,7 @@ $(DEV_STAMP): $(STAMP)
 
 demo: venv
 	$(BIN)/dvc repro
-	@$(BIN)/python -m pipeline.cli where-reports
+	@$(BIN)/python -m navreplay.pipeline.cli where-reports
 
 test: lint typecheck pytest
 
@@ -43,7 +43,13 @@ lint: dev
 	$(BIN)/ruff format --check .
 	$(BIN)/lint-imports --no-cache
 
+# mypy checks pipeline/ and ingest/ under their installed names (navreplay.pipeline,
+# navreplay.ingest) through these symlinks: it cannot follow the editable install's import hook
+TYPECHECK_TREE := build/typecheck/navreplay
+
 typecheck: dev
+	@mkdir -p $(TYPECHECK_TREE)
+	@for pkg in pipeline ingest; do ln -sfn ../../../$$pkg $(TYPECHECK_TREE)/$$pkg; done
 	$(BIN)/mypy
 
 # Headless Chromium for the report tests (tests/browser): Debian's chromium and chromium-driver,

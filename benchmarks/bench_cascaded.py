@@ -16,14 +16,14 @@ from functools import partial
 from pathlib import Path
 
 from benchmarks._table import print_table, timed
-from pipeline.estimation.cascaded.backends import replay
-from pipeline.estimation.cascaded.closed_loop import run_closed_loop
-from pipeline.estimation.cascaded.engine import make_setup
-from pipeline.estimation.cascaded.inputs import prepare_inputs
-from pipeline.estimation.cascaded_config import CASCADED_KINDS
-from pipeline.params import load_params
-from pipeline.synth.tractor import TractorSim
-from pipeline.synth.tractor_log import synthesize
+from navreplay.pipeline.estimation.cascaded.backends import replay
+from navreplay.pipeline.estimation.cascaded.closed_loop import run_closed_loop
+from navreplay.pipeline.estimation.cascaded.engine import make_setup
+from navreplay.pipeline.estimation.cascaded.inputs import prepare_inputs
+from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS
+from navreplay.pipeline.params import load_params
+from navreplay.pipeline.synth.tractor import TractorSim
+from navreplay.pipeline.synth.tractor_log import synthesize
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -90,7 +90,7 @@ def _children_cpu() -> float:
 
 
 def _params(name: str) -> Any:
-    from pipeline.params import load_params
+    from navreplay.pipeline.params import load_params
 
     base = "tc_ukf" if name == "tc_ukf_10" else name
     p = load_params(Path("params.yaml")).filters.get(base)
@@ -101,8 +101,8 @@ def _params(name: str) -> Any:
 
 
 def _data(hours: float) -> tuple[dict[str, Any], Any]:
-    from pipeline.params import load_params
-    from pipeline.synth.seoul_campus import simulate
+    from navreplay.pipeline.params import load_params
+    from navreplay.pipeline.synth.seoul_campus import simulate
 
     synth = load_params(Path("params.yaml")).synth
     sp = synth.seoul_campus
@@ -121,8 +121,8 @@ def _slice(tables: dict[str, Any], seconds: float, skip_s: float = 60.0) -> dict
 
 
 def _write_tables(tables: dict[str, Any], sensors: Any, out: Path) -> Path:
-    from ingest.meta import DatasetMeta, write_meta
-    from ingest.tables import Provenance, write_table
+    from navreplay.ingest.meta import DatasetMeta, write_meta
+    from navreplay.ingest.tables import Provenance, write_table
 
     out.mkdir(parents=True, exist_ok=True)
     for name, table in tables.items():
@@ -134,7 +134,7 @@ def _write_tables(tables: dict[str, Any], sensors: Any, out: Path) -> Path:
 
 def _run(tables: dict[str, Any], sensors: Any, name: str, backend: str) -> tuple[float, float, Any]:
     """(wall s, cpu s, result) of one run; the kernel's compile/load time is excluded."""
-    from pipeline.estimation.replay import run_filter
+    from navreplay.pipeline.estimation.replay import run_filter
 
     base = "tc_ukf" if name == "tc_ukf_10" else name
     cpu = _cpu()
@@ -149,7 +149,7 @@ def _python_reference(tables_dir: Path, name: str) -> float:
     code = (
         "import json, resource; from pathlib import Path\n"
         "from benchmarks.bench_estimation import _params\n"
-        "from pipeline.estimation.families import run_tables\n"
+        "from navreplay.pipeline.estimation.families import run_tables\n"
         "def cpu():\n"
         "    r = resource.getrusage(resource.RUSAGE_SELF)\n"
         "    return r.ru_utime + r.ru_stime\n"
@@ -170,8 +170,8 @@ def _navreplay(args: list[str], cache: Path) -> tuple[float, float]:
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
     cpu = _children_cpu()
     wall = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "pipeline.cli", "-q", *args], env=env, check=True,
-                   capture_output=True)  # fmt: skip
+    subprocess.run([sys.executable, "-m", "navreplay.pipeline.cli", "-q", *args], env=env,
+                   check=True, capture_output=True)  # fmt: skip
     return _children_cpu() - cpu, time.perf_counter() - wall
 
 
@@ -275,10 +275,10 @@ def run(options: argparse.Namespace) -> None:
 
 def _accuracy_cost() -> None:
     """H RMS and NEES of the speed choices on the 900 s seoul_campus drive (cw)."""
-    from pipeline.estimation.metrics import compute_metrics
-    from pipeline.estimation.replay import run_filter
-    from pipeline.params import load_params
-    from pipeline.synth.seoul_campus import simulate
+    from navreplay.pipeline.estimation.metrics import compute_metrics
+    from navreplay.pipeline.estimation.replay import run_filter
+    from navreplay.pipeline.params import load_params
+    from navreplay.pipeline.synth.seoul_campus import simulate
 
     params = load_params(Path("params.yaml"))
     result = simulate(params.synth.seoul_campus, seed=params.synth.seed, variant="cw")

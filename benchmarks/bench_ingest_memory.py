@@ -96,7 +96,7 @@ def run(options: argparse.Namespace) -> None:
         ingest_code = textwrap.dedent(
             """
             from pathlib import Path
-            from ingest.api import ingest
+            from navreplay.ingest.api import navreplay.ingest
             print(ingest([Path({log!r})], Path({out!r})).tables["imu"])
             """
         )

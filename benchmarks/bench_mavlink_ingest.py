@@ -58,10 +58,10 @@ def plain_pymavlink(path: Path, types: list[str] | None) -> int:
 
 def reader_only(path: Path) -> int:
     """Inventory and read every stream ingest could convert: decoding without output."""
-    from ingest.damage import DamageLog
-    from ingest.detect import detect
-    from ingest.readers import open_reader
-    from ingest.readers.base import ReadContext, Selection
+    from navreplay.ingest.damage import DamageLog
+    from navreplay.ingest.detect import detect
+    from navreplay.ingest.readers import open_reader
+    from navreplay.ingest.readers.base import ReadContext, Selection
 
     with open_reader(detect(path), ReadContext(DamageLog(path, strict=False))) as reader:
         inv = reader.inventory()
@@ -74,8 +74,8 @@ def _count_into(out: list[int], fn: Callable[[], int]) -> None:
 
 
 def run(options: argparse.Namespace) -> None:
-    from ingest.api import ingest
-    from ingest.config import parse_dataset_config
+    from navreplay.ingest.api import ingest
+    from navreplay.ingest.config import parse_dataset_config
 
     tmp = Path(tempfile.mkdtemp(prefix="navreplay-bench-mav-"))
     try:

@@ -18,12 +18,12 @@ import argparse
 import time
 
 from benchmarks._table import print_table
-from pipeline.estimation.metrics import compute_metrics
-from pipeline.estimation.replay import run_filter
-from pipeline.estimation.windows import NS
-from pipeline.outages.montecarlo import Case, draw_starts, run_montecarlo
-from pipeline.scenarios.apply import apply_scenario
-from pipeline.scenarios.config import ScenarioSpec, WindowsSpec
+from navreplay.pipeline.estimation.metrics import compute_metrics
+from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.outages.montecarlo import Case, draw_starts, run_montecarlo
+from navreplay.pipeline.scenarios.apply import apply_scenario
+from navreplay.pipeline.scenarios.config import ScenarioSpec, WindowsSpec
 from tests.pipeline.scenarios.drives import drive, params
 
 LENGTH_S, TAIL_S, PER_SEED = 60.0, 30.0, 8

@@ -22,12 +22,12 @@ from typing import Any
 import numpy as np
 
 from benchmarks._table import print_table, timed
-from ingest.damage import DamageLog
-from ingest.gpstime import gps_from_calendar
-from ingest.rinexobs import from_georinex, read_obs, signals
-from ingest.rinextext import open_lines, read_header
-from ingest.schema import from_columns
-from ingest.writers import rinex
+from navreplay.ingest.damage import DamageLog
+from navreplay.ingest.gpstime import gps_from_calendar
+from navreplay.ingest.rinexobs import from_georinex, read_obs, signals
+from navreplay.ingest.rinextext import open_lines, read_header
+from navreplay.ingest.schema import from_columns
+from navreplay.ingest.writers import rinex
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -91,7 +91,7 @@ def _count_into(out: list[int], fn: Callable[[Path], int], path: Path) -> None:
 
 
 def run(options: argparse.Namespace) -> None:
-    from ingest.api import ingest
+    from navreplay.ingest.api import ingest
 
     n = options.ros_imu_messages
     tmp = Path(tempfile.mkdtemp(prefix="navreplay-bench-"))

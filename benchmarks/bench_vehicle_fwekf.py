@@ -26,12 +26,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(options: argparse.Namespace) -> None:
-    from pipeline.estimation.replay import run_filter
-    from pipeline.estimation.vehicle_config import VEHICLE_FILTERS
-    from pipeline.estimation.vehicle_replay import run_vehicle_filter
-    from pipeline.params import load_params
-    from pipeline.synth import car
-    from pipeline.synth.seoul_campus import simulate
+    from navreplay.pipeline.estimation.replay import run_filter
+    from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS
+    from navreplay.pipeline.estimation.vehicle_replay import run_vehicle_filter
+    from navreplay.pipeline.params import load_params
+    from navreplay.pipeline.synth import car
+    from navreplay.pipeline.synth.seoul_campus import simulate
 
     p = load_params("params.yaml")
     drive = car.synthesize(p.synth.car_speed_ramp, p.synth.seed).tables

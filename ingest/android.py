@@ -38,8 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ingest.gnss import C_MPS, F_L1_HZ
-from ingest.gpstime import NS_PER_WEEK
+from navreplay.ingest.gnss import C_MPS, F_L1_HZ
+from navreplay.ingest.gpstime import NS_PER_WEEK
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

@@ -50,22 +50,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ingest.alignment import check_tables
-from ingest.atomic import atomic_directory, atomic_write_json
-from ingest.config import DatasetConfig
-from ingest.damage import DamageLog
-from ingest.detect import Detected, Format, detect
-from ingest.errors import IngestError
-from ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
-from ingest.readers import open_reader
-from ingest.readers.base import Inventory, LogReader, ReadContext, Selection
-from ingest.readers.rosmsg import DefinitionError
-from ingest.schema import TableName
-from ingest.select import TablePlan, select_streams
-from ingest.sink import TableSink
-from ingest.tables import SourceFile, package_version, sha256_file
-from ingest.timebase import TimeBase, reconcile
-from ingest.typed import to_plain
+from navreplay.ingest.alignment import check_tables
+from navreplay.ingest.atomic import atomic_directory, atomic_write_json
+from navreplay.ingest.config import DatasetConfig
+from navreplay.ingest.damage import DamageLog
+from navreplay.ingest.detect import Detected, Format, detect
+from navreplay.ingest.errors import IngestError
+from navreplay.ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
+from navreplay.ingest.readers import open_reader
+from navreplay.ingest.readers.base import Inventory, LogReader, ReadContext, Selection
+from navreplay.ingest.readers.rosmsg import DefinitionError
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.select import TablePlan, select_streams
+from navreplay.ingest.sink import TableSink
+from navreplay.ingest.tables import SourceFile, package_version, sha256_file
+from navreplay.ingest.timebase import TimeBase, reconcile
+from navreplay.ingest.typed import to_plain
 
 log = logging.getLogger(__name__)
 
@@ -352,7 +352,7 @@ def _gnss_check(
         return None
     import pyarrow.parquet as pq
 
-    from ingest import gnsscheck
+    from navreplay.ingest import gnsscheck
 
     result = gnsscheck.check(pq.read_table(obs_sink.path), pq.read_table(fix_sink.path))
     obs_files = ", ".join(sorted({names[s.file_index] for s in obs_sink.plan.sources}))

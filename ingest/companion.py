@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ingest.hygiene import Rows, StreamCleaner
+from navreplay.ingest.hygiene import Rows, StreamCleaner
 
 TOLERANCE_NS = 5_000_000
 

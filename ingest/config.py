@@ -31,9 +31,9 @@ from typing import Literal
 
 import yaml
 
-from ingest.errors import ConfigError
-from ingest.schema import TableName
-from ingest.typed import FieldError, KeyPathError, load_dataclass
+from navreplay.ingest.errors import ConfigError
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.typed import FieldError, KeyPathError, load_dataclass
 
 _ID_RE = re.compile(r"^[a-z][a-z0-9_]*$")
 _DATE_RE = re.compile(r"^(19[89]\d|2\d{3})-(0[1-9]|1[0-2])-(0[1-9]|[12]\d|3[01])$")

@@ -13,7 +13,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
-from ingest.errors import CorruptLogError
+from navreplay.ingest.errors import CorruptLogError
 
 log = logging.getLogger(__name__)
 

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
 
-from ingest.errors import CorruptLogError, UnsupportedFormatError
+from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
 
 HEAD_BYTES = 8192
 

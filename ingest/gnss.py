@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
-from ingest.gpstime import NS_PER_S, NS_PER_WEEK
+from navreplay.ingest.gpstime import NS_PER_S, NS_PER_WEEK
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

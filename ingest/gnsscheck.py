@@ -25,7 +25,7 @@ import numpy.typing as npt
 import pyarrow as pa
 import pymap3d
 
-from ingest import spp
+from navreplay.ingest import spp
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

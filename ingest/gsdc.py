@@ -43,9 +43,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ingest import spp
-from ingest.gnss import C_MPS, elevation_azimuth, rotate_earth
-from ingest.gpstime import NS_PER_S
+from navreplay.ingest import spp
+from navreplay.ingest.gnss import C_MPS, elevation_azimuth, rotate_earth
+from navreplay.ingest.gpstime import NS_PER_S
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

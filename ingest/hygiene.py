@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ingest.errors import CorruptLogError
+from navreplay.ingest.errors import CorruptLogError
 
 STEP_MIN_SAMPLES = 3
 _MAX_LISTED = 10

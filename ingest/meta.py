@@ -12,11 +12,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ingest.atomic import atomic_write_json
-from ingest.config import ImuNoise, Vec3
-from ingest.errors import ConfigError
-from ingest.tables import SourceFile, package_version
-from ingest.typed import KeyPathError, load_dataclass, to_plain
+from navreplay.ingest.atomic import atomic_write_json
+from navreplay.ingest.config import ImuNoise, Vec3
+from navreplay.ingest.errors import ConfigError
+from navreplay.ingest.tables import SourceFile, package_version
+from navreplay.ingest.typed import KeyPathError, load_dataclass, to_plain
 
 META_NAME = "meta.json"
 

@@ -34,9 +34,9 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
-from ingest import spp
-from ingest.gnss import C_MPS, Ephemeris, elevation_azimuth, select, transmit_state
-from ingest.gpstime import NS_PER_S, NS_PER_WEEK
+from navreplay.ingest import spp
+from navreplay.ingest.gnss import C_MPS, Ephemeris, elevation_azimuth, select, transmit_state
+from navreplay.ingest.gpstime import NS_PER_S, NS_PER_WEEK
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

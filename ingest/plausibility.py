@@ -32,10 +32,17 @@ from typing import Any
 
 import numpy as np
 
-from ingest.config import GnssConfig, ImuConfig
-from ingest.errors import PlausibilityError
-from ingest.frames import ACC, GYRO, dcm_from_rpy_deg, level_from_gravity, rotate_imu, tilt_deg
-from ingest.schema import FixType
+from navreplay.ingest.config import GnssConfig, ImuConfig
+from navreplay.ingest.errors import PlausibilityError
+from navreplay.ingest.frames import (
+    ACC,
+    GYRO,
+    dcm_from_rpy_deg,
+    level_from_gravity,
+    rotate_imu,
+    tilt_deg,
+)
+from navreplay.ingest.schema import FixType
 
 G0 = 9.80665
 GRAVITY_TOL_MPS2 = 0.5

@@ -27,11 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ingest.damage import Completeness, DamageLog, Defect
-from ingest.errors import CorruptLogError
-from ingest.gnss import Ephemeris, concat
-from ingest.gpstime import GPS_EPOCH, NS_PER_S, NS_PER_WEEK
-from ingest.rinextext import Header, open_lines, read_header
+from navreplay.ingest.damage import Completeness, DamageLog, Defect
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.gnss import Ephemeris, concat
+from navreplay.ingest.gpstime import GPS_EPOCH, NS_PER_S, NS_PER_WEEK
+from navreplay.ingest.rinextext import Header, open_lines, read_header
 
 # georinex variable -> Ephemeris field
 _FIELDS = {

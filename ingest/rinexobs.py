@@ -30,12 +30,12 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from ingest.damage import Completeness, DamageLog, Defect
-from ingest.errors import CorruptLogError
-from ingest.gpstime import GPS_EPOCH, GPS_EPOCH_UNIX_NS, NS_PER_S
-from ingest.rinexepochs import Counts, Epoch, epochs
-from ingest.rinextext import Header, open_lines, read_header
-from ingest.timebase import utc_to_gps_ns
+from navreplay.ingest.damage import Completeness, DamageLog, Defect
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.gpstime import GPS_EPOCH, GPS_EPOCH_UNIX_NS, NS_PER_S
+from navreplay.ingest.rinexepochs import Counts, Epoch, epochs
+from navreplay.ingest.rinextext import Header, open_lines, read_header
+from navreplay.ingest.timebase import utc_to_gps_ns
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

@@ -24,7 +24,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ingest.errors import CorruptLogError, UnsupportedFormatError
+from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
 
 MAX_HEADER_LINES = 5000
 

@@ -27,7 +27,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from ingest.errors import TableValidationError
+from navreplay.ingest.errors import TableValidationError
 
 SCHEMA_VERSION = 1
 

@@ -25,10 +25,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from ingest.config import DatasetConfig
-from ingest.errors import ConfigError, IngestError
-from ingest.readers.base import Inventory, StreamInfo
-from ingest.schema import TableName
+from navreplay.ingest.config import DatasetConfig
+from navreplay.ingest.errors import ConfigError, IngestError
+from navreplay.ingest.readers.base import Inventory, StreamInfo
+from navreplay.ingest.schema import TableName
 
 _TWINS = {TableName.TRUTH, TableName.ESTIMATOR}
 

@@ -20,17 +20,17 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from ingest.audit import StreamAudit
-from ingest.companion import TOLERANCE_NS, Companion
-from ingest.config import DatasetConfig
-from ingest.frames import flu_to_frd
-from ingest.hygiene import Rows, StreamCleaner
-from ingest.plausibility import GnssDecision, ImuDecision, decide_gnss, decide_imu
-from ingest.readers.base import Batch
-from ingest.schema import TableName, from_columns, spec
-from ingest.select import TablePlan
-from ingest.tables import Provenance, SourceFile, TableWriter
-from ingest.timebase import TimeBase, convert
+from navreplay.ingest.audit import StreamAudit
+from navreplay.ingest.companion import TOLERANCE_NS, Companion
+from navreplay.ingest.config import DatasetConfig
+from navreplay.ingest.frames import flu_to_frd
+from navreplay.ingest.hygiene import Rows, StreamCleaner
+from navreplay.ingest.plausibility import GnssDecision, ImuDecision, decide_gnss, decide_imu
+from navreplay.ingest.readers.base import Batch
+from navreplay.ingest.schema import TableName, from_columns, spec
+from navreplay.ingest.select import TablePlan
+from navreplay.ingest.tables import Provenance, SourceFile, TableWriter
+from navreplay.ingest.timebase import TimeBase, convert
 
 log = logging.getLogger(__name__)
 

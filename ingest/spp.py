@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from ingest.gnss import C_MPS
+from navreplay.ingest.gnss import C_MPS
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

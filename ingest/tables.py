@@ -23,9 +23,14 @@ from typing import Any, Self
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from ingest.atomic import atomic_path, dumps_json
-from ingest.errors import CorruptLogError, IngestError, ProvenanceError, TableValidationError
-from ingest.schema import SCHEMA_VERSION, TableName, last_key, spec, validate
+from navreplay.ingest.atomic import atomic_path, dumps_json
+from navreplay.ingest.errors import (
+    CorruptLogError,
+    IngestError,
+    ProvenanceError,
+    TableValidationError,
+)
+from navreplay.ingest.schema import SCHEMA_VERSION, TableName, last_key, spec, validate
 
 PROVENANCE_KEY = b"navreplay"
 _ROW_GROUP_ROWS = 262_144

@@ -26,8 +26,8 @@ from enum import StrEnum
 import numpy as np
 import numpy.typing as npt
 
-from ingest.errors import IngestError
-from ingest.gpstime import (
+from navreplay.ingest.errors import IngestError
+from navreplay.ingest.gpstime import (
     GPS_EPOCH_UNIX_NS,
     LEAP_STEPS_UNIX_NS,
     NS_PER_S,

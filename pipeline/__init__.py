@@ -1,6 +1,6 @@
 """navreplay pipeline: earth model and mechanization, synthesizers, estimation, scenarios,
 metrics, reports, DVC stage entry points and the ``navreplay`` command line."""
 
-from pipeline._numba_cache import configure as _configure_numba_cache
+from navreplay.pipeline._numba_cache import configure as _configure_numba_cache
 
 _configure_numba_cache()

@@ -32,7 +32,10 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-#: the project's top-level packages, siblings in one directory
+#: the package the project installs (a namespace package)
+ROOT = "navreplay"
+#: its packages, siblings in one directory: the repository's folders, and the installed
+#: ``navreplay/`` (``navreplay.pipeline`` is the folder ``pipeline``)
 PACKAGES = ("pipeline", "ingest")
 
 
@@ -51,8 +54,9 @@ _IMPORT = re.compile(rb"^[ \t]*import[ \t]+([^\n]*)", re.M)
 
 
 def _imported_modules(source: bytes, packages: Sequence[str]) -> Iterator[str]:
-    """Every project module an ``import`` statement anywhere in ``source`` names; ``from M
-    import n`` also yields ``M.n``, a module when ``n`` is a submodule.
+    """Every project module an ``import`` statement anywhere in ``source`` names, relative
+    to ``ROOT`` (``navreplay.pipeline.x`` is ``pipeline.x``, the file ``pipeline/x.py``);
+    ``from M import n`` also yields ``M.n``, a module when ``n`` is a submodule.
 
     A textual scan (a tenth of the time ``ast`` takes, and this runs at every start): an import
     in a string or comment only adds a file, which costs a needless recompile, never a stale
@@ -66,10 +70,11 @@ def _imported_modules(source: bytes, packages: Sequence[str]) -> Iterator[str]:
         for item in m.group(1).split(b"#")[0].split(b","):
             if item.split():
                 found.append((item.split()[0].decode(), []))
+    prefix = f"{ROOT}."
     for module, names in found:
-        if module.split(".")[0] in packages:
-            yield module
-            yield from (f"{module}.{n}" for n in names)
+        for name in (module, *(f"{module}.{n}" for n in names)):
+            if name.startswith(prefix) and name[len(prefix) :].split(".")[0] in packages:
+                yield name[len(prefix) :]
 
 
 def compiled_sources(base: Path, packages: Sequence[str] = PACKAGES) -> list[Path]:

@@ -24,14 +24,14 @@ from typing import Any
 
 import pyarrow.parquet as pq
 
-from ingest.api import IngestOptions, ingest
-from ingest.config import DatasetConfig
-from ingest.tables import params_hash
-from ingest.typed import to_plain
-from pipeline.errors import DivergenceError, ParamsError, PipelineError
-from pipeline.estimation.config import FILTER_KINDS
-from pipeline.params import Params
-from pipeline.report.render import RenderedReport
+from navreplay.ingest.api import IngestOptions, ingest
+from navreplay.ingest.config import DatasetConfig
+from navreplay.ingest.tables import params_hash
+from navreplay.ingest.typed import to_plain
+from navreplay.pipeline.errors import DivergenceError, ParamsError, PipelineError
+from navreplay.pipeline.estimation.config import FILTER_KINDS
+from navreplay.pipeline.params import Params
+from navreplay.pipeline.report.render import RenderedReport
 
 Progress = Callable[[str], None]
 
@@ -89,7 +89,7 @@ def plan(tables_dir: Path, filters: Sequence[str]) -> tuple[list[str], list[Skip
 
 def write_skip(run_dir: Path, s: Skipped) -> None:
     """``run_dir/metrics.json`` of a run that was not made: status skipped and the reason."""
-    from ingest.atomic import atomic_write_json
+    from navreplay.ingest.atomic import atomic_write_json
 
     run_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_json(
@@ -110,11 +110,11 @@ def analyze(
     progress: Progress = lambda _: None,
 ) -> AnalysisResult:
     """Ingest, run and report one log (see the module docstring)."""
-    from pipeline.estimation.contract import RunInputs, write_run
-    from pipeline.estimation.run import INPUTS
-    from pipeline.outages.runs import run_scenarios
-    from pipeline.report.inputs import load_dataset
-    from pipeline.report.render import render_dataset
+    from navreplay.pipeline.estimation.contract import RunInputs, write_run
+    from navreplay.pipeline.estimation.run import INPUTS
+    from navreplay.pipeline.outages.runs import run_scenarios
+    from navreplay.pipeline.report.inputs import load_dataset
+    from navreplay.pipeline.report.render import render_dataset
 
     t_start = time.perf_counter()
     filters = list(filters or params.run.filters)

@@ -14,9 +14,9 @@ import sys
 from collections.abc import Sequence
 from typing import Protocol, cast
 
-from ingest.errors import IngestError
-from pipeline._numba_cache import fewer_gc_passes
-from pipeline.errors import NotBuiltError, PipelineError
+from navreplay.ingest.errors import IngestError
+from navreplay.pipeline._numba_cache import fewer_gc_passes
+from navreplay.pipeline.errors import NotBuiltError, PipelineError
 
 log = logging.getLogger("navreplay")
 
@@ -27,35 +27,41 @@ EXIT_INTERRUPTED = 130
 # name -> (module, one-line help). Order is the order shown by --help.
 COMMANDS: dict[str, tuple[str, str]] = {
     "ingest": (
-        "pipeline.stages.ingest",
+        "navreplay.pipeline.stages.ingest",
         "convert logs (MCAP, ROS bags, tlog, DataFlash, ULog, RINEX, CSV) to tables",
     ),
     "warm": (
-        "pipeline.stages.warm",
+        "navreplay.pipeline.stages.warm",
         "compile every filter now, so that its first run loads it from the cache",
     ),
-    "run": ("pipeline.stages.run", "replay a filter over canonical tables under scenarios"),
+    "run": (
+        "navreplay.pipeline.stages.run",
+        "replay a filter over canonical tables under scenarios",
+    ),
     "montecarlo": (
-        "pipeline.stages.montecarlo",
+        "navreplay.pipeline.stages.montecarlo",
         "replay one filter under outages drawn over the drive (Monte Carlo)",
     ),
     "outages": (
-        "pipeline.stages.outages",
+        "navreplay.pipeline.stages.outages",
         "reduction per satellite count and drift vs outage length from the Monte Carlo",
     ),
     "analyze": (
-        "pipeline.stages.analyze",
+        "navreplay.pipeline.stages.analyze",
         "one-off post-mission analysis of a log: ingest + filters + report",
     ),
-    "synth": ("pipeline.stages.synth", "generate a synthesized dataset with exact truth"),
+    "synth": ("navreplay.pipeline.stages.synth", "generate a synthesized dataset with exact truth"),
     "experiment": (
-        "pipeline.stages.experiment",
+        "navreplay.pipeline.stages.experiment",
         "run a paper experiment (tables + figures; Monte Carlo where the paper's claims need it)",
     ),
-    "report": ("pipeline.stages.report", "render the HTML report of one dataset"),
-    "summarize": ("pipeline.stages.summarize", "rank filters across datasets"),
-    "bench": ("pipeline.stages.bench", "run the speed benchmarks against reference backends"),
-    "where-reports": ("pipeline.stages.where_reports", "list the generated reports"),
+    "report": ("navreplay.pipeline.stages.report", "render the HTML report of one dataset"),
+    "summarize": ("navreplay.pipeline.stages.summarize", "rank filters across datasets"),
+    "bench": (
+        "navreplay.pipeline.stages.bench",
+        "run the speed benchmarks against reference backends",
+    ),
+    "where-reports": ("navreplay.pipeline.stages.where_reports", "list the generated reports"),
 }
 
 

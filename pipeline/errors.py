@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ingest.typed import KeyPathError
+from navreplay.ingest.typed import KeyPathError
 
 
 class PipelineError(Exception):

@@ -14,17 +14,17 @@ from typing import Any, Literal
 
 import yaml
 
-from ingest.typed import FieldError, load_dataclass, to_plain
-from pipeline.errors import ParamsError
-from pipeline.estimation.config import FiltersParams
-from pipeline.experiments.tractor_cascaded.config import TractorExperimentParams
-from pipeline.experiments.vehicle_bands_config import VehicleBandsParams
-from pipeline.outages.config import OutagesParams
-from pipeline.scenarios.config import ScenariosParams
-from pipeline.synth.car import CarSpeedRampParams
-from pipeline.synth.fwekf import FwekfReferenceParams
-from pipeline.synth.seoul_params import SeoulCampusParams
-from pipeline.synth.tractor import TractorStraightParams
+from navreplay.ingest.typed import FieldError, load_dataclass, to_plain
+from navreplay.pipeline.errors import ParamsError
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.experiments.tractor_cascaded.config import TractorExperimentParams
+from navreplay.pipeline.experiments.vehicle_bands_config import VehicleBandsParams
+from navreplay.pipeline.outages.config import OutagesParams
+from navreplay.pipeline.scenarios.config import ScenariosParams
+from navreplay.pipeline.synth.car import CarSpeedRampParams
+from navreplay.pipeline.synth.fwekf import FwekfReferenceParams
+from navreplay.pipeline.synth.seoul_params import SeoulCampusParams
+from navreplay.pipeline.synth.tractor import TractorStraightParams
 
 DEFAULT_PARAMS = Path("params.yaml")
 _ID_RE = re.compile(r"^[a-z][a-z0-9_]*$")

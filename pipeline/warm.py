@@ -25,10 +25,10 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from ingest.meta import DatasetMeta, write_meta
-from ingest.tables import Provenance, write_table
-from pipeline.errors import PipelineError
-from pipeline.params import Params
+from navreplay.ingest.meta import DatasetMeta, write_meta
+from navreplay.ingest.tables import Provenance, write_table
+from navreplay.pipeline.errors import PipelineError
+from navreplay.pipeline.params import Params
 
 log = logging.getLogger(__name__)
 
@@ -46,8 +46,8 @@ def groups(names: Sequence[str] | None = None) -> list[tuple[str, ...]]:
     """The filters in compile groups (one compiled kernel each), in family order.
 
     ``names`` restricts them to those filters (unknown names raise ``KeyError``)."""
-    from pipeline.estimation.config import FILTER_KINDS
-    from pipeline.estimation.families import FAMILIES, filter_names
+    from navreplay.pipeline.estimation.config import FILTER_KINDS
+    from navreplay.pipeline.estimation.families import FAMILIES, filter_names
 
     known = filter_names()
     wanted = known if names is None else tuple(names)
@@ -68,7 +68,7 @@ def groups(names: Sequence[str] | None = None) -> list[tuple[str, ...]]:
 
 
 def _family(name: str) -> str:
-    from pipeline.estimation.families import family_of
+    from navreplay.pipeline.estimation.families import family_of
 
     return family_of(name).name
 
@@ -77,16 +77,16 @@ def _drive(family: str, params: Params, out: Path) -> Path:
     """A short synthesized drive of ``family``'s kind, written as canonical tables to ``out``."""
     synth = params.synth
     if family == "ins":
-        from pipeline.synth.seoul_campus import simulate
+        from navreplay.pipeline.synth.seoul_campus import simulate
 
         sp = replace(synth.seoul_campus, duration_s=40.0, stationary_s=10.0)
         result = simulate(sp, seed=synth.seed, variant="cw")
     elif family == "vehicle":
-        from pipeline.synth.car import synthesize as car
+        from navreplay.pipeline.synth.car import synthesize as car
 
         result = car(replace(synth.car_speed_ramp, ramp_s=20.0, hold_s=10.0), synth.seed)
     else:
-        from pipeline.synth.tractor_log import synthesize as tractor
+        from navreplay.pipeline.synth.tractor_log import synthesize as tractor
 
         result = tractor(replace(synth.tractor_straight, duration_s=20.0), synth.seed)
     for name, table in result.tables.items():
@@ -103,8 +103,8 @@ def warm_here(names: Sequence[str], params: Params) -> None:
     Raises:
         PipelineError: a filter could not run on its warm-up drive (the message names it).
     """
-    from pipeline.errors import DivergenceError
-    from pipeline.estimation.families import family_of, run_tables
+    from navreplay.pipeline.errors import DivergenceError
+    from navreplay.pipeline.estimation.families import family_of, run_tables
 
     with tempfile.TemporaryDirectory(prefix="navreplay-warm-") as tmp:
         drives: dict[str, Path] = {}
@@ -140,7 +140,7 @@ def warm(
     families = [_family(g[0]) for g in todo]
 
     def one(group: tuple[str, ...]) -> WarmResult:
-        cmd = [sys.executable, "-m", "pipeline.cli", "-q", "warm", "--in-process"]
+        cmd = [sys.executable, "-m", "navreplay.pipeline.cli", "-q", "warm", "--in-process"]
         cmd += ["--params", str(params_path)]
         for name in group:
             cmd += ["--filter", name]

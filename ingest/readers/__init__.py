@@ -9,24 +9,24 @@ from __future__ import annotations
 
 import importlib
 
-from ingest.detect import Detected, Format
-from ingest.errors import UnsupportedFormatError
-from ingest.readers.base import LogReader, ReadContext
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.errors import UnsupportedFormatError
+from navreplay.ingest.readers.base import LogReader, ReadContext
 
 REGISTRY: dict[Format, str] = {
-    Format.MCAP: "ingest.readers.mcap:McapReader",
-    Format.ROS1BAG: "ingest.readers.ros1bag:Ros1BagReader",
-    Format.ROS2BAG: "ingest.readers.ros2bag:Ros2BagReader",
-    Format.CSV: "ingest.readers.csv:CsvReader",
-    Format.RINEX: "ingest.readers.rinex:RinexReader",
-    Format.GNSSLOGGER: "ingest.readers.gnsslogger:GnssLoggerReader",
-    Format.GSDC: "ingest.readers.gsdc:GsdcReader",
-    Format.TLOG: "ingest.readers.tlog:TlogReader",
-    Format.DATAFLASH: "ingest.readers.dataflash:DataFlashReader",
-    Format.ULOG: "ingest.readers.ulog:UlogReader",
-    Format.COMMA2K19: "ingest.readers.comma2k19:Comma2k19Reader",
-    Format.LIBRSF: "ingest.readers.librsf:LibrsfReader",
-    Format.NMEA: "ingest.readers.nmea:NmeaReader",
+    Format.MCAP: "navreplay.ingest.readers.mcap:McapReader",
+    Format.ROS1BAG: "navreplay.ingest.readers.ros1bag:Ros1BagReader",
+    Format.ROS2BAG: "navreplay.ingest.readers.ros2bag:Ros2BagReader",
+    Format.CSV: "navreplay.ingest.readers.csv:CsvReader",
+    Format.RINEX: "navreplay.ingest.readers.rinex:RinexReader",
+    Format.GNSSLOGGER: "navreplay.ingest.readers.gnsslogger:GnssLoggerReader",
+    Format.GSDC: "navreplay.ingest.readers.gsdc:GsdcReader",
+    Format.TLOG: "navreplay.ingest.readers.tlog:TlogReader",
+    Format.DATAFLASH: "navreplay.ingest.readers.dataflash:DataFlashReader",
+    Format.ULOG: "navreplay.ingest.readers.ulog:UlogReader",
+    Format.COMMA2K19: "navreplay.ingest.readers.comma2k19:Comma2k19Reader",
+    Format.LIBRSF: "navreplay.ingest.readers.librsf:LibrsfReader",
+    Format.NMEA: "navreplay.ingest.readers.nmea:NmeaReader",
 }
 
 

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ingest.damage import Completeness, DamageLog, Defect
-from ingest.errors import CorruptLogError
+from navreplay.ingest.damage import Completeness, DamageLog, Defect
+from navreplay.ingest.errors import CorruptLogError
 
 NPY_MAGIC = b"\x93NUMPY"
 

@@ -47,11 +47,11 @@ from typing import Self
 import numpy as np
 import numpy.typing as npt
 
-from ingest.config import DatasetConfig
-from ingest.damage import DamageLog
-from ingest.detect import Detected, Format
-from ingest.schema import TableName
-from ingest.timebase import TimeBase
+from navreplay.ingest.config import DatasetConfig
+from navreplay.ingest.damage import DamageLog
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.timebase import TimeBase
 
 
 @dataclass(frozen=True)

@@ -47,20 +47,27 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from ingest.damage import Completeness, Defect
-from ingest.detect import Detected, Format
-from ingest.ecef import (
+from navreplay.ingest.damage import Completeness, Defect
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.ecef import (
     c_ned_ecef,
     dcm_from_quat_wxyz,
     geodetic_from_ecef,
     rpy_from_dcm,
     velocity_ned_from_course,
 )
-from ingest.errors import CorruptLogError
-from ingest.readers import _npy
-from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
-from ingest.schema import FixType, TableName
-from ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers import _npy
+from navreplay.ingest.readers.base import (
+    Batch,
+    Inventory,
+    LogReader,
+    ReadContext,
+    Selection,
+    StreamInfo,
+)
+from navreplay.ingest.schema import FixType, TableName
+from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
 
 I64 = npt.NDArray[np.int64]
 F64 = npt.NDArray[np.float64]

@@ -27,13 +27,20 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
-from ingest.config import CsvSource
-from ingest.damage import Completeness, Defect
-from ingest.detect import Detected, Format
-from ingest.errors import ConfigError, CorruptLogError, UnsupportedFormatError
-from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
-from ingest.schema import TableName, spec
-from ingest.timebase import TimeBase
+from navreplay.ingest.config import CsvSource
+from navreplay.ingest.damage import Completeness, Defect
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.errors import ConfigError, CorruptLogError, UnsupportedFormatError
+from navreplay.ingest.readers.base import (
+    Batch,
+    Inventory,
+    LogReader,
+    ReadContext,
+    Selection,
+    StreamInfo,
+)
+from navreplay.ingest.schema import TableName, spec
+from navreplay.ingest.timebase import TimeBase
 
 _UNIT_NS = {"ns": 1, "us": 1_000, "ms": 1_000_000, "s": 1_000_000_000}
 _WS = re.compile(r"\s+")

@@ -26,17 +26,24 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from ingest.damage import Completeness, Defect
-from ingest.detect import Detected, Format
-from ingest.errors import CorruptLogError
-from ingest.readers.asof import AsofJoin, Left
-from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
-from ingest.readers.dfclock import DfSurvey, instances, survey
-from ingest.readers.dfformat import DfFormat
-from ingest.readers.dfmsgs import BY_NAME, JOIN_COLUMNS, DfExtras, DfStream, finish_gnss
-from ingest.readers.dfscan import Formats, Records, ScanStats, scan_blocks
-from ingest.readers.mavmsgs import Converted
-from ingest.schema import FixType, TableName
+from navreplay.ingest.damage import Completeness, Defect
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers.asof import AsofJoin, Left
+from navreplay.ingest.readers.base import (
+    Batch,
+    Inventory,
+    LogReader,
+    ReadContext,
+    Selection,
+    StreamInfo,
+)
+from navreplay.ingest.readers.dfclock import DfSurvey, instances, survey
+from navreplay.ingest.readers.dfformat import DfFormat
+from navreplay.ingest.readers.dfmsgs import BY_NAME, JOIN_COLUMNS, DfExtras, DfStream, finish_gnss
+from navreplay.ingest.readers.dfscan import Formats, Records, ScanStats, scan_blocks
+from navreplay.ingest.readers.mavmsgs import Converted
+from navreplay.ingest.schema import FixType, TableName
 
 I64Array = npt.NDArray[np.int64]
 JOIN_TOLERANCE_NS = 50_000_000

@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from ingest.readers._mavscan import gather
-from ingest.readers.dfformat import FMT_TYPE, DfFormat
-from ingest.readers.dfmsgs import BY_NAME, DfExtras, Origin
-from ingest.readers.dfscan import Formats, Records, ScanStats, Unusable, scan_blocks
-from ingest.readers.mavclock import BootTracker, OffsetAccumulator, unroll_gps_week
-from ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
+from navreplay.ingest.readers._mavscan import gather
+from navreplay.ingest.readers.dfformat import FMT_TYPE, DfFormat
+from navreplay.ingest.readers.dfmsgs import BY_NAME, DfExtras, Origin
+from navreplay.ingest.readers.dfscan import Formats, Records, ScanStats, Unusable, scan_blocks
+from navreplay.ingest.readers.mavclock import BootTracker, OffsetAccumulator, unroll_gps_week
+from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
 
 I64Array = npt.NDArray[np.int64]
 WEEK_NS = SECONDS_PER_WEEK * NS_PER_S

@@ -29,9 +29,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from ingest.readers.dfformat import DfFormat
-from ingest.readers.mavmsgs import Converted
-from ingest.schema import FixType, TableName
+from navreplay.ingest.readers.dfformat import DfFormat
+from navreplay.ingest.readers.mavmsgs import Converted
+from navreplay.ingest.schema import FixType, TableName
 
 F64 = npt.NDArray[np.float64]
 #: ArduPilot's LOCATION_SCALING_FACTOR_INV: 1e-7 degree units per metre (sphere 6378100 m).

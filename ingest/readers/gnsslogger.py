@@ -43,12 +43,12 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
-from ingest.android import CONSTELLATIONS, RawColumns, pseudoranges
-from ingest.damage import Completeness, Defect
-from ingest.detect import Detected, Format
-from ingest.errors import IngestError
-from ingest.obsgeometry import observation_geometry
-from ingest.readers.base import (
+from navreplay.ingest.android import CONSTELLATIONS, RawColumns, pseudoranges
+from navreplay.ingest.damage import Completeness, Defect
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.errors import IngestError
+from navreplay.ingest.obsgeometry import observation_geometry
+from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
     LogReader,
@@ -57,9 +57,9 @@ from ingest.readers.base import (
     StreamInfo,
     selected_tables,
 )
-from ingest.rinexnav import NavData, Unreported, merge, read_nav
-from ingest.schema import FixType, TableName
-from ingest.timebase import TimeBase
+from navreplay.ingest.rinexnav import NavData, Unreported, merge, read_nav
+from navreplay.ingest.schema import FixType, TableName
+from navreplay.ingest.timebase import TimeBase
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

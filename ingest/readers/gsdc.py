@@ -27,11 +27,11 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 
-from ingest import gsdc
-from ingest.damage import Completeness, Defect
-from ingest.detect import Detected, Format
-from ingest.errors import CorruptLogError
-from ingest.readers.base import (
+from navreplay.ingest import gsdc
+from navreplay.ingest.damage import Completeness, Defect
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
     LogReader,
@@ -40,8 +40,8 @@ from ingest.readers.base import (
     StreamInfo,
     selected_tables,
 )
-from ingest.schema import TableName
-from ingest.timebase import TimeBase
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.timebase import TimeBase
 
 _MEASUREMENTS = {"derived2021", "device_gnss2022"}
 GSDC2021_HEIGHT_ERROR_M = 61.0

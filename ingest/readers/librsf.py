@@ -42,14 +42,21 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from ingest.damage import Completeness, Defect
-from ingest.detect import Detected, Format
-from ingest.ecef import geodetic_from_ecef
-from ingest.errors import CorruptLogError
-from ingest.gnss import C_MPS, rotate_earth
-from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
-from ingest.schema import TableName
-from ingest.timebase import NS_PER_S, TimeBase
+from navreplay.ingest.damage import Completeness, Defect
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.ecef import geodetic_from_ecef
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.gnss import C_MPS, rotate_earth
+from navreplay.ingest.readers.base import (
+    Batch,
+    Inventory,
+    LogReader,
+    ReadContext,
+    Selection,
+    StreamInfo,
+)
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.timebase import NS_PER_S, TimeBase
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from ingest.timebase import NS_PER_S, SECONDS_PER_WEEK
+from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK
 
 I64Array = npt.NDArray[np.int64]
 

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ingest.errors import ConfigError
+from navreplay.ingest.errors import ConfigError
 
 DEFAULT_DIALECT = "ardupilotmega"
 MAX_MSGID = 1 << 24  # MAVLink 2 message ids are 24-bit

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ingest.schema import FixType, TableName
+from navreplay.ingest.schema import FixType, TableName
 
 G0 = 9.80665
 UINT8_MAX = 255

@@ -35,13 +35,20 @@ from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.records import Channel, ChunkIndex, Schema, Statistics
 
-from ingest.damage import Completeness, DamageLog, Defect
-from ingest.detect import MCAP_MAGIC, Detected, Format
-from ingest.errors import CorruptLogError
-from ingest.readers._compression import MAX_CHUNK_BYTES, DecompressError, decompress
-from ingest.readers._walk import INCOMPLETE, OK, TOO_LONG, mcap_records
-from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
-from ingest.readers.roscommon import RosChannel, decode_batch, make_channel, stream_info
+from navreplay.ingest.damage import Completeness, DamageLog, Defect
+from navreplay.ingest.detect import MCAP_MAGIC, Detected, Format
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers._compression import MAX_CHUNK_BYTES, DecompressError, decompress
+from navreplay.ingest.readers._walk import INCOMPLETE, OK, TOO_LONG, mcap_records
+from navreplay.ingest.readers.base import (
+    Batch,
+    Inventory,
+    LogReader,
+    ReadContext,
+    Selection,
+    StreamInfo,
+)
+from navreplay.ingest.readers.roscommon import RosChannel, decode_batch, make_channel, stream_info
 
 U8Array = npt.NDArray[np.uint8]
 I64Array = npt.NDArray[np.int64]

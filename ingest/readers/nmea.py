@@ -43,12 +43,26 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from ingest.damage import Completeness, Defect
-from ingest.detect import Detected, Format
-from ingest.readers._nmea import Epoch, EpochBuilder, Gga, checksum_ok, date_ymd, time_of_day_s
-from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
-from ingest.schema import FixType, TableName
-from ingest.timebase import NS_PER_S, TimeBase, utc_to_gps_ns
+from navreplay.ingest.damage import Completeness, Defect
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.readers._nmea import (
+    Epoch,
+    EpochBuilder,
+    Gga,
+    checksum_ok,
+    date_ymd,
+    time_of_day_s,
+)
+from navreplay.ingest.readers.base import (
+    Batch,
+    Inventory,
+    LogReader,
+    ReadContext,
+    Selection,
+    StreamInfo,
+)
+from navreplay.ingest.schema import FixType, TableName
+from navreplay.ingest.timebase import NS_PER_S, TimeBase, utc_to_gps_ns
 
 Bools = npt.NDArray[np.bool_]
 _MAX_LISTED = 20

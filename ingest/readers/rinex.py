@@ -26,12 +26,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ingest.detect import Detected, Format
-from ingest.errors import IngestError
-from ingest.gnss import LAMBDA_L1_M, Ephemeris
-from ingest.gpstime import NS_PER_WEEK
-from ingest.obsgeometry import observation_geometry
-from ingest.readers.base import (
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.errors import IngestError
+from navreplay.ingest.gnss import LAMBDA_L1_M, Ephemeris
+from navreplay.ingest.gpstime import NS_PER_WEEK
+from navreplay.ingest.obsgeometry import observation_geometry
+from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
     LogReader,
@@ -40,11 +40,11 @@ from ingest.readers.base import (
     StreamInfo,
     selected_tables,
 )
-from ingest.rinexnav import NavData, Unreported, merge, read_nav
-from ingest.rinexobs import ObsRows, ObsScan, Signals, read_obs
-from ingest.rinextext import Header
-from ingest.schema import TableName
-from ingest.timebase import TimeBase
+from navreplay.ingest.rinexnav import NavData, Unreported, merge, read_nav
+from navreplay.ingest.rinexobs import ObsRows, ObsScan, Signals, read_obs
+from navreplay.ingest.rinextext import Header
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.timebase import TimeBase
 
 log = logging.getLogger(__name__)
 

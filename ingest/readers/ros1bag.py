@@ -23,13 +23,20 @@ from typing import BinaryIO
 import numpy as np
 import numpy.typing as npt
 
-from ingest.damage import Completeness, DamageLog, Defect
-from ingest.detect import ROSBAG_MAGIC, Detected, Format
-from ingest.errors import CorruptLogError
-from ingest.readers._compression import DecompressError, decompress
-from ingest.readers._walk import BAD_HEADER, INCOMPLETE, OK, TOO_LONG, ros1_records
-from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
-from ingest.readers.roscommon import RosChannel, decode_batch, make_channel, stream_info
+from navreplay.ingest.damage import Completeness, DamageLog, Defect
+from navreplay.ingest.detect import ROSBAG_MAGIC, Detected, Format
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers._compression import DecompressError, decompress
+from navreplay.ingest.readers._walk import BAD_HEADER, INCOMPLETE, OK, TOO_LONG, ros1_records
+from navreplay.ingest.readers.base import (
+    Batch,
+    Inventory,
+    LogReader,
+    ReadContext,
+    Selection,
+    StreamInfo,
+)
+from navreplay.ingest.readers.roscommon import RosChannel, decode_batch, make_channel, stream_info
 
 U8Array = npt.NDArray[np.uint8]
 I64Array = npt.NDArray[np.int64]

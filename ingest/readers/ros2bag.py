@@ -24,12 +24,19 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ingest.damage import Completeness, DamageLog, Defect
-from ingest.detect import MCAP_MAGIC, SQLITE_MAGIC, Detected, Format
-from ingest.errors import CorruptLogError
-from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
-from ingest.readers.mcap import McapReader
-from ingest.readers.roscommon import RosChannel, decode_batch, make_channel, stream_info
+from navreplay.ingest.damage import Completeness, DamageLog, Defect
+from navreplay.ingest.detect import MCAP_MAGIC, SQLITE_MAGIC, Detected, Format
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers.base import (
+    Batch,
+    Inventory,
+    LogReader,
+    ReadContext,
+    Selection,
+    StreamInfo,
+)
+from navreplay.ingest.readers.mcap import McapReader
+from navreplay.ingest.readers.roscommon import RosChannel, decode_batch, make_channel, stream_info
 
 
 class Ros2BagReader(LogReader):

@@ -9,18 +9,18 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from ingest.errors import CorruptLogError
-from ingest.readers.base import Batch, StreamInfo
-from ingest.readers.rosconv import RosConversion, conversion_for
-from ingest.readers.rosmsg import (
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers.base import Batch, StreamInfo
+from navreplay.ingest.readers.rosconv import RosConversion, conversion_for
+from navreplay.ingest.readers.rosmsg import (
     DefinitionError,
     Encoding,
     MessageDecoder,
     normalize_msgtype,
     parse_definition,
 )
-from ingest.schema import TableName
-from ingest.timebase import MIN_PLAUSIBLE_UTC_NS, TimeBase
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.timebase import MIN_PLAUSIBLE_UTC_NS, TimeBase
 
 U8Array = npt.NDArray[np.uint8]
 I64Array = npt.NDArray[np.int64]

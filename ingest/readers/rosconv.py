@@ -45,9 +45,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ingest.frames import enu_to_ned
-from ingest.readers.rosmsg import Decoded, LeafKind, MessageDecoder
-from ingest.schema import FixType, TableName, spec
+from navreplay.ingest.frames import enu_to_ned
+from navreplay.ingest.readers.rosmsg import Decoded, LeafKind, MessageDecoder
+from navreplay.ingest.schema import FixType, TableName, spec
 
 I64Array = npt.NDArray[np.int64]
 Columns = dict[str, np.ndarray]

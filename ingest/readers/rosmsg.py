@@ -29,7 +29,7 @@ from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 from rosbags.typesys.base import TypesysError
 
-from ingest.errors import IngestError
+from navreplay.ingest.errors import IngestError
 
 Encoding = Literal["ros1", "cdr"]
 U8Array = npt.NDArray[np.uint8]

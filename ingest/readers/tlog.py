@@ -31,16 +31,23 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from ingest.damage import Completeness, Defect
-from ingest.detect import Detected, Format
-from ingest.errors import CorruptLogError
-from ingest.readers._mavscan import VALID
-from ingest.readers.asof import AsofJoin, Left
-from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
-from ingest.readers.mavclock import ROLLOVER_NS
-from ingest.readers.mavdialect import load_dialect
-from ingest.readers.mavmsgs import BY_NAME, Extras, MavStream
-from ingest.readers.tlogclock import (
+from navreplay.ingest.damage import Completeness, Defect
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers._mavscan import VALID
+from navreplay.ingest.readers.asof import AsofJoin, Left
+from navreplay.ingest.readers.base import (
+    Batch,
+    Inventory,
+    LogReader,
+    ReadContext,
+    Selection,
+    StreamInfo,
+)
+from navreplay.ingest.readers.mavclock import ROLLOVER_NS
+from navreplay.ingest.readers.mavdialect import load_dialect
+from navreplay.ingest.readers.mavmsgs import BY_NAME, Extras, MavStream
+from navreplay.ingest.readers.tlogclock import (
     EPOCH_MIN_US,
     HeldClock,
     TlogSurvey,
@@ -49,9 +56,9 @@ from ingest.readers.tlogclock import (
     instances,
     survey,
 )
-from ingest.readers.tlogscan import Packets, ScanStats, scan_blocks
-from ingest.schema import TableName
-from ingest.timebase import TimeBase, utc_to_gps_ns
+from navreplay.ingest.readers.tlogscan import Packets, ScanStats, scan_blocks
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
 
 I64Array = npt.NDArray[np.int64]
 

@@ -33,12 +33,12 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from ingest.readers._mavscan import VALID, gather
-from ingest.readers.mavclock import ROLLOVER_NS, BootTracker, OffsetAccumulator
-from ingest.readers.mavdialect import Dialect, MessageDef
-from ingest.readers.mavmsgs import BY_NAME, MavStream
-from ingest.readers.tlogscan import Packets, ScanStats, scan_blocks
-from ingest.timebase import TimeBase
+from navreplay.ingest.readers._mavscan import VALID, gather
+from navreplay.ingest.readers.mavclock import ROLLOVER_NS, BootTracker, OffsetAccumulator
+from navreplay.ingest.readers.mavdialect import Dialect, MessageDef
+from navreplay.ingest.readers.mavmsgs import BY_NAME, MavStream
+from navreplay.ingest.readers.tlogscan import Packets, ScanStats, scan_blocks
+from navreplay.ingest.timebase import TimeBase
 
 I64Array = npt.NDArray[np.int64]
 

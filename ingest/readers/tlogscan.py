@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from ingest.readers._mavscan import END_PARTIAL, MAVLINK_V2, VALID, scan_tlog
-from ingest.readers.mavdialect import Dialect
+from navreplay.ingest.readers._mavscan import END_PARTIAL, MAVLINK_V2, VALID, scan_tlog
+from navreplay.ingest.readers.mavdialect import Dialect
 
 BLOCK_BYTES = 8 << 20
 MIN_STAMP_US = 946_684_800 * 10**6  # 2000-01-01

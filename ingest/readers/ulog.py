@@ -40,14 +40,21 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ingest.damage import Completeness, Defect
-from ingest.detect import Detected, Format
-from ingest.errors import CorruptLogError
-from ingest.readers.asof import AsofJoin, Left
-from ingest.readers.base import Batch, Inventory, LogReader, ReadContext, Selection, StreamInfo
-from ingest.readers.ulogmsgs import GPS_TOPICS, TOPICS, UlogTopic, attitude_columns
-from ingest.schema import TableName
-from ingest.timebase import TimeBase, utc_to_gps_ns
+from navreplay.ingest.damage import Completeness, Defect
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers.asof import AsofJoin, Left
+from navreplay.ingest.readers.base import (
+    Batch,
+    Inventory,
+    LogReader,
+    ReadContext,
+    Selection,
+    StreamInfo,
+)
+from navreplay.ingest.readers.ulogmsgs import GPS_TOPICS, TOPICS, UlogTopic, attitude_columns
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
 
 log = logging.getLogger(__name__)
 

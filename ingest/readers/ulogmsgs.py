@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ingest.readers.mavmsgs import Converted
-from ingest.schema import FixType, TableName
+from navreplay.ingest.readers.mavmsgs import Converted
+from navreplay.ingest.schema import FixType, TableName
 
 F64 = npt.NDArray[np.float64]
 Data = Mapping[str, np.ndarray]

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from ingest.atomic import atomic_write_text
-from ingest.errors import IngestError
+from navreplay.ingest.atomic import atomic_write_text
+from navreplay.ingest.errors import IngestError
 
 F64 = npt.NDArray[np.float64]
 

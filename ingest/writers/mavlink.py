@@ -37,9 +37,9 @@ import numpy.typing as npt
 import pyarrow as pa
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from ingest.atomic import atomic_path
-from ingest.errors import IngestError
-from ingest.schema import from_columns
+from navreplay.ingest.atomic import atomic_path
+from navreplay.ingest.errors import IngestError
+from navreplay.ingest.schema import from_columns
 
 F64 = npt.NDArray[np.float64]
 

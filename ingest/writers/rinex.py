@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from ingest.atomic import atomic_write_text
-from ingest.gnss import LAMBDA_L1_M, Ephemeris
-from ingest.gpstime import NS_PER_S, calendar_from_gps, leap_seconds, week_and_seconds
-from ingest.tables import package_version
+from navreplay.ingest.atomic import atomic_write_text
+from navreplay.ingest.gnss import LAMBDA_L1_M, Ephemeris
+from navreplay.ingest.gpstime import NS_PER_S, calendar_from_gps, leap_seconds, week_and_seconds
+from navreplay.ingest.tables import package_version
 
 RINEX_VERSION = "3.04"
 OBS_TYPES = ("C1C", "D1C", "S1C")

@@ -38,10 +38,10 @@ from rosbags.rosbag1 import Writer as Bag1Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from ingest.atomic import atomic_path
-from ingest.gpstime import utc_unix_ns_from_gps
-from ingest.tables import package_version
-from ingest.writers.rosserial import Stream, encoder
+from navreplay.ingest.atomic import atomic_path
+from navreplay.ingest.gpstime import utc_unix_ns_from_gps
+from navreplay.ingest.tables import package_version
+from navreplay.ingest.writers.rosserial import Stream, encoder
 
 TRUTH_MSGTYPE = "navreplay_msgs/msg/NavTruth"
 _IMU, _FIX = "sensor_msgs/msg/Imu", "sensor_msgs/msg/NavSatFix"

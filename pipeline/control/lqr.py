@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 import scipy.linalg
 
-from ingest.typed import FieldError
+from navreplay.ingest.typed import FieldError
 
 F64 = npt.NDArray[np.float64]
 

@@ -28,14 +28,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ingest.config import ImuNoise
-from pipeline.estimation.config import InitParams
-from pipeline.estimation.inputs import FixData, ImuData, ObsData
-from pipeline.estimation.models import ins
-from pipeline.estimation.models import measurement as me
-from pipeline.estimation.models.gnss import AN_DIM, AN_RE, AN_VE, antenna
-from pipeline.nav import spp
-from pipeline.nav.earth import F64, OMEGA_IE, ecef_to_geodetic, gravity, radii
+from navreplay.ingest.config import ImuNoise
+from navreplay.pipeline.estimation.config import InitParams
+from navreplay.pipeline.estimation.inputs import FixData, ImuData, ObsData
+from navreplay.pipeline.estimation.models import ins
+from navreplay.pipeline.estimation.models import measurement as me
+from navreplay.pipeline.estimation.models.gnss import AN_DIM, AN_RE, AN_VE, antenna
+from navreplay.pipeline.nav import spp
+from navreplay.pipeline.nav.earth import F64, OMEGA_IE, ecef_to_geodetic, gravity, radii
 
 log = logging.getLogger(__name__)
 

@@ -44,8 +44,8 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Any, Literal
 
-from ingest.typed import FieldError
-from pipeline.control.lqr import YawSteerModel
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.control.lqr import YawSteerModel
 
 Estimator = Literal["ekf", "ukf", "hybrid"]
 

@@ -16,11 +16,15 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Literal
 
-from ingest.config import ImuNoise
-from ingest.typed import FieldError
-from pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams, check_sections
-from pipeline.estimation.fuzzy import FuzzyParams
-from pipeline.estimation.vehicle_config import VehicleFilterParams
+from navreplay.ingest.config import ImuNoise
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.estimation.cascaded_config import (
+    CASCADED_KINDS,
+    CascadedFilterParams,
+    check_sections,
+)
+from navreplay.pipeline.estimation.fuzzy import FuzzyParams
+from navreplay.pipeline.estimation.vehicle_config import VehicleFilterParams
 
 Estimator = Literal["ekf", "ukf"]
 Coupling = Literal["loose", "tight"]
@@ -327,7 +331,7 @@ class FilterKind:
         module, fn = (
             ("fwekf", "run_fwekf") if self.fading else (self.estimator, f"run_{self.estimator}")
         )
-        return f"pipeline.estimation.kernels.{module}:{fn}"
+        return f"navreplay.pipeline.estimation.kernels.{module}:{fn}"
 
 
 FILTER_KINDS: dict[str, FilterKind] = {
@@ -392,7 +396,7 @@ class FiltersParams:
 
     def vehicle(self, name: str) -> VehicleFilterParams:
         """The section of vehicle filter ``name`` (``vehicle_config.VEHICLE_FILTERS``)."""
-        from pipeline.estimation.vehicle_config import VEHICLE_FILTERS
+        from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS
 
         if name not in VEHICLE_FILTERS:
             raise KeyError(f"unknown vehicle filter {name!r} (known: {', '.join(VEHICLE_FILTERS)})")

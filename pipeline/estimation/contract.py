@@ -26,11 +26,11 @@ from typing import Any, Literal, Protocol
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from ingest.atomic import atomic_directory, atomic_write_json
-from ingest.meta import META_NAME, SensorMeta, read_meta
-from ingest.schema import TableName
-from ingest.tables import Provenance, read_table, write_table
-from ingest.typed import to_plain
+from navreplay.ingest.atomic import atomic_directory, atomic_write_json
+from navreplay.ingest.meta import META_NAME, SensorMeta, read_meta
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.tables import Provenance, read_table, write_table
+from navreplay.ingest.typed import to_plain
 
 log = logging.getLogger(__name__)
 

@@ -12,10 +12,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from pipeline.estimation.cascaded.run import CASCADED
-from pipeline.estimation.contract import Backend, Family, RunInputs, RunOutput
-from pipeline.estimation.run import INS
-from pipeline.estimation.vehicle_run import VEHICLE
+from navreplay.pipeline.estimation.cascaded.run import CASCADED
+from navreplay.pipeline.estimation.contract import Backend, Family, RunInputs, RunOutput
+from navreplay.pipeline.estimation.run import INS
+from navreplay.pipeline.estimation.vehicle_run import VEHICLE
 
 #: every family, in the order of the reports and the ranking
 FAMILIES: tuple[Family, ...] = (INS, VEHICLE, CASCADED)

@@ -56,9 +56,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ingest.typed import FieldError
-from pipeline._jit import njit
-from pipeline.nav.earth import F64, I64
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.nav.earth import F64, I64
 
 Z, S, L, NS = 0, 1, 2, 3
 LABELS = ("Z", "S", "L", "NS")

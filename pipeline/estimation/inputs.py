@@ -18,10 +18,10 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
-from ingest.schema import FixType
-from pipeline.estimation.config import GnssNoiseParams, StepParams
-from pipeline.estimation.models import measurement as me
-from pipeline.nav.earth import F64, I64
+from navreplay.ingest.schema import FixType
+from navreplay.pipeline.estimation.config import GnssNoiseParams, StepParams
+from navreplay.pipeline.estimation.models import measurement as me
+from navreplay.pipeline.nav.earth import F64, I64
 
 B8 = npt.NDArray[np.bool_]
 _IMU_COLS = ("acc_x_mps2", "acc_y_mps2", "acc_z_mps2", "gyro_x_radps", "gyro_y_radps")

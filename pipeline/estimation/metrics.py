@@ -24,13 +24,13 @@ import numpy.typing as npt
 import pyarrow as pa
 from scipy.stats import chi2
 
-from pipeline.estimation.contract import run_metrics
-from pipeline.estimation.models import measurement as me
-from pipeline.estimation.outage_metrics import outage_windows
-from pipeline.estimation.replay import RunResult
-from pipeline.estimation.truth import error_states, full_truth
-from pipeline.estimation.windows import Window, WindowMetricsParams
-from pipeline.nav.earth import F64
+from navreplay.pipeline.estimation.contract import run_metrics
+from navreplay.pipeline.estimation.models import measurement as me
+from navreplay.pipeline.estimation.outage_metrics import outage_windows
+from navreplay.pipeline.estimation.replay import RunResult
+from navreplay.pipeline.estimation.truth import error_states, full_truth
+from navreplay.pipeline.estimation.windows import Window, WindowMetricsParams
+from navreplay.pipeline.nav.earth import F64
 
 
 def _rms(a: F64) -> float | None:

@@ -28,12 +28,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.estimation.models import ins
-from pipeline.estimation.replay import RunResult
-from pipeline.estimation.truth import error_states, truth_at
-from pipeline.estimation.windows import NS, Window, WindowMetricsParams
-from pipeline.nav.earth import E2, F64, I64, A
-from pipeline.nav.rotations import quat_to_dcm
+from navreplay.pipeline.estimation.models import ins
+from navreplay.pipeline.estimation.replay import RunResult
+from navreplay.pipeline.estimation.truth import error_states, truth_at
+from navreplay.pipeline.estimation.windows import NS, Window, WindowMetricsParams
+from navreplay.pipeline.nav.earth import E2, F64, I64, A
+from navreplay.pipeline.nav.rotations import quat_to_dcm
 
 
 @dataclass(frozen=True)

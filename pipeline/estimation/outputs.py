@@ -33,11 +33,11 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
-from ingest.schema import from_columns
-from pipeline.estimation.models import ins
-from pipeline.estimation.models import measurement as me
-from pipeline.estimation.replay import RunResult
-from pipeline.nav.earth import F64
+from navreplay.ingest.schema import from_columns
+from navreplay.pipeline.estimation.models import ins
+from navreplay.pipeline.estimation.models import measurement as me
+from navreplay.pipeline.estimation.replay import RunResult
+from navreplay.pipeline.nav.earth import F64
 
 BIAS_COLUMNS = (
     ("acc_bias_x_mps2", ins.X_BA, ins.E_BA, "acc_bias_x_sigma_mps2"),

@@ -24,13 +24,13 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-from pipeline.estimation.kernels import common as cm
-from pipeline.estimation.kernels.ekf import ekf_prepare
-from pipeline.estimation.kernels.records import RunLog, Schedule, Settings
-from pipeline.estimation.kernels.unscented import sigma_h
-from pipeline.estimation.models import ins, ins_errors
-from pipeline.estimation.models import measurement as me
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.estimation.kernels.ekf import ekf_prepare
+from navreplay.pipeline.estimation.kernels.records import RunLog, Schedule, Settings
+from navreplay.pipeline.estimation.kernels.unscented import sigma_h
+from navreplay.pipeline.estimation.models import ins, ins_errors
+from navreplay.pipeline.estimation.models import measurement as me
+from navreplay.pipeline.nav.earth import F64, I64
 
 
 @dataclass

@@ -16,15 +16,15 @@ from __future__ import annotations
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
-from pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
-from pipeline.estimation.kernels import common as cm
-from pipeline.estimation.kernels.ekf import ekf_prepare
-from pipeline.estimation.kernels.fwekf import RING_COLS, push_residuals
-from pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
-from pipeline.estimation.models import ins, ins_errors
-from pipeline.estimation.models import measurement as me
-from pipeline.estimation.reference import _Run
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
+from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.estimation.kernels.ekf import ekf_prepare
+from navreplay.pipeline.estimation.kernels.fwekf import RING_COLS, push_residuals
+from navreplay.pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
+from navreplay.pipeline.estimation.models import ins, ins_errors
+from navreplay.pipeline.estimation.models import measurement as me
+from navreplay.pipeline.estimation.reference import _Run
+from navreplay.pipeline.nav.earth import F64, I64
 
 
 def run_fwekf_filterpy(

@@ -25,11 +25,11 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, IMMEstimator
 
-from pipeline.estimation.kernels import common as cm
-from pipeline.estimation.kernels import vehicle as kv
-from pipeline.estimation.kernels.records import RunLog
-from pipeline.estimation.models import vehicle as vm
-from pipeline.nav.earth import F64
+from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.estimation.kernels import vehicle as kv
+from navreplay.pipeline.estimation.kernels.records import RunLog
+from navreplay.pipeline.estimation.models import vehicle as vm
+from navreplay.pipeline.nav.earth import F64
 
 
 class _ModelEKF(ExtendedKalmanFilter):  # type: ignore[misc]

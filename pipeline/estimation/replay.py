@@ -29,20 +29,20 @@ import numpy as np
 import pyarrow as pa
 from scipy.stats import chi2
 
-from ingest.config import ImuNoise
-from ingest.meta import SensorMeta
-from pipeline._numba_cache import fewer_gc_passes
-from pipeline.errors import DivergenceError, PipelineError
-from pipeline.estimation import inputs as inp
-from pipeline.estimation.alignment import Alignment, align
-from pipeline.estimation.config import FILTER_KINDS, FilterKind, InsFilterParams
-from pipeline.estimation.contract import Backend
-from pipeline.estimation.kernels import common as cm
-from pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
-from pipeline.estimation.kernels.unscented import ukf_weights
-from pipeline.estimation.models import ins, ins_errors
-from pipeline.estimation.models import measurement as me
-from pipeline.nav.earth import F64, I64
+from navreplay.ingest.config import ImuNoise
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline._numba_cache import fewer_gc_passes
+from navreplay.pipeline.errors import DivergenceError, PipelineError
+from navreplay.pipeline.estimation import inputs as inp
+from navreplay.pipeline.estimation.alignment import Alignment, align
+from navreplay.pipeline.estimation.config import FILTER_KINDS, FilterKind, InsFilterParams
+from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
+from navreplay.pipeline.estimation.kernels.unscented import ukf_weights
+from navreplay.pipeline.estimation.models import ins, ins_errors
+from navreplay.pipeline.estimation.models import measurement as me
+from navreplay.pipeline.nav.earth import F64, I64
 
 log = logging.getLogger(__name__)
 
@@ -192,10 +192,10 @@ def kernel_for(kind: FilterKind, backend: Backend) -> KernelFn:
         kernel: KernelFn = getattr(importlib.import_module(module), function)
         return kernel
     if kind.fading:
-        from pipeline.estimation.reference_fwekf import run_fwekf_filterpy
+        from navreplay.pipeline.estimation.reference_fwekf import run_fwekf_filterpy
 
         return run_fwekf_filterpy
-    from pipeline.estimation.reference import run_ekf_filterpy, run_ukf_filterpy
+    from navreplay.pipeline.estimation.reference import run_ekf_filterpy, run_ukf_filterpy
 
     return run_ekf_filterpy if kind.estimator == "ekf" else run_ukf_filterpy
 
@@ -390,7 +390,7 @@ def _run_segment(
         out_alpha = np.ones(log_.capacity()[0])  # fwekf: the fading factor at each output row
         args: tuple[object, ...] = (al.x0, al.P0, sched, fix_arr, obs_arr, setup.settings)
         if setup.fuzzy is not None:
-            from pipeline.estimation.fuzzy import RULES
+            from navreplay.pipeline.estimation.fuzzy import RULES
 
             args = (*args, Fading(setup.fuzzy, RULES, out_alpha))
         args = (*args, log_)

@@ -11,12 +11,18 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from ingest.schema import TableName
-from pipeline.estimation.config import FILTER_KINDS, FiltersParams, InsFilterParams
-from pipeline.estimation.contract import Backend, RunInputs, RunOutput, RunTables, events_table
-from pipeline.estimation.metrics import compute_metrics
-from pipeline.estimation.outputs import estimate_table, innovations_table
-from pipeline.estimation.replay import RunResult, run_filter
+from navreplay.ingest.schema import TableName
+from navreplay.pipeline.estimation.config import FILTER_KINDS, FiltersParams, InsFilterParams
+from navreplay.pipeline.estimation.contract import (
+    Backend,
+    RunInputs,
+    RunOutput,
+    RunTables,
+    events_table,
+)
+from navreplay.pipeline.estimation.metrics import compute_metrics
+from navreplay.pipeline.estimation.outputs import estimate_table, innovations_table
+from navreplay.pipeline.estimation.replay import RunResult, run_filter
 
 INPUTS = (TableName.IMU, TableName.GNSS, TableName.GNSS_OBS, TableName.TRUTH)
 

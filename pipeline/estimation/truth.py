@@ -12,10 +12,10 @@ import numpy as np
 import pyarrow as pa
 from scipy.spatial.transform import Rotation
 
-from pipeline.estimation.models import ins
-from pipeline.estimation.outputs import BIAS_COLUMNS, CLOCK_COLUMNS
-from pipeline.estimation.replay import RunResult
-from pipeline.nav.earth import E2, F64, A
+from navreplay.pipeline.estimation.models import ins
+from navreplay.pipeline.estimation.outputs import BIAS_COLUMNS, CLOCK_COLUMNS
+from navreplay.pipeline.estimation.replay import RunResult
+from navreplay.pipeline.nav.earth import E2, F64, A
 
 _NAV_TRUTH = ("lat_deg", "lon_deg", "alt_m", "vel_n_mps", "vel_e_mps", "vel_d_mps")
 _ANGLES = ("roll_rad", "pitch_rad", "yaw_rad")

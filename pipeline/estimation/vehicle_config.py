@@ -12,8 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Literal
 
-from ingest.typed import FieldError
-from pipeline.synth.bicycle import VehicleParams
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.synth.bicycle import VehicleParams
 
 VEHICLE_FILTERS = ("vehicle_kinematic", "vehicle_dynamic", "vehicle_switched", "vehicle_imm")
 

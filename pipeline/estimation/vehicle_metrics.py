@@ -14,13 +14,13 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.estimation.contract import run_metrics
-from pipeline.estimation.kernels import vehicle as kv
-from pipeline.estimation.metrics import nis_by_stream
-from pipeline.estimation.models import vehicle as vm
-from pipeline.estimation.truth import truth_at
-from pipeline.estimation.vehicle_replay import VehicleRunResult
-from pipeline.nav.earth import F64
+from navreplay.pipeline.estimation.contract import run_metrics
+from navreplay.pipeline.estimation.kernels import vehicle as kv
+from navreplay.pipeline.estimation.metrics import nis_by_stream
+from navreplay.pipeline.estimation.models import vehicle as vm
+from navreplay.pipeline.estimation.truth import truth_at
+from navreplay.pipeline.estimation.vehicle_replay import VehicleRunResult
+from navreplay.pipeline.nav.earth import F64
 
 
 def _wrap(a: F64) -> F64:

@@ -28,17 +28,17 @@ import numpy as np
 import pyarrow as pa
 from scipy.stats import chi2
 
-from pipeline.errors import DivergenceError
-from pipeline.estimation import inputs as inp
-from pipeline.estimation.contract import Backend
-from pipeline.estimation.kernels import common as cm
-from pipeline.estimation.kernels import vehicle as kv
-from pipeline.estimation.kernels.records import RunLog
-from pipeline.estimation.models import vehicle as vm
-from pipeline.estimation.replay import ReplayInputError
-from pipeline.estimation.vehicle_config import VehicleFilterParams
-from pipeline.nav.earth import F64, I64
-from pipeline.nav.local import LocalFrame
+from navreplay.pipeline.errors import DivergenceError
+from navreplay.pipeline.estimation import inputs as inp
+from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.estimation.kernels import vehicle as kv
+from navreplay.pipeline.estimation.kernels.records import RunLog
+from navreplay.pipeline.estimation.models import vehicle as vm
+from navreplay.pipeline.estimation.replay import ReplayInputError
+from navreplay.pipeline.estimation.vehicle_config import VehicleFilterParams
+from navreplay.pipeline.nav.earth import F64, I64
+from navreplay.pipeline.nav.local import LocalFrame
 
 log = logging.getLogger(__name__)
 
@@ -292,7 +292,7 @@ KernelFn = Callable[..., int]
 def _kernel(backend: Backend) -> KernelFn:
     if backend == "numba":
         return kv.run_vehicle
-    from pipeline.estimation.reference_vehicle import run_vehicle_filterpy
+    from navreplay.pipeline.estimation.reference_vehicle import run_vehicle_filterpy
 
     return run_vehicle_filterpy
 

@@ -18,14 +18,20 @@ import logging
 import numpy as np
 import pyarrow as pa
 
-from ingest.schema import TableName, from_columns
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.contract import Backend, RunInputs, RunOutput, RunTables, events_table
-from pipeline.estimation.kernels import vehicle as kv
-from pipeline.estimation.models import vehicle as vm
-from pipeline.estimation.vehicle_config import VEHICLE_FILTERS, VehicleFilterParams
-from pipeline.estimation.vehicle_metrics import compute_metrics
-from pipeline.estimation.vehicle_replay import VehicleRunResult, run_vehicle_filter
+from navreplay.ingest.schema import TableName, from_columns
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.contract import (
+    Backend,
+    RunInputs,
+    RunOutput,
+    RunTables,
+    events_table,
+)
+from navreplay.pipeline.estimation.kernels import vehicle as kv
+from navreplay.pipeline.estimation.models import vehicle as vm
+from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS, VehicleFilterParams
+from navreplay.pipeline.estimation.vehicle_metrics import compute_metrics
+from navreplay.pipeline.estimation.vehicle_replay import VehicleRunResult, run_vehicle_filter
 
 log = logging.getLogger(__name__)
 

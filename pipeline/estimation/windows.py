@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ingest.typed import FieldError
-from pipeline.nav.earth import I64
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.nav.earth import I64
 
 NS = 1_000_000_000
 

@@ -31,14 +31,19 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from ingest.meta import SensorMeta
-from pipeline.estimation.config import FiltersParams, InsFilterParams
-from pipeline.estimation.contract import Backend
-from pipeline.estimation.metrics import nis_summary
-from pipeline.estimation.replay import run_filter
-from pipeline.estimation.truth import error_states
-from pipeline.experiments.gnss_outages import Window, drop_fixes, in_windows, periodic_windows
-from pipeline.nav.earth import radii
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation.config import FiltersParams, InsFilterParams
+from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.metrics import nis_summary
+from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.truth import error_states
+from navreplay.pipeline.experiments.gnss_outages import (
+    Window,
+    drop_fixes,
+    in_windows,
+    periodic_windows,
+)
+from navreplay.pipeline.nav.earth import radii
 
 FILTERS = ("lc_ekf", "lc_ekf_white", "fwekf")
 

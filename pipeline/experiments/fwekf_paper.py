@@ -42,15 +42,15 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from ingest.meta import SensorMeta
-from pipeline.estimation.alignment import Alignment
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.contract import Backend
-from pipeline.estimation.models import ins
-from pipeline.estimation.replay import RunResult, run_filter
-from pipeline.estimation.truth import error_states, truth_at
-from pipeline.nav.earth import radii
-from pipeline.nav.rotations import euler_to_quat
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation.alignment import Alignment
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.models import ins
+from navreplay.pipeline.estimation.replay import RunResult, run_filter
+from navreplay.pipeline.estimation.truth import error_states, truth_at
+from navreplay.pipeline.nav.earth import radii
+from navreplay.pipeline.nav.rotations import euler_to_quat
 
 FILTERS = ("lc_ekf", "fwekf")
 PAPER = {

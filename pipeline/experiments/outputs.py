@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from ingest.atomic import atomic_path, atomic_write_json
+from navreplay.ingest.atomic import atomic_path, atomic_write_json
 
 
 def _plain(v: Any) -> Any:

@@ -17,12 +17,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.contract import Backend
-from pipeline.estimation.vehicle_config import VEHICLE_FILTERS
-from pipeline.estimation.vehicle_metrics import errors, per_band
-from pipeline.estimation.vehicle_replay import run_vehicle_filter
-from pipeline.experiments.gnss_outages import drop_fixes, in_windows, periodic_windows
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS
+from navreplay.pipeline.estimation.vehicle_metrics import errors, per_band
+from navreplay.pipeline.estimation.vehicle_replay import run_vehicle_filter
+from navreplay.pipeline.experiments.gnss_outages import drop_fixes, in_windows, periodic_windows
 
 SPEED_EDGES_MPS = (0.0, 2.5, 5.0, 10.0, 15.0, 20.0, 25.0, 35.0)
 

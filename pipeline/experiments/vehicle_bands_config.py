@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ingest.typed import FieldError
+from navreplay.ingest.typed import FieldError
 
 
 @dataclass(frozen=True)

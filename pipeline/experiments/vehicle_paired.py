@@ -36,13 +36,13 @@ import numpy as np
 import pyarrow as pa
 from scipy import stats
 
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.contract import Backend
-from pipeline.estimation.vehicle_config import VEHICLE_FILTERS, SwitchingParams
-from pipeline.experiments.vehicle_bands import band_table
-from pipeline.experiments.vehicle_bands_config import VehicleBandsParams
-from pipeline.nav.earth import F64
-from pipeline.synth import car
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS, SwitchingParams
+from navreplay.pipeline.experiments.vehicle_bands import band_table
+from navreplay.pipeline.experiments.vehicle_bands_config import VehicleBandsParams
+from navreplay.pipeline.nav.earth import F64
+from navreplay.pipeline.synth import car
 
 PASSING = ("not worse", "equivalent")  # verdicts that meet the acceptance
 

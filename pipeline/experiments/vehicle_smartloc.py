@@ -32,14 +32,14 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from ingest.schema import FixType, from_columns
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.contract import Backend
-from pipeline.estimation.vehicle_config import VEHICLE_FILTERS, VehicleFilterParams
-from pipeline.estimation.vehicle_metrics import errors, per_band, summarize
-from pipeline.estimation.vehicle_replay import run_vehicle_filter
-from pipeline.experiments.gnss_outages import drop_fixes, in_windows, periodic_windows
-from pipeline.nav.earth import dcm_ecef_to_ned, ecef_to_geodetic, geodetic_to_ecef
+from navreplay.ingest.schema import FixType, from_columns
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS, VehicleFilterParams
+from navreplay.pipeline.estimation.vehicle_metrics import errors, per_band, summarize
+from navreplay.pipeline.estimation.vehicle_replay import run_vehicle_filter
+from navreplay.pipeline.experiments.gnss_outages import drop_fixes, in_windows, periodic_windows
+from navreplay.pipeline.nav.earth import dcm_ecef_to_ned, ecef_to_geodetic, geodetic_to_ecef
 
 SMARTLOC_EDGES_MPS = (0.0, 2.5, 5.0, 10.0)
 MIN_SATS = 6
@@ -187,8 +187,8 @@ def smartloc_rows(
 
 def errors_of_fixes(fixes: pa.Table, truth: pa.Table) -> np.ndarray:
     """Horizontal error of the least-squares fixes against the truth, m."""
-    from pipeline.estimation.truth import truth_at
-    from pipeline.nav.local import LocalFrame
+    from navreplay.pipeline.estimation.truth import truth_at
+    from navreplay.pipeline.nav.local import LocalFrame
 
     t = np.asarray(fixes.column("t_ns").to_numpy(), dtype=np.int64)
     inside, tr = truth_at(truth, t)

@@ -34,12 +34,12 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.contract import Backend
-from pipeline.experiments.vehicle_bands import SPEED_EDGES_MPS, band_table
-from pipeline.experiments.vehicle_bands_config import VehicleBandsParams
-from pipeline.experiments.vehicle_paired import SINGLE, mean_ci
-from pipeline.synth import car
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.experiments.vehicle_bands import SPEED_EDGES_MPS, band_table
+from navreplay.pipeline.experiments.vehicle_bands_config import VehicleBandsParams
+from navreplay.pipeline.experiments.vehicle_paired import SINGLE, mean_ci
+from navreplay.pipeline.synth import car
 
 #: calibration bands, m/s: the acceptance's
 CALIBRATION_EDGES_MPS = SPEED_EDGES_MPS

@@ -14,7 +14,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from pipeline._jit import njit
+from navreplay.pipeline._jit import njit
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ingest.typed import FieldError
-from pipeline.nav.earth import radii
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.nav.earth import radii
 
 F64 = npt.NDArray[np.float64]
 

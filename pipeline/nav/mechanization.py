@@ -25,8 +25,8 @@ import math
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.nav.earth import (
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.nav.earth import (
     E2,
     F64,
     GAMMA_E,
@@ -40,7 +40,7 @@ from pipeline.nav.earth import (
     omega_en_n,
     omega_ie_n,
 )
-from pipeline.nav.rotations import quat_to_dcm
+from navreplay.pipeline.nav.rotations import quat_to_dcm
 
 I_LAT, I_LON, I_H = 0, 1, 2
 I_VN, I_VE, I_VD = 3, 4, 5

@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.nav.earth import F64
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.nav.earth import F64
 
 
 @njit(cache=True)

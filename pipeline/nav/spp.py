@@ -16,8 +16,8 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from pipeline._jit import njit
-from pipeline.nav.earth import F64, I64, dcm_ecef_to_ned, ecef_to_geodetic
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.nav.earth import F64, I64, dcm_ecef_to_ned, ecef_to_geodetic
 
 STATE_DIM = 4
 

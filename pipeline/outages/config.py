@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ingest.typed import FieldError
-from pipeline.estimation.config import FILTER_KINDS
-from pipeline.scenarios.config import Policy
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.estimation.config import FILTER_KINDS
+from navreplay.pipeline.scenarios.config import Policy
 
 
 @dataclass(frozen=True)

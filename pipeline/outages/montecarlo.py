@@ -28,16 +28,21 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from ingest.meta import SensorMeta
-from pipeline.estimation.alignment import Alignment
-from pipeline.estimation.config import InsFilterParams
-from pipeline.estimation.contract import Backend
-from pipeline.estimation.outage_metrics import ErrorTrack, fixes_track, truth_track, window_metrics
-from pipeline.estimation.replay import RunResult, run_filter
-from pipeline.estimation.windows import NS, WindowMetricsParams
-from pipeline.nav.earth import I64
-from pipeline.scenarios.apply import apply_scenario, log_span
-from pipeline.scenarios.config import Policy, SatellitesSpec, ScenarioSpec, WindowsSpec
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation.alignment import Alignment
+from navreplay.pipeline.estimation.config import InsFilterParams
+from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.outage_metrics import (
+    ErrorTrack,
+    fixes_track,
+    truth_track,
+    window_metrics,
+)
+from navreplay.pipeline.estimation.replay import RunResult, run_filter
+from navreplay.pipeline.estimation.windows import NS, WindowMetricsParams
+from navreplay.pipeline.nav.earth import I64
+from navreplay.pipeline.scenarios.apply import apply_scenario, log_span
+from navreplay.pipeline.scenarios.config import Policy, SatellitesSpec, ScenarioSpec, WindowsSpec
 
 log = logging.getLogger(__name__)
 

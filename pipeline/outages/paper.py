@@ -26,7 +26,7 @@ import numpy as np
 import pyarrow as pa
 from scipy.spatial.transform import Rotation
 
-from pipeline.outages.tables import PAPER_001_PAIR, PAPER_001_TABLE1
+from navreplay.pipeline.outages.tables import PAPER_001_PAIR, PAPER_001_TABLE1
 
 
 def nhc_validity(truth: pa.Table) -> dict[str, float]:

@@ -17,14 +17,14 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
-from pipeline.estimation.config import InsFilterParams
-from pipeline.estimation.contract import Backend, RunInputs, RunOutput
-from pipeline.estimation.metrics import compute_metrics
-from pipeline.estimation.replay import RunResult, run_filter
-from pipeline.estimation.run import decode
-from pipeline.scenarios.apply import AppliedScenario, apply_scenario
-from pipeline.scenarios.config import ScenariosParams, ScenarioSpec
-from pipeline.scenarios.criteria import check_fault
+from navreplay.pipeline.estimation.config import InsFilterParams
+from navreplay.pipeline.estimation.contract import Backend, RunInputs, RunOutput
+from navreplay.pipeline.estimation.metrics import compute_metrics
+from navreplay.pipeline.estimation.replay import RunResult, run_filter
+from navreplay.pipeline.estimation.run import decode
+from navreplay.pipeline.scenarios.apply import AppliedScenario, apply_scenario
+from navreplay.pipeline.scenarios.config import ScenariosParams, ScenarioSpec
+from navreplay.pipeline.scenarios.criteria import check_fault
 
 log = logging.getLogger(__name__)
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import bootstrap, norm
 
-from pipeline.nav.earth import F64
+from navreplay.pipeline.nav.earth import F64
 
 
 @dataclass(frozen=True)

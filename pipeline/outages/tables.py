@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.nav.earth import F64
-from pipeline.outages.config import OutagesParams
-from pipeline.outages.stats import delta_reduction, mean_interval, paired_reduction
+from navreplay.pipeline.nav.earth import F64
+from navreplay.pipeline.outages.config import OutagesParams
+from navreplay.pipeline.outages.stats import delta_reduction, mean_interval, paired_reduction
 
 SAT_REDUCTION_COLUMNS = (
     "pair",

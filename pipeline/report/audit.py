@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from pipeline.report import html as h
-from pipeline.report.inputs import DatasetInputs
+from navreplay.pipeline.report import html as h
+from navreplay.pipeline.report.inputs import DatasetInputs
 
 Row = dict[str, Any]
 

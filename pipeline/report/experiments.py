@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from pipeline.outages.tables import SAT_REDUCTION_COLUMNS
-from pipeline.report.input_files import ReportInputError, read_json
+from navreplay.pipeline.outages.tables import SAT_REDUCTION_COLUMNS
+from navreplay.pipeline.report.input_files import ReportInputError, read_json
 
 SECTION_NAME = "section.json"
 SAT_REDUCTION_NAME = "sat_reduction.csv"

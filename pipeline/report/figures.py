@@ -17,9 +17,9 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.stats import chi2
 
-from pipeline.report.inputs import DatasetInputs, Run, column, times_ns
-from pipeline.report.series import ErrorSeries, local_en
-from pipeline.report.svg import (
+from navreplay.pipeline.report.inputs import DatasetInputs, Run, column, times_ns
+from navreplay.pipeline.report.series import ErrorSeries, local_en
+from navreplay.pipeline.report.svg import (
     TRUTH_COLOUR,
     colour,
     decimate_minmax,

@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.report.inputs import DatasetInputs
-from pipeline.report.series import ErrorSeries
-from pipeline.report.svg import OUTAGE_COLOUR, colour, figure_svg, style
+from navreplay.pipeline.report.inputs import DatasetInputs
+from navreplay.pipeline.report.series import ErrorSeries
+from navreplay.pipeline.report.svg import OUTAGE_COLOUR, colour, figure_svg, style
 
 PRE_S = 10.0
 POST_S = 30.0

@@ -12,7 +12,7 @@ import html
 from collections.abc import Sequence
 from typing import Any
 
-from pipeline.report.tables import fmt
+from navreplay.pipeline.report.tables import fmt
 
 CSS = """
 :root { --fg: #1b1f24; --muted: #5b6570; --line: #d8dde3; --bg2: #f5f7f9; --accent: #0b5cad; }

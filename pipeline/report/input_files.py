@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from pipeline.errors import PipelineError
+from navreplay.pipeline.errors import PipelineError
 
 
 class ReportInputError(PipelineError):

@@ -31,12 +31,12 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from ingest.errors import IngestError
-from ingest.meta import META_NAME, DatasetMeta, read_meta
-from ingest.schema import TableName
-from ingest.tables import read_table
-from pipeline.report.experiments import load_experiments
-from pipeline.report.input_files import ReportInputError, read_json
+from navreplay.ingest.errors import IngestError
+from navreplay.ingest.meta import META_NAME, DatasetMeta, read_meta
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.tables import read_table
+from navreplay.pipeline.report.experiments import load_experiments
+from navreplay.pipeline.report.input_files import ReportInputError, read_json
 
 REPORT_NAME = "ingest_report.json"
 

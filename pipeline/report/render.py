@@ -26,13 +26,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
-from ingest.tables import git_commit, package_version
-from pipeline.report import audit, figures, figures_outage, sections
-from pipeline.report import html as h
-from pipeline.report import tables as tb
-from pipeline.report.experiments import DRIFT_NAME, SAT_REDUCTION_NAME, find_outage_results
-from pipeline.report.inputs import DatasetInputs
+from navreplay.ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
+from navreplay.ingest.tables import git_commit, package_version
+from navreplay.pipeline.report import audit, figures, figures_outage, sections
+from navreplay.pipeline.report import html as h
+from navreplay.pipeline.report import tables as tb
+from navreplay.pipeline.report.experiments import (
+    DRIFT_NAME,
+    SAT_REDUCTION_NAME,
+    find_outage_results,
+)
+from navreplay.pipeline.report.inputs import DatasetInputs
 
 log = logging.getLogger(__name__)
 

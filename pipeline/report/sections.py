@@ -6,11 +6,11 @@ import re
 from collections.abc import Sequence
 from typing import Any
 
-from pipeline.report import html as h
-from pipeline.report import markdown
-from pipeline.report.experiments import CsvTable, Experiment
-from pipeline.report.inputs import DatasetInputs
-from pipeline.report.tables import PAPER_PAIR, PAPER_REDUCTION_PCT
+from navreplay.pipeline.report import html as h
+from navreplay.pipeline.report import markdown
+from navreplay.pipeline.report.experiments import CsvTable, Experiment
+from navreplay.pipeline.report.inputs import DatasetInputs
+from navreplay.pipeline.report.tables import PAPER_PAIR, PAPER_REDUCTION_PCT
 
 Row = dict[str, Any]
 MAX_TABLE_ROWS = 40  # rows of an experiment's CSV shown on the page
@@ -237,7 +237,7 @@ def experiments(exps: Sequence[Experiment], figs: list[str]) -> str:
         for i, f in enumerate(e.figures):
             svg = f.svg
             if svg is not None:
-                from pipeline.report.svg import prefix_ids
+                from navreplay.pipeline.report.svg import prefix_ids
 
                 svg = prefix_ids(svg, f"exp-{e.name}-{i}")
                 figs.append(svg)

@@ -17,9 +17,9 @@ from typing import Literal
 import numpy as np
 import pyarrow as pa
 
-from pipeline.estimation.truth import truth_at
-from pipeline.nav.earth import E2, F64, A
-from pipeline.report.inputs import Run, column, times_ns
+from navreplay.pipeline.estimation.truth import truth_at
+from navreplay.pipeline.nav.earth import E2, F64, A
+from navreplay.pipeline.report.inputs import Run, column, times_ns
 
 Reference = Literal["truth", "gnss"]
 

@@ -29,14 +29,14 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
-from ingest.tables import git_commit, package_version
-from pipeline.report import html as h
-from pipeline.report import tables as tb
-from pipeline.report.experiments import SAT_REDUCTION_NAME, read_csv
-from pipeline.report.input_files import ReportInputError, read_json
-from pipeline.report.sections import paper_pct
-from pipeline.report.tables import PAPER_PAIR
+from navreplay.ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
+from navreplay.ingest.tables import git_commit, package_version
+from navreplay.pipeline.report import html as h
+from navreplay.pipeline.report import tables as tb
+from navreplay.pipeline.report.experiments import SAT_REDUCTION_NAME, read_csv
+from navreplay.pipeline.report.input_files import ReportInputError, read_json
+from navreplay.pipeline.report.sections import paper_pct
+from navreplay.pipeline.report.tables import PAPER_PAIR
 
 Row = dict[str, Any]
 METRIC = "pos_err_3d_rms_m"

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.nav.earth import F64
+from navreplay.pipeline.nav.earth import F64
 
 MAX_POINTS = 2000  # per line, after decimation: two extremes per pixel column of a wide plot
 

@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from pipeline.report.inputs import DatasetInputs, Run
-from pipeline.report.series import ErrorSeries, error_series, local_en
+from navreplay.pipeline.report.inputs import DatasetInputs, Run
+from navreplay.pipeline.report.series import ErrorSeries, error_series, local_en
 
 Row = dict[str, Any]
 PAPER_REDUCTION_PCT = {0: 54.4, 1: 53.2, 2: 52.6, 3: 52.4, 4: 22.6}  # paper 001, Table 1
@@ -123,7 +123,7 @@ def all_series(data: DatasetInputs) -> dict[tuple[str, str], ErrorSeries]:
 
 
 def _path_length_m(data: DatasetInputs, a_ns: int, b_ns: int) -> float | None:
-    from pipeline.report.inputs import column, times_ns
+    from navreplay.pipeline.report.inputs import column, times_ns
 
     ref = data.truth if data.truth is not None and data.truth.num_rows > 1 else data.gnss
     if ref is None or ref.num_rows < 2:

@@ -16,12 +16,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from ingest.schema import FixType
-from ingest.typed import to_plain
-from pipeline.estimation.windows import Window
-from pipeline.nav import earth
-from pipeline.scenarios.config import SatellitesSpec, ScenarioSpec
-from pipeline.scenarios.faults import (
+from navreplay.ingest.schema import FixType
+from navreplay.ingest.typed import to_plain
+from navreplay.pipeline.estimation.windows import Window
+from navreplay.pipeline.nav import earth
+from navreplay.pipeline.scenarios.config import SatellitesSpec, ScenarioSpec
+from navreplay.pipeline.scenarios.faults import (
     ScenarioError,
     Tables,
     column,
@@ -30,8 +30,8 @@ from pipeline.scenarios.faults import (
     times,
     with_values,
 )
-from pipeline.scenarios.satellites import Selection, refix, select
-from pipeline.scenarios.windows import in_any, place_windows
+from navreplay.pipeline.scenarios.satellites import Selection, refix, select
+from navreplay.pipeline.scenarios.windows import in_any, place_windows
 
 log = logging.getLogger(__name__)
 

@@ -19,8 +19,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
-from ingest.typed import FieldError
-from pipeline.estimation.windows import WindowMetricsParams
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.estimation.windows import WindowMetricsParams
 
 Placement = Literal["explicit", "random", "periodic"]
 Policy = Literal["highest_elevation", "lowest_elevation", "random", "best_dop", "worst_dop"]

@@ -33,13 +33,13 @@ import numpy as np
 import pyarrow as pa
 from scipy.stats import chi2
 
-from pipeline.estimation.config import FILTER_KINDS
-from pipeline.estimation.models import measurement as me
-from pipeline.estimation.replay import RunResult
-from pipeline.estimation.truth import error_states
-from pipeline.estimation.windows import NS, Window
-from pipeline.nav.earth import F64
-from pipeline.scenarios.apply import AppliedScenario
+from navreplay.pipeline.estimation.config import FILTER_KINDS
+from navreplay.pipeline.estimation.models import measurement as me
+from navreplay.pipeline.estimation.replay import RunResult
+from navreplay.pipeline.estimation.truth import error_states
+from navreplay.pipeline.estimation.windows import NS, Window
+from navreplay.pipeline.nav.earth import F64
+from navreplay.pipeline.scenarios.apply import AppliedScenario
 
 
 @dataclass(frozen=True)

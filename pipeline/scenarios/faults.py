@@ -23,13 +23,13 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from ingest.schema import FixType
-from pipeline.errors import PipelineError
-from pipeline.estimation.windows import NS, Window
-from pipeline.nav import earth
-from pipeline.nav.earth import F64, I64
-from pipeline.scenarios.config import FaultSpec
-from pipeline.scenarios.satellites import los_rows
+from navreplay.ingest.schema import FixType
+from navreplay.pipeline.errors import PipelineError
+from navreplay.pipeline.estimation.windows import NS, Window
+from navreplay.pipeline.nav import earth
+from navreplay.pipeline.nav.earth import F64, I64
+from navreplay.pipeline.scenarios.config import FaultSpec
+from navreplay.pipeline.scenarios.satellites import los_rows
 
 Tables = dict[str, pa.Table]
 Record = dict[str, Any]

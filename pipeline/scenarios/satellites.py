@@ -21,10 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from pipeline.estimation.inputs import corrected_observables, float_column
-from pipeline.nav import earth, spp
-from pipeline.nav.earth import F64, I64
-from pipeline.scenarios.config import Policy
+from navreplay.pipeline.estimation.inputs import corrected_observables, float_column
+from navreplay.pipeline.nav import earth, spp
+from navreplay.pipeline.nav.earth import F64, I64
+from navreplay.pipeline.scenarios.config import Policy
 
 #: Above this many subsets the DOP policies choose greedily instead of exhaustively.
 MAX_SUBSETS = 20_000

@@ -10,9 +10,9 @@ import logging
 
 import numpy as np
 
-from pipeline.estimation.windows import NS
-from pipeline.nav.earth import I64
-from pipeline.scenarios.config import WindowsSpec
+from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.nav.earth import I64
+from navreplay.pipeline.scenarios.config import WindowsSpec
 
 log = logging.getLogger(__name__)
 

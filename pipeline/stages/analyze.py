@@ -62,10 +62,10 @@ def _progress(line: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ingest.config import load_dataset_config
-    from pipeline.analyze import analyze
-    from pipeline.params import load_params
-    from pipeline.report.tables import fmt
+    from navreplay.ingest.config import load_dataset_config
+    from navreplay.pipeline.analyze import analyze
+    from navreplay.pipeline.params import load_params
+    from navreplay.pipeline.report.tables import fmt
 
     params = load_params(args.params)
     config = load_dataset_config(args.dataset_config) if args.dataset_config else None

@@ -17,7 +17,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from pipeline.errors import PipelineError
+from navreplay.pipeline.errors import PipelineError
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

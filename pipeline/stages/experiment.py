@@ -37,13 +37,13 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from pipeline.errors import ParamsError
+from navreplay.pipeline.errors import ParamsError
 
 if TYPE_CHECKING:
     import pyarrow as pa
 
-    from ingest.meta import SensorMeta
-    from pipeline.params import Params
+    from navreplay.ingest.meta import SensorMeta
+    from navreplay.pipeline.params import Params
 
 log = logging.getLogger(__name__)
 
@@ -75,9 +75,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _read(tables_dir: Path) -> tuple[dict[str, pa.Table], SensorMeta]:
-    from ingest.meta import read_meta
-    from ingest.schema import TableName
-    from ingest.tables import read_table
+    from navreplay.ingest.meta import read_meta
+    from navreplay.ingest.schema import TableName
+    from navreplay.ingest.tables import read_table
 
     tables: dict[str, pa.Table] = {}
     for name in TableName:
@@ -88,8 +88,8 @@ def _read(tables_dir: Path) -> tuple[dict[str, pa.Table], SensorMeta]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ingest.atomic import atomic_write_text
-    from pipeline.experiments import (
+    from navreplay.ingest.atomic import atomic_write_text
+    from navreplay.pipeline.experiments import (
         fwekf_faults,
         fwekf_notes,
         fwekf_paper,
@@ -97,8 +97,8 @@ def run(args: argparse.Namespace) -> int:
         vehicle_paired,
         vehicle_smartloc,
     )
-    from pipeline.experiments.outputs import write_rows
-    from pipeline.params import load_params
+    from navreplay.pipeline.experiments.outputs import write_rows
+    from navreplay.pipeline.params import load_params
 
     params = load_params(args.params)
     out: Path = args.out
@@ -160,9 +160,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _vehicle_switch_speed(params: Params, out: Path) -> int:
-    from ingest.atomic import atomic_write_text
-    from pipeline.experiments import vehicle_switch_speed
-    from pipeline.experiments.outputs import write_rows
+    from navreplay.ingest.atomic import atomic_write_text
+    from navreplay.pipeline.experiments import vehicle_switch_speed
+    from navreplay.pipeline.experiments.outputs import write_rows
 
     exp = params.experiments.vehicle_bands
     seeds = vehicle_switch_speed.calibration_seeds(params.synth.seed, exp)
@@ -181,9 +181,9 @@ def _vehicle_switch_speed(params: Params, out: Path) -> int:
 def _tractor_cascaded(params: Params, out: Path) -> int:
     import time
 
-    from pipeline.estimation.cascaded_config import CASCADED_KINDS
-    from pipeline.experiments.tractor_cascaded.artifacts import write_experiment
-    from pipeline.experiments.tractor_cascaded.runs import ExperimentInputs
+    from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS
+    from navreplay.pipeline.experiments.tractor_cascaded.artifacts import write_experiment
+    from navreplay.pipeline.experiments.tractor_cascaded.runs import ExperimentInputs
 
     exp = params.experiments.tractor_cascaded
     inputs = ExperimentInputs(

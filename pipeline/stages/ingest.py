@@ -18,8 +18,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ingest.detect import Format
-from pipeline.errors import ParamsError
+from navreplay.ingest.detect import Format
+from navreplay.pipeline.errors import ParamsError
 
 FORMATS = ("auto", *(f.value for f in Format))
 
@@ -71,9 +71,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ingest.api import IngestOptions, ingest, inspect
-    from ingest.config import input_paths, load_dataset_config
-    from pipeline.params import load_params
+    from navreplay.ingest.api import IngestOptions, ingest, inspect
+    from navreplay.ingest.config import input_paths, load_dataset_config
+    from navreplay.pipeline.params import load_params
 
     config = None
     config_dir = None

@@ -22,7 +22,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from pipeline.errors import ParamsError
+from navreplay.pipeline.errors import ParamsError
 
 log = logging.getLogger(__name__)
 
@@ -47,19 +47,19 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import pyarrow.parquet as pq
 
-    from ingest.atomic import atomic_directory, atomic_write_json
-    from ingest.typed import to_plain
-    from pipeline.estimation.contract import RunInputs
-    from pipeline.estimation.run import INPUTS
-    from pipeline.outages.montecarlo import (
+    from navreplay.ingest.atomic import atomic_directory, atomic_write_json
+    from navreplay.ingest.typed import to_plain
+    from navreplay.pipeline.estimation.contract import RunInputs
+    from navreplay.pipeline.estimation.run import INPUTS
+    from navreplay.pipeline.outages.montecarlo import (
         SKIPPED,
         cases_for,
         draw_starts,
         run_montecarlo,
         windows_table,
     )
-    from pipeline.params import load_params
-    from pipeline.scenarios.apply import log_span
+    from navreplay.pipeline.params import load_params
+    from navreplay.pipeline.scenarios.apply import log_span
 
     params = load_params(args.params)
     o = params.outages
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
             f"filters.{args.filter}", str(err.args[0]), source=str(args.params)
         ) from err
     if args.skip_unfit:
-        from pipeline.analyze import plan as fit_plan
+        from navreplay.pipeline.analyze import plan as fit_plan
 
         _, unfit = fit_plan(args.tables, [args.filter])
         if unfit:

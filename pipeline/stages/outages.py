@@ -31,7 +31,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from pipeline.errors import PipelineError
+from navreplay.pipeline.errors import PipelineError
 
 log = logging.getLogger(__name__)
 
@@ -50,11 +50,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import pyarrow.parquet as pq
 
-    from ingest.atomic import atomic_write_json, atomic_write_text
-    from ingest.meta import read_meta
-    from ingest.typed import to_plain
-    from pipeline.outages import paper
-    from pipeline.outages.tables import (
+    from navreplay.ingest.atomic import atomic_write_json, atomic_write_text
+    from navreplay.ingest.meta import read_meta
+    from navreplay.ingest.typed import to_plain
+    from navreplay.pipeline.outages import paper
+    from navreplay.pipeline.outages.tables import (
         DRIFT_COLUMNS,
         SAT_REDUCTION_COLUMNS,
         csv_text,
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         reduction_text,
         sat_reduction,
     )
-    from pipeline.params import load_params
+    from navreplay.pipeline.params import load_params
 
     params = load_params(args.params)
     o = params.outages
@@ -132,7 +132,7 @@ def _read_windows(
     """Each filter's ``windows.parquet`` by name, and the reasons of the skipped ones."""
     import pyarrow.parquet as pq
 
-    from pipeline.outages.montecarlo import SKIPPED
+    from navreplay.pipeline.outages.montecarlo import SKIPPED
 
     windows: dict[str, Any] = {}
     skipped: dict[str, str] = {}

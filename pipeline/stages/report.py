@@ -53,11 +53,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ingest.tables import params_hash
-    from ingest.typed import to_plain
-    from pipeline.params import load_params
-    from pipeline.report.inputs import load_dataset
-    from pipeline.report.render import render_dataset
+    from navreplay.ingest.tables import params_hash
+    from navreplay.ingest.typed import to_plain
+    from navreplay.pipeline.params import load_params
+    from navreplay.pipeline.report.inputs import load_dataset
+    from navreplay.pipeline.report.render import render_dataset
 
     params = load_params(args.params)
     runs = args.runs or args.tables.parent / "runs"

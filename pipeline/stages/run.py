@@ -30,11 +30,11 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from pipeline.errors import NotBuiltError, ParamsError
+from navreplay.pipeline.errors import NotBuiltError, ParamsError
 
 if TYPE_CHECKING:
-    from pipeline.estimation.contract import Backend
-    from pipeline.params import Params
+    from navreplay.pipeline.estimation.contract import Backend
+    from navreplay.pipeline.params import Params
 
 log = logging.getLogger(__name__)
 
@@ -84,7 +84,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.params import load_params
+    from navreplay.pipeline.params import load_params
 
     params = load_params(args.params)
     backend: Backend = args.backend or params.run.backend
@@ -96,12 +96,12 @@ def run(args: argparse.Namespace) -> int:
 def _run(
     args: argparse.Namespace, params: Params, backend: Backend, asked: list[str], names: list[str]
 ) -> int:
-    from ingest.atomic import atomic_directory
-    from pipeline.analyze import Skipped, plan, write_skip
-    from pipeline.estimation.contract import RunInputs, write_run
-    from pipeline.estimation.families import family_of
-    from pipeline.estimation.run import INS
-    from pipeline.outages.runs import run_scenarios
+    from navreplay.ingest.atomic import atomic_directory
+    from navreplay.pipeline.analyze import Skipped, plan, write_skip
+    from navreplay.pipeline.estimation.contract import RunInputs, write_run
+    from navreplay.pipeline.estimation.families import family_of
+    from navreplay.pipeline.estimation.run import INS
+    from navreplay.pipeline.outages.runs import run_scenarios
 
     try:
         family = family_of(args.filter)

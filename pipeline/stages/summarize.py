@@ -21,7 +21,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.report.summary import render_summary
+    from navreplay.pipeline.report.summary import render_summary
 
     index = render_summary(args.reports, args.out)
     print(f"summary: {index}")

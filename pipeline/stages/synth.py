@@ -16,7 +16,7 @@ import logging
 import time
 from pathlib import Path
 
-from pipeline.errors import NotBuiltError, PipelineError
+from navreplay.pipeline.errors import NotBuiltError, PipelineError
 
 log = logging.getLogger(__name__)
 
@@ -39,8 +39,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.params import load_params
-    from pipeline.synth import DATASETS
+    from navreplay.pipeline.params import load_params
+    from navreplay.pipeline.synth import DATASETS
 
     params = load_params(args.params)
     name = str(args.name)

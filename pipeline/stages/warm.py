@@ -19,7 +19,7 @@ import argparse
 import os
 from pathlib import Path
 
-from pipeline.errors import ParamsError, PipelineError
+from navreplay.pipeline.errors import ParamsError, PipelineError
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -53,8 +53,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.params import load_params
-    from pipeline.warm import WarmResult, groups, warm, warm_here
+    from navreplay.pipeline.params import load_params
+    from navreplay.pipeline.warm import WarmResult, groups, warm, warm_here
 
     params = load_params(args.params)
     try:
@@ -76,8 +76,8 @@ def run(args: argparse.Namespace) -> int:
         names = ", ".join(n for r in failed for n in r.filters)
         raise PipelineError(f"could not warm {names}; their first run will compile (and fail)")
     if args.stamp is not None:
-        from ingest.atomic import atomic_write_json
-        from pipeline._numba_cache import installed_digest
+        from navreplay.ingest.atomic import atomic_write_json
+        from navreplay.pipeline._numba_cache import installed_digest
 
         stamp = {"numba_source_digest": installed_digest(), "filters": [list(g) for g in todo]}
         atomic_write_json(args.stamp, stamp)

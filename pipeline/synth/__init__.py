@@ -15,17 +15,17 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     import pyarrow as pa
 
-    from ingest.gnss import Ephemeris
-    from ingest.meta import SensorMeta
+    from navreplay.ingest.gnss import Ephemeris
+    from navreplay.ingest.meta import SensorMeta
 
 # dataset id -> module with write_dataset(name, synth_params, out_dir)
 DATASETS: dict[str, str] = {
-    "seoul_campus_cw": "pipeline.synth.seoul_campus",
-    "seoul_campus_ccw": "pipeline.synth.seoul_campus",
-    "tractor_straight": "pipeline.synth.tractor_log",
-    "fwekf_reference": "pipeline.synth.fwekf",
-    "fwekf_reference_noise_free": "pipeline.synth.fwekf",
-    "car_speed_ramp": "pipeline.synth.car",
+    "seoul_campus_cw": "navreplay.pipeline.synth.seoul_campus",
+    "seoul_campus_ccw": "navreplay.pipeline.synth.seoul_campus",
+    "tractor_straight": "navreplay.pipeline.synth.tractor_log",
+    "fwekf_reference": "navreplay.pipeline.synth.fwekf",
+    "fwekf_reference_noise_free": "navreplay.pipeline.synth.fwekf",
+    "car_speed_ramp": "navreplay.pipeline.synth.car",
 }
 
 

@@ -29,9 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ingest.typed import FieldError
-from pipeline._jit import njit
-from pipeline.nav.earth import radii
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.nav.earth import radii
 
 F64 = npt.NDArray[np.float64]
 

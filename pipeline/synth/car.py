@@ -39,15 +39,15 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
-from ingest.meta import SensorMeta
-from ingest.schema import FixType, from_columns
-from ingest.typed import FieldError, to_plain
-from ingest.writers.csv import CsvColumn, quantize, write_csv
-from pipeline.nav.earth import OMEGA_IE, radii
-from pipeline.nav.local import LocalFrame
-from pipeline.synth import SynthResult
-from pipeline.synth.bicycle import COLUMNS, VehicleParams, simulate
-from pipeline.synth.output import dataset_rng, write_dataset_dir
+from navreplay.ingest.meta import SensorMeta
+from navreplay.ingest.schema import FixType, from_columns
+from navreplay.ingest.typed import FieldError, to_plain
+from navreplay.ingest.writers.csv import CsvColumn, quantize, write_csv
+from navreplay.pipeline.nav.earth import OMEGA_IE, radii
+from navreplay.pipeline.nav.local import LocalFrame
+from navreplay.pipeline.synth import SynthResult
+from navreplay.pipeline.synth.bicycle import COLUMNS, VehicleParams, simulate
+from navreplay.pipeline.synth.output import dataset_rng, write_dataset_dir
 
 F64 = npt.NDArray[np.float64]
 

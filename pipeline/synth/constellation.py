@@ -23,9 +23,9 @@ import math
 
 import numpy as np
 
-from ingest.gnss import MU_GPS, OMEGA_E_GPS, Ephemeris
-from ingest.gpstime import NS_PER_S, NS_PER_WEEK
-from pipeline.synth.seoul_params import ConstellationParams
+from navreplay.ingest.gnss import MU_GPS, OMEGA_E_GPS, Ephemeris
+from navreplay.ingest.gpstime import NS_PER_S, NS_PER_WEEK
+from navreplay.pipeline.synth.seoul_params import ConstellationParams
 
 # (slot, RAAN deg, argument of latitude deg) at 0000Z 1 July 1993 (SPS PS 2008, Table 3.1-1)
 SLOTS: tuple[tuple[str, float, float], ...] = (

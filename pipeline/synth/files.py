@@ -20,13 +20,13 @@ from typing import Any
 
 import numpy as np
 
-from ingest.atomic import atomic_directory
-from ingest.meta import DatasetMeta, SourceRecord, write_meta
-from ingest.tables import Provenance, sha256_file, write_table
-from ingest.typed import to_plain
-from ingest.writers import rinex, ros
-from pipeline.nav import earth
-from pipeline.synth import SynthResult
+from navreplay.ingest.atomic import atomic_directory
+from navreplay.ingest.meta import DatasetMeta, SourceRecord, write_meta
+from navreplay.ingest.tables import Provenance, sha256_file, write_table
+from navreplay.ingest.typed import to_plain
+from navreplay.ingest.writers import rinex, ros
+from navreplay.pipeline.nav import earth
+from navreplay.pipeline.synth import SynthResult
 
 log = logging.getLogger(__name__)
 REFERENCE_DIR = "reference"

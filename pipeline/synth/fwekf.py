@@ -42,17 +42,22 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
-from ingest.config import ImuNoise
-from ingest.meta import SensorMeta
-from ingest.schema import FixType, from_columns
-from ingest.typed import FieldError, to_plain
-from ingest.writers.mavlink import MAV_TYPE_FIXED_WING, as_logged_gnss, as_logged_imu, write_tlog
-from pipeline.nav.earth import radii
-from pipeline.nav.local import LocalFrame
-from pipeline.nav.mechanization import NAV_DIM, imu_from_motion
-from pipeline.nav.rotations import euler_to_quat
-from pipeline.synth import SynthResult
-from pipeline.synth.output import dataset_rng, write_dataset_dir
+from navreplay.ingest.config import ImuNoise
+from navreplay.ingest.meta import SensorMeta
+from navreplay.ingest.schema import FixType, from_columns
+from navreplay.ingest.typed import FieldError, to_plain
+from navreplay.ingest.writers.mavlink import (
+    MAV_TYPE_FIXED_WING,
+    as_logged_gnss,
+    as_logged_imu,
+    write_tlog,
+)
+from navreplay.pipeline.nav.earth import radii
+from navreplay.pipeline.nav.local import LocalFrame
+from navreplay.pipeline.nav.mechanization import NAV_DIM, imu_from_motion
+from navreplay.pipeline.nav.rotations import euler_to_quat
+from navreplay.pipeline.synth import SynthResult
+from navreplay.pipeline.synth.output import dataset_rng, write_dataset_dir
 
 F64 = npt.NDArray[np.float64]
 

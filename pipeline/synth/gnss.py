@@ -31,7 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ingest.gnss import (
+from navreplay.ingest.gnss import (
     C_MPS,
     LAMBDA_L1_M,
     Ephemeris,
@@ -40,12 +40,12 @@ from ingest.gnss import (
     select,
     transmit_state,
 )
-from ingest.schema import FixType
-from pipeline.nav import earth, spp
-from pipeline.nav.earth import F64, I64
-from pipeline.nav.rotations import quat_to_dcm
-from pipeline.synth.seoul_params import ReceiverParams
-from pipeline.synth.trajectory import Motion
+from navreplay.ingest.schema import FixType
+from navreplay.pipeline.nav import earth, spp
+from navreplay.pipeline.nav.earth import F64, I64
+from navreplay.pipeline.nav.rotations import quat_to_dcm
+from navreplay.pipeline.synth.seoul_params import ReceiverParams
+from navreplay.pipeline.synth.trajectory import Motion
 
 RATE_STEP_S = 1e-3
 

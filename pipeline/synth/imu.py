@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.nav.earth import F64
-from pipeline.nav.mechanization import I_QW, I_VN, NAV_DIM, imu_from_motion
-from pipeline.synth.seoul_params import ImuErrors
-from pipeline.synth.trajectory import Motion
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.nav.earth import F64
+from navreplay.pipeline.nav.mechanization import I_QW, I_VN, NAV_DIM, imu_from_motion
+from navreplay.pipeline.synth.seoul_params import ImuErrors
+from navreplay.pipeline.synth.trajectory import Motion
 
 
 @njit(cache=True)

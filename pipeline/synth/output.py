@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from ingest.atomic import atomic_directory
-from ingest.meta import DatasetMeta, SourceRecord, write_meta
-from ingest.tables import Provenance, sha256_file, write_table
-from pipeline.synth import SynthResult
+from navreplay.ingest.atomic import atomic_directory
+from navreplay.ingest.meta import DatasetMeta, SourceRecord, write_meta
+from navreplay.ingest.tables import Provenance, sha256_file, write_table
+from navreplay.pipeline.synth import SynthResult
 
 REFERENCE_DIR = "reference"  # as in pipeline.synth.files
 

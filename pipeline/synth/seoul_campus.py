@@ -20,12 +20,12 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from ingest.gpstime import NS_PER_S, gps_from_calendar
-from ingest.meta import SensorMeta
-from ingest.schema import from_columns
-from pipeline.synth import SynthResult, constellation, gnss, imu, trajectory
-from pipeline.synth.seoul_params import NO_IMU_ERRORS, SeoulCampusParams
-from pipeline.synth.trajectory import Leg
+from navreplay.ingest.gpstime import NS_PER_S, gps_from_calendar
+from navreplay.ingest.meta import SensorMeta
+from navreplay.ingest.schema import from_columns
+from navreplay.pipeline.synth import SynthResult, constellation, gnss, imu, trajectory
+from navreplay.pipeline.synth.seoul_params import NO_IMU_ERRORS, SeoulCampusParams
+from navreplay.pipeline.synth.trajectory import Leg
 
 __all__ = ["ROUTE", "SeoulCampusParams", "route", "simulate", "write_dataset"]
 
@@ -163,7 +163,7 @@ class SynthSection(Protocol):
 def write_dataset(name: str, synth: SynthSection, out_dir: Path) -> list[Path]:
     """Simulate ``seoul_campus_cw`` or ``seoul_campus_ccw`` and write its files into
     ``out_dir`` (``pipeline.synth.files``); returns the paths written."""
-    from pipeline.synth.files import write_result
+    from navreplay.pipeline.synth.files import write_result
 
     variant: Variant = "cw" if name.endswith("_cw") else "ccw"
     if name not in (f"seoul_campus_{v}" for v in _VARIANT_KEY):

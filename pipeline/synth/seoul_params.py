@@ -15,10 +15,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ingest.typed import FieldError
+from navreplay.ingest.typed import FieldError
 
 if TYPE_CHECKING:
-    from ingest.config import ImuNoise
+    from navreplay.ingest.config import ImuNoise
 
 
 def _non_negative(obj: object) -> None:
@@ -57,7 +57,7 @@ class ImuErrors:
 
     def noise_model(self) -> ImuNoise:
         """The matching filter noise model (``ingest.config.ImuNoise``; no scale factors)."""
-        from ingest.config import ImuNoise
+        from navreplay.ingest.config import ImuNoise
 
         return ImuNoise(
             accel_noise_mps2_rthz=self.accel_noise_mps2_rthz,

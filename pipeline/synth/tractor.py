@@ -38,9 +38,9 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from ingest.typed import FieldError
-from pipeline.control.lqr import StraightLine, YawSteerModel, discretize
-from pipeline.nav.local import LocalFrame
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.control.lqr import StraightLine, YawSteerModel, discretize
+from navreplay.pipeline.nav.local import LocalFrame
 
 F64 = npt.NDArray[np.float64]
 

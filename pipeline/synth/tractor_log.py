@@ -27,14 +27,14 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
-from ingest.meta import SensorMeta
-from ingest.schema import FixType, from_columns
-from ingest.typed import to_plain
-from ingest.writers.csv import CsvColumn, quantize, write_csv
-from pipeline.control.lqr import lqr_command, tractor_lqr_gain
-from pipeline.synth import SynthResult
-from pipeline.synth.output import dataset_seed, write_dataset_dir
-from pipeline.synth.tractor import (
+from navreplay.ingest.meta import SensorMeta
+from navreplay.ingest.schema import FixType, from_columns
+from navreplay.ingest.typed import to_plain
+from navreplay.ingest.writers.csv import CsvColumn, quantize, write_csv
+from navreplay.pipeline.control.lqr import lqr_command, tractor_lqr_gain
+from navreplay.pipeline.synth import SynthResult
+from navreplay.pipeline.synth.output import dataset_seed, write_dataset_dir
+from navreplay.pipeline.synth.tractor import (
     TractorMeasurement,
     TractorSim,
     TractorState,

@@ -24,8 +24,8 @@ from typing import Literal, NamedTuple
 import numpy as np
 from scipy.interpolate import PPoly
 
-from pipeline.nav.earth import E2, F64, A
-from pipeline.synth.profile import PEAK_SLOPE_FACTOR, ProfileBuilder
+from navreplay.pipeline.nav.earth import E2, F64, A
+from navreplay.pipeline.synth.profile import PEAK_SLOPE_FACTOR, ProfileBuilder
 
 MIN_RAMP_S = 3.0
 

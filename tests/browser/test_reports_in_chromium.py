@@ -15,9 +15,9 @@ from typing import Any
 
 import pytest
 
-from pipeline.report.inputs import load_dataset
-from pipeline.report.render import render_dataset
-from pipeline.report.summary import render_summary
+from navreplay.pipeline.report.inputs import load_dataset
+from navreplay.pipeline.report.render import render_dataset
+from navreplay.pipeline.report.summary import render_summary
 from tests.browser.chromium import available, check_page, open_browser
 
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"

@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from ingest.gnss import C_MPS, LAMBDA_L1_M
-from ingest.gpstime import calendar_from_gps
-from ingest.writers import rinex
+from navreplay.ingest.gnss import C_MPS, LAMBDA_L1_M
+from navreplay.ingest.gpstime import calendar_from_gps
+from navreplay.ingest.writers import rinex
 
 REPO = Path(__file__).resolve().parents[2]
 GLONASS = ("R01", "R08", "R13", "R20", "R22", "R24")
@@ -28,8 +28,8 @@ GLONASS = ("R01", "R08", "R13", "R20", "R22", "R24")
 @functools.cache
 def short_drive(duration_s: float = 25.0, seed: int = 11) -> Any:
     """A short ``seoul_campus_cw`` drive (10 s at rest, then driving), cached per session."""
-    from pipeline.params import load_params
-    from pipeline.synth.seoul_campus import simulate
+    from navreplay.pipeline.params import load_params
+    from navreplay.pipeline.synth.seoul_campus import simulate
 
     params = load_params(REPO / "params.yaml").synth.seoul_campus
     short = dataclasses.replace(params, duration_s=duration_s, stationary_s=10.0)
@@ -37,7 +37,7 @@ def short_drive(duration_s: float = 25.0, seed: int = 11) -> Any:
 
 
 def station(synth: Any) -> rinex.Station:
-    from pipeline.synth.files import _station
+    from navreplay.pipeline.synth.files import _station
 
     return _station("drive", synth.tables)
 
@@ -180,8 +180,8 @@ def write_obs2(path: Path, synth: Any) -> dict[str, int]:
 def antenna_ecef(synth: Any, rows: np.ndarray) -> np.ndarray:
     """The true antenna at truth rows ``rows``, moved back by the receiver clock offset
     ``b / c`` along the body velocity (the instant the signals arrived)."""
-    from pipeline.nav import earth
-    from pipeline.nav.rotations import euler_to_dcm
+    from navreplay.pipeline.nav import earth
+    from navreplay.pipeline.nav.rotations import euler_to_dcm
 
     truth = synth.tables["truth"].take(pa.array(rows))
     lat, lon = np.radians(_f(truth, "lat_deg")), np.radians(_f(truth, "lon_deg"))

@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from ingest.gnss import C_MPS
-from ingest.gpstime import NS_PER_WEEK, utc_unix_ns_from_gps
+from navreplay.ingest.gnss import C_MPS
+from navreplay.ingest.gpstime import NS_PER_WEEK, utc_unix_ns_from_gps
 
 HW0_NS = 21_000_000_000_000
 BIAS_NS = 0.25

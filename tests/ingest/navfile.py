@@ -12,8 +12,8 @@ from pathlib import Path
 import georinex
 import numpy as np
 
-from ingest.gnss import Ephemeris
-from ingest.gpstime import GPS_EPOCH, NS_PER_S, NS_PER_WEEK
+from navreplay.ingest.gnss import Ephemeris
+from navreplay.ingest.gpstime import GPS_EPOCH, NS_PER_S, NS_PER_WEEK
 
 
 def read_gps_nav(path: Path) -> Ephemeris:

@@ -11,9 +11,9 @@ import numpy as np
 import pymap3d
 import pytest
 
-from ingest.alignment import WARN_LAG_S, estimate_lag, speed_signal
-from ingest.api import ingest
-from ingest.config import parse_dataset_config
+from navreplay.ingest.alignment import WARN_LAG_S, estimate_lag, speed_signal
+from navreplay.ingest.api import ingest
+from navreplay.ingest.config import parse_dataset_config
 
 
 def _speed(t_s: np.ndarray) -> np.ndarray:

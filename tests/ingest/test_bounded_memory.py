@@ -24,7 +24,7 @@ def _peak_rss_mb(log: Path, out: Path, setup: str = "") -> float:
         {setup}
         import re
         from pathlib import Path
-        from ingest.api import IngestOptions, ingest
+        from navreplay.ingest.api import IngestOptions, ingest
         options = IngestOptions(block_rows=8192)  # many blocks in both logs
         result = ingest([Path({str(log)!r})], Path({str(out)!r}), options=options)
         # VmHWM, not ru_maxrss: Linux carries the (large) pytest parent's peak into the child.
@@ -59,7 +59,7 @@ def test_autopilot_log_memory_does_not_grow_with_the_log(kind: str, tmp_path: Pa
     small = write(tmp_path / f"small.{kind}", 20.0)
     large = write(tmp_path / f"large.{kind}", 80.0)
     module = "tlogscan" if kind == "tlog" else "dfscan"
-    setup = f"import ingest.readers.{module} as m; m.BLOCK_BYTES = 1 << 17"
+    setup = f"import navreplay.ingest.readers.{module} as m; m.BLOCK_BYTES = 1 << 17"
     rss_small = _peak_rss_mb(small, tmp_path / "s", setup)
     rss_large = _peak_rss_mb(large, tmp_path / "l", setup)
     assert rss_large < 512

@@ -15,12 +15,12 @@ import pymap3d
 import pytest
 from scipy.spatial.transform import Rotation
 
-from ingest.api import IngestOptions, IngestResult, ingest, inspect
-from ingest.config import parse_dataset_config
-from ingest.detect import Format, detect
-from ingest.ecef import c_ned_ecef
-from ingest.errors import CorruptLogError, UnsupportedFormatError
-from ingest.gpstime import GPS_EPOCH_UNIX_NS, NS_PER_S, NS_PER_WEEK
+from navreplay.ingest.api import IngestOptions, IngestResult, ingest, inspect
+from navreplay.ingest.config import parse_dataset_config
+from navreplay.ingest.detect import Format, detect
+from navreplay.ingest.ecef import c_ned_ecef
+from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
+from navreplay.ingest.gpstime import GPS_EPOCH_UNIX_NS, NS_PER_S, NS_PER_WEEK
 
 SEGMENT = (
     Path(__file__).resolve().parents[3] / "shared" / "data" / "comma2k19_example_segment"

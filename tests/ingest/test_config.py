@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from ingest.config import load_dataset_config, log_paths, parse_dataset_config
-from ingest.errors import ConfigError
+from navreplay.ingest.config import load_dataset_config, log_paths, parse_dataset_config
+from navreplay.ingest.errors import ConfigError
 
 
 def test_minimal_descriptor_has_defaults() -> None:

@@ -10,9 +10,9 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from ingest.api import IngestOptions, ingest
-from ingest.config import DatasetConfig, parse_dataset_config
-from ingest.errors import CorruptLogError, UnsupportedFormatError
+from navreplay.ingest.api import IngestOptions, ingest
+from navreplay.ingest.config import DatasetConfig, parse_dataset_config
+from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
 
 SHARED = Path(__file__).resolve().parents[3] / "shared" / "data"
 COMMA = SHARED / "comma2k19_example_segment" / "derived_csv"

@@ -14,10 +14,10 @@ import pyarrow.parquet as pq
 import pytest
 from pymavlink import mavutil
 
-from ingest.api import IngestOptions, IngestResult, ingest, inspect
-from ingest.config import parse_dataset_config
-from ingest.errors import CorruptLogError
-from ingest.timebase import SECONDS_PER_WEEK, gps_week_tow_to_ns
+from navreplay.ingest.api import IngestOptions, IngestResult, ingest, inspect
+from navreplay.ingest.config import parse_dataset_config
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.timebase import SECONDS_PER_WEEK, gps_week_tow_to_ns
 
 from .mavlogs import DF_FORMATS, GMS0, GWK, DfLog, df_drive
 

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from ingest.detect import Format, detect
-from ingest.errors import CorruptLogError, UnsupportedFormatError
+from navreplay.ingest.detect import Format, detect
+from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
 
 from .roslogs import fix_stream, write_bag1, write_bag2, write_mcap
 

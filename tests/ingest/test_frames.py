@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ingest.config import GnssConfig, ImuConfig
-from ingest.errors import PlausibilityError
-from ingest.frames import (
+from navreplay.ingest.config import GnssConfig, ImuConfig
+from navreplay.ingest.errors import PlausibilityError
+from navreplay.ingest.frames import (
     ACC,
     GYRO,
     dcm_from_rpy_deg,
@@ -21,7 +21,7 @@ from ingest.frames import (
     rpy_deg_from_dcm,
     tilt_deg,
 )
-from ingest.plausibility import G0, decide_gnss, decide_imu
+from navreplay.ingest.plausibility import G0, decide_gnss, decide_imu
 
 P = Path("log.mcap")
 angles = st.floats(-179.0, 179.0)

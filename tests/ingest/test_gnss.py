@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ingest import gnss
-from ingest.gpstime import NS_PER_S, NS_PER_WEEK
+from navreplay.ingest import gnss
+from navreplay.ingest.gpstime import NS_PER_S, NS_PER_WEEK
 from tests.ingest.navfile import read_gps_nav
 
 SHARED = Path(__file__).resolve().parents[3] / "shared" / "data"

@@ -13,11 +13,11 @@ import pyarrow.parquet as pq
 import pymap3d
 import pytest
 
-from ingest import spp
-from ingest.api import IngestOptions, ingest
-from ingest.errors import CorruptLogError
-from ingest.gnss import C_MPS, orbit, rotate_earth, select
-from ingest.writers import rinex
+from navreplay.ingest import spp
+from navreplay.ingest.api import IngestOptions, ingest
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.gnss import C_MPS, orbit, rotate_earth, select
+from navreplay.ingest.writers import rinex
 
 from .gnssfiles import assert_obs_match, short_drive
 from .gnsslogs import write_gnsslogger

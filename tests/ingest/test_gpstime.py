@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ingest import gpstime as gt
+from navreplay.ingest import gpstime as gt
 
 
 def test_leap_seconds_follow_the_iers_table() -> None:

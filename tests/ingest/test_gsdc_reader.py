@@ -12,11 +12,11 @@ import pyarrow.parquet as pq
 import pymap3d
 import pytest
 
-from ingest import gnsscheck
-from ingest.api import IngestOptions, ingest
-from ingest.errors import CorruptLogError
-from ingest.gnss import C_MPS, OMEGA_E_GPS
-from ingest.gsdc import sv_ids
+from navreplay.ingest import gnsscheck
+from navreplay.ingest.api import IngestOptions, ingest
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.gnss import C_MPS, OMEGA_E_GPS
+from navreplay.ingest.gsdc import sv_ids
 
 GSDC = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "gnss_lib_py_gsdc_android"
 

@@ -9,9 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ingest.audit import StreamAudit
-from ingest.errors import CorruptLogError
-from ingest.hygiene import Rows, StreamCleaner
+from navreplay.ingest.audit import StreamAudit
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.hygiene import Rows, StreamCleaner
 
 W_NS = 1_000_000_000  # the reorder window of params.yaml
 DT = 10_000_000  # 100 Hz

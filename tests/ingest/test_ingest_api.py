@@ -14,13 +14,13 @@ import pyarrow.parquet as pq
 import pytest
 from rosbags.typesys import get_types_from_msg
 
-from ingest.api import REPORT_NAME, IngestOptions, ingest
-from ingest.config import parse_dataset_config
-from ingest.errors import ConfigError, IngestError
-from ingest.meta import read_meta
-from ingest.schema import spec
-from ingest.tables import TableWriter, read_table
-from ingest.timebase import GPS_EPOCH_UNIX_NS, NS_PER_S
+from navreplay.ingest.api import REPORT_NAME, IngestOptions, ingest
+from navreplay.ingest.config import parse_dataset_config
+from navreplay.ingest.errors import ConfigError, IngestError
+from navreplay.ingest.meta import read_meta
+from navreplay.ingest.schema import spec
+from navreplay.ingest.tables import TableWriter, read_table
+from navreplay.ingest.timebase import GPS_EPOCH_UNIX_NS, NS_PER_S
 
 from .roslogs import (
     ROS2,
@@ -114,8 +114,8 @@ def test_sigkill_mid_write_leaves_no_partial_output_and_a_rerun_is_identical(
         f"""
         import os, signal
         from pathlib import Path
-        from ingest.api import IngestOptions, ingest
-        from ingest.tables import TableWriter
+        from navreplay.ingest.api import IngestOptions, ingest
+        from navreplay.ingest.tables import TableWriter
         real = TableWriter.write
         calls = [0]
         def write(self, table):

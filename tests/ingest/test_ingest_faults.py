@@ -9,10 +9,10 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from ingest.api import IngestOptions, ingest
-from ingest.config import parse_dataset_config
-from ingest.errors import CorruptLogError, PlausibilityError
-from ingest.tables import read_provenance
+from navreplay.ingest.api import IngestOptions, ingest
+from navreplay.ingest.config import parse_dataset_config
+from navreplay.ingest.errors import CorruptLogError, PlausibilityError
+from navreplay.ingest.tables import read_provenance
 
 from .roslogs import (
     G,

@@ -15,12 +15,12 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from ingest.api import IngestResult, ingest
-from ingest.config import load_dataset_config, parse_dataset_config
-from ingest.tables import read_table
-from ingest.timebase import gps_week_tow_to_ns
-from pipeline.synth import fwekf
-from pipeline.synth.fwekf import FwekfReferenceParams
+from navreplay.ingest.api import IngestResult, ingest
+from navreplay.ingest.config import load_dataset_config, parse_dataset_config
+from navreplay.ingest.tables import read_table
+from navreplay.ingest.timebase import gps_week_tow_to_ns
+from navreplay.pipeline.synth import fwekf
+from navreplay.pipeline.synth.fwekf import FwekfReferenceParams
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO.parent / "shared" / "data"

@@ -8,15 +8,15 @@ import itertools
 import numpy as np
 import pytest
 
-from ingest.readers.asof import AsofJoin, Left
-from ingest.readers.mavclock import (
+from navreplay.ingest.readers.asof import AsofJoin, Left
+from navreplay.ingest.readers.mavclock import (
     RESET_DROP_NS,
     ROLLOVER_WEEKS,
     BootTracker,
     OffsetAccumulator,
     unroll_gps_week,
 )
-from ingest.timebase import NS_PER_S, SECONDS_PER_WEEK
+from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK
 
 
 def _cuts(n: int, rng: np.random.Generator, parts: int) -> list[int]:

@@ -14,11 +14,11 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as apm
 from pymavlink.generator.mavcrc import x25crc
 
-from ingest.readers._mavscan import VALID, x25_crc
-from ingest.readers.dfformat import FormatError, make_format
-from ingest.readers.mavdialect import load_dialect
-from ingest.readers.tlogclock import decode
-from ingest.readers.tlogscan import ScanStats, scan_blocks
+from navreplay.ingest.readers._mavscan import VALID, x25_crc
+from navreplay.ingest.readers.dfformat import FormatError, make_format
+from navreplay.ingest.readers.mavdialect import load_dialect
+from navreplay.ingest.readers.tlogclock import decode
+from navreplay.ingest.readers.tlogscan import ScanStats, scan_blocks
 
 _RANGES = {
     "int8_t": (-128, 127),

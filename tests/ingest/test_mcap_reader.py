@@ -11,14 +11,14 @@ import pytest
 from mcap.reader import NonSeekingReader, make_reader
 from mcap.writer import CompressionType, IndexType
 
-from ingest.api import ingest
-from ingest.damage import Completeness, DamageLog
-from ingest.detect import detect
-from ingest.errors import CorruptLogError
-from ingest.readers.base import ReadContext, Selection
-from ingest.readers.mcap import McapReader
-from ingest.readers.rosmsg import DefinitionError
-from ingest.schema import TableName
+from navreplay.ingest.api import ingest
+from navreplay.ingest.damage import Completeness, DamageLog
+from navreplay.ingest.detect import detect
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers.base import ReadContext, Selection
+from navreplay.ingest.readers.mcap import McapReader
+from navreplay.ingest.readers.rosmsg import DefinitionError
+from navreplay.ingest.schema import TableName
 
 from .roslogs import (
     ImuData,

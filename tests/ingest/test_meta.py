@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from ingest.config import ImuNoise
-from ingest.errors import ConfigError
-from ingest.meta import DatasetMeta, SensorMeta, SourceRecord, read_meta, write_meta
+from navreplay.ingest.config import ImuNoise
+from navreplay.ingest.errors import ConfigError
+from navreplay.ingest.meta import DatasetMeta, SensorMeta, SourceRecord, read_meta, write_meta
 
 
 def test_meta_round_trips(tmp_path: Path) -> None:

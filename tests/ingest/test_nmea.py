@@ -16,12 +16,12 @@ import pymap3d
 import pytest
 from pynmeagps import GET, NMEAMessage, NMEAReader
 
-from ingest.api import IngestOptions, IngestResult, ingest, inspect
-from ingest.config import parse_dataset_config
-from ingest.detect import Format, detect
-from ingest.errors import ConfigError, CorruptLogError
-from ingest.gpstime import GPS_EPOCH_UNIX_NS, NS_PER_S
-from ingest.schema import FixType
+from navreplay.ingest.api import IngestOptions, IngestResult, ingest, inspect
+from navreplay.ingest.config import parse_dataset_config
+from navreplay.ingest.detect import Format, detect
+from navreplay.ingest.errors import ConfigError, CorruptLogError
+from navreplay.ingest.gpstime import GPS_EPOCH_UNIX_NS, NS_PER_S
+from navreplay.ingest.schema import FixType
 
 DRIVE = (
     Path(__file__).resolve().parents[3] / "shared" / "data" / "gps_measurement_tools"

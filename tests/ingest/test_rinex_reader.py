@@ -12,13 +12,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from ingest.api import IngestOptions, ingest
-from ingest.damage import DamageLog
-from ingest.errors import CorruptLogError, IngestError, UnsupportedFormatError
-from ingest.gnss import C_MPS, select, transmit_state
-from ingest.gpstime import NS_PER_WEEK
-from ingest.rinexobs import from_georinex, read_obs
-from ingest.writers import rinex
+from navreplay.ingest.api import IngestOptions, ingest
+from navreplay.ingest.damage import DamageLog
+from navreplay.ingest.errors import CorruptLogError, IngestError, UnsupportedFormatError
+from navreplay.ingest.gnss import C_MPS, select, transmit_state
+from navreplay.ingest.gpstime import NS_PER_WEEK
+from navreplay.ingest.rinexobs import from_georinex, read_obs
+from navreplay.ingest.writers import rinex
 
 from .gnssfiles import (
     antenna_ecef,

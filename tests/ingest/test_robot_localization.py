@@ -17,7 +17,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from ingest.api import IngestResult, ingest
+from navreplay.ingest.api import IngestResult, ingest
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "robot_localization"
 FILES = [

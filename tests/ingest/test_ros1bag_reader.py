@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 from rosbags.rosbag1 import Writer as Bag1Writer
 
-from ingest.api import ingest, inspect
-from ingest.damage import Completeness, DamageLog
-from ingest.detect import detect
-from ingest.errors import CorruptLogError
-from ingest.readers.base import ReadContext, Selection
-from ingest.readers.ros1bag import Ros1BagReader
-from ingest.readers.rosmsg import DefinitionError
-from ingest.schema import TableName
+from navreplay.ingest.api import ingest, inspect
+from navreplay.ingest.damage import Completeness, DamageLog
+from navreplay.ingest.detect import detect
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers.base import ReadContext, Selection
+from navreplay.ingest.readers.ros1bag import Ros1BagReader
+from navreplay.ingest.readers.rosmsg import DefinitionError
+from navreplay.ingest.schema import TableName
 
 from .roslogs import ROS1, fix_stream, imu_data, imu_stream, msgdef, serialize, vec3, write_bag1
 
@@ -129,7 +129,7 @@ def test_truncated_bz2_bag_recovers_a_prefix(tmp_path: Path) -> None:
     result = ingest([path], tmp_path / "out")
     assert result.tables["imu"] == n
     assert result.report["files"][0]["completeness"] == ["truncated"]
-    from ingest.api import IngestOptions
+    from navreplay.ingest.api import IngestOptions
 
     with pytest.raises(CorruptLogError):
         ingest([path], tmp_path / "strict", options=IngestOptions(strict=True))

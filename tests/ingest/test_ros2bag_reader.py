@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ingest.api import IngestOptions, ingest
-from ingest.errors import CorruptLogError, IngestError
+from navreplay.ingest.api import IngestOptions, ingest
+from navreplay.ingest.errors import CorruptLogError, IngestError
 
 from .roslogs import fix_stream, imu_data, imu_stream, odom_stream, write_bag2
 

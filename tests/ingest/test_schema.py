@@ -6,8 +6,8 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from ingest.errors import TableValidationError
-from ingest.schema import SPECS, TableName, empty, from_columns, validate
+from navreplay.ingest.errors import TableValidationError
+from navreplay.ingest.schema import SPECS, TableName, empty, from_columns, validate
 
 
 def imu_columns(n: int = 5) -> dict[str, np.ndarray]:

@@ -22,13 +22,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from ingest.api import IngestOptions, ingest
-from ingest.config import input_paths, load_dataset_config
-from ingest.errors import IngestError
-from ingest.tables import read_table
-from ingest.writers import ros
-from pipeline.synth import car, tractor_log
-from pipeline.synth.tractor import TractorStraightParams
+from navreplay.ingest.api import IngestOptions, ingest
+from navreplay.ingest.config import input_paths, load_dataset_config
+from navreplay.ingest.errors import IngestError
+from navreplay.ingest.tables import read_table
+from navreplay.ingest.writers import ros
+from navreplay.pipeline.synth import car, tractor_log
+from navreplay.pipeline.synth.tractor import TractorStraightParams
 
 from .gnssfiles import assert_obs_match, short_drive, write_pair
 

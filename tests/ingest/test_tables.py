@@ -13,10 +13,15 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from ingest.atomic import atomic_directory, atomic_write_json
-from ingest.errors import CorruptLogError, IngestError, ProvenanceError, TableValidationError
-from ingest.schema import from_columns
-from ingest.tables import (
+from navreplay.ingest.atomic import atomic_directory, atomic_write_json
+from navreplay.ingest.errors import (
+    CorruptLogError,
+    IngestError,
+    ProvenanceError,
+    TableValidationError,
+)
+from navreplay.ingest.schema import from_columns
+from navreplay.ingest.tables import (
     PROVENANCE_KEY,
     Provenance,
     TableWriter,
@@ -121,8 +126,8 @@ _KILLED_WRITER = textwrap.dedent(
     """
     import sys, time
     import numpy as np
-    from ingest.schema import from_columns
-    from ingest.tables import Provenance, TableWriter
+    from navreplay.ingest.schema import from_columns
+    from navreplay.ingest.tables import Provenance, TableWriter
 
     n = 1000
     with TableWriter(sys.argv[1], "imu", Provenance.create("imu")) as w:

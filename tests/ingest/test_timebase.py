@@ -7,8 +7,8 @@ import datetime as dt
 import numpy as np
 import pytest
 
-from ingest.errors import IngestError
-from ingest.timebase import (
+from navreplay.ingest.errors import IngestError
+from navreplay.ingest.timebase import (
     GPS_EPOCH_UNIX_NS,
     NS_PER_S,
     TimeBase,
@@ -75,7 +75,7 @@ def test_recorder_clock_cannot_merge_with_wall_clock() -> None:
 
 
 def test_utc_side_table_agrees_with_gpstime_outside_leap_seconds() -> None:
-    from ingest import gpstime
+    from navreplay.ingest import gpstime
 
     rng = np.random.default_rng(0)
     gps = rng.integers(0, 46 * 365 * 86400, 5000).astype(np.int64) * NS_PER_S + 123

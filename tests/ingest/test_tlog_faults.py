@@ -14,16 +14,16 @@ import pyarrow.parquet as pq
 import pytest
 from pymavlink import mavutil
 
-from ingest.api import IngestOptions, IngestResult, ingest
-from ingest.config import parse_dataset_config
-from ingest.damage import DamageLog
-from ingest.detect import Detected, Format
-from ingest.errors import CorruptLogError, PlausibilityError, UnsupportedFormatError
-from ingest.readers.base import ReadContext
-from ingest.readers.mavclock import ROLLOVER_NS
-from ingest.readers.tlog import TlogReader
-from ingest.readers.tlogclock import decode
-from ingest.timebase import utc_to_gps_ns
+from navreplay.ingest.api import IngestOptions, IngestResult, ingest
+from navreplay.ingest.config import parse_dataset_config
+from navreplay.ingest.damage import DamageLog
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.errors import CorruptLogError, PlausibilityError, UnsupportedFormatError
+from navreplay.ingest.readers.base import ReadContext
+from navreplay.ingest.readers.mavclock import ROLLOVER_NS
+from navreplay.ingest.readers.tlog import TlogReader
+from navreplay.ingest.readers.tlogclock import decode
+from navreplay.ingest.timebase import utc_to_gps_ns
 
 from .mavlogs import BOOT_US, UTC0_US, DriveSpec, G, Tlog, mav, tlog_drive
 
@@ -327,7 +327,7 @@ def test_a_failure_mid_read_leaves_the_previous_output_untouched(
             raise RuntimeError("injected failure")
         return decode(*args)
 
-    monkeypatch.setattr("ingest.readers.tlog.decode", failing)
+    monkeypatch.setattr("navreplay.ingest.readers.tlog.decode", failing)
     with pytest.raises(RuntimeError, match="injected"):
         run(path, out, **HIGHRES)
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before

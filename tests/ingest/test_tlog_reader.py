@@ -14,10 +14,10 @@ import pyarrow.parquet as pq
 import pytest
 from pymavlink import mavutil
 
-from ingest.api import IngestResult, ingest, inspect
-from ingest.config import parse_dataset_config
-from ingest.errors import ConfigError
-from ingest.timebase import utc_to_gps_ns
+from navreplay.ingest.api import IngestResult, ingest, inspect
+from navreplay.ingest.config import parse_dataset_config
+from navreplay.ingest.errors import ConfigError
+from navreplay.ingest.timebase import utc_to_gps_ns
 
 from .mavlogs import (
     ALT_ELL_MM,

@@ -10,10 +10,10 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from ingest.api import IngestOptions, ingest
-from ingest.errors import CorruptLogError, UnsupportedFormatError
-from ingest.readers.ulogmsgs import euler_from_quaternion, reproject
-from ingest.timebase import utc_to_gps_ns
+from navreplay.ingest.api import IngestOptions, ingest
+from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
+from navreplay.ingest.readers.ulogmsgs import euler_from_quaternion, reproject
+from navreplay.ingest.timebase import utc_to_gps_ns
 
 from .mavlogs import UTC0_US, G, ulog_drive
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.cli import main
+from navreplay.pipeline.cli import main
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 LOGS = {

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.cli import COMMANDS, main
+from navreplay.pipeline.cli import COMMANDS, main
 
 
 def test_top_level_help_lists_every_command(capsys: pytest.CaptureFixture[str]) -> None:
@@ -60,7 +60,7 @@ def test_unbuilt_capability_says_so_and_exits_non_zero(
     import argparse
     import types
 
-    from pipeline.errors import NotBuiltError
+    from navreplay.pipeline.errors import NotBuiltError
 
     def configure(parser: argparse.ArgumentParser) -> None:
         parser.add_argument("--out")
@@ -86,7 +86,7 @@ def test_typed_errors_exit_2_with_the_message(
     import argparse
     import types
 
-    from pipeline.params import load_params
+    from navreplay.pipeline.params import load_params
 
     def configure(parser: argparse.ArgumentParser) -> None:
         parser.add_argument("--params", type=Path)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.cli import main
+from navreplay.pipeline.cli import main
 from tests.ingest.roslogs import fix_stream, imu_data, imu_stream, write_mcap
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pipeline.params import load_params
+from navreplay.pipeline.params import load_params
 
 REPO = Path(__file__).resolve().parents[2]
 

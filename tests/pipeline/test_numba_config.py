@@ -13,13 +13,13 @@ from pathlib import Path
 
 import pytest
 
-from pipeline._numba_cache import compiled_sources, fewer_gc_passes, source_digest
+from navreplay.pipeline._numba_cache import compiled_sources, fewer_gc_passes, source_digest
 
 REPO = Path(__file__).resolve().parents[2]
 
 PROBE = """
 import json, os
-import pipeline
+import navreplay.pipeline
 import numba
 from numba.core import errors
 print(json.dumps({
@@ -33,7 +33,6 @@ print(json.dumps({
 def _probe(env_extra: dict[str, str], drop: tuple[str, ...] = ()) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k not in drop}
     env.update(env_extra)
-    env["PYTHONPATH"] = str(REPO)
     out = subprocess.run(
         [sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, check=True
     )
@@ -109,10 +108,11 @@ def test_a_new_import_in_a_jitted_module_extends_the_digest(tmp_path: Path) -> N
     (base / "pipeline" / "consts.py").write_text("G = 9.8\n")
     (base / "pipeline" / "other.py").write_text("x = 1\n")
     kernel = base / "pipeline" / "sub" / "kernel.py"
-    kernel.write_text("from pipeline._jit import njit\n\n@njit\ndef f():\n    return 1\n")
+    kernel.write_text("from navreplay.pipeline._jit import njit\n\n@njit\ndef f():\n    return 1\n")
     assert base / "pipeline" / "consts.py" not in compiled_sources(base)
     kernel.write_text(
-        "from pipeline._jit import njit\nfrom pipeline import (\n    consts,  # g\n)\n"
+        "from navreplay.pipeline._jit import njit\n"
+        "from navreplay.pipeline import (\n    consts,  # g\n)\n"
         "@njit\ndef f():\n    return consts.G\n"
     )
     found = compiled_sources(base)
@@ -128,7 +128,7 @@ IMPORTED = """
 import importlib, json, sys
 for name in sys.argv[1:]:
     importlib.import_module(name)
-ours = [m for n, m in sys.modules.items() if n.split(".")[0] in ("pipeline", "ingest")]
+ours = [m for n, m in sys.modules.items() if n.split(".")[0] == "navreplay"]
 print(json.dumps(sorted(m.__file__ for m in ours if getattr(m, "__file__", None))))
 """
 
@@ -138,9 +138,9 @@ def test_the_digest_covers_every_module_python_loads_with_the_jitted_ones() -> N
     nothing from the project that the digest leaves out."""
     seeds = [p for p in compiled_sources(REPO) if b"njit" in p.read_bytes()]
     modules = [".".join(p.relative_to(REPO).with_suffix("").parts) for p in seeds]
-    modules = [m.removesuffix(".__init__") for m in modules]
-    assert "pipeline.estimation.kernels.ukf" in modules
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    modules = ["navreplay." + m.removesuffix(".__init__") for m in modules]
+    assert "navreplay.pipeline.estimation.kernels.ukf" in modules
+    env = dict(os.environ)
     out = subprocess.run(
         [sys.executable, "-c", IMPORTED, *modules],
         env=env, capture_output=True, text=True, check=True, cwd=REPO,
@@ -187,7 +187,7 @@ def test_fewer_gc_passes_restores_on_error_and_leaves_a_disabled_collector_alone
 
 
 def test_a_failing_command_leaves_the_collector_as_it_was(tmp_path: Path) -> None:
-    from pipeline.cli import EXIT_ERROR, main
+    from navreplay.pipeline.cli import EXIT_ERROR, main
 
     before = gc.get_threshold()
     code = main(["run", str(tmp_path / "missing"), "--filter", "lc_ekf", "--out", str(tmp_path)])
@@ -205,14 +205,14 @@ def test_every_compiled_pipeline_function_skips_the_c_callback_wrapper() -> None
 
     from numba.core.dispatcher import Dispatcher
 
-    import pipeline
+    from navreplay import pipeline
 
     found = []
-    for info in pkgutil.walk_packages(pipeline.__path__, "pipeline."):
+    for info in pkgutil.walk_packages(pipeline.__path__, "navreplay.pipeline."):
         module = importlib.import_module(info.name)
         for name, value in vars(module).items():
             if isinstance(value, Dispatcher) and value.py_func.__module__ == info.name:
                 found.append((info.name, name, value.targetoptions.get("no_cfunc_wrapper")))
     assert len(found) > 100
     missing = [f"{m}.{n}" for m, n, flag in found if flag is not True]
-    assert not missing, f"compiled without pipeline._jit.njit: {missing}"
+    assert not missing, f"compiled without navreplay.pipeline._jit.njit: {missing}"

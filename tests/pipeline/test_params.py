@@ -10,9 +10,9 @@ from typing import Any, Literal
 import pytest
 import yaml
 
-from ingest.typed import KeyPathError, load_dataclass
-from pipeline.errors import ParamsError
-from pipeline.params import Params, load_params, parse_params, read_yaml, section
+from navreplay.ingest.typed import KeyPathError, load_dataclass
+from navreplay.pipeline.errors import ParamsError
+from navreplay.pipeline.params import Params, load_params, parse_params, read_yaml, section
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -12,10 +12,10 @@ from typing import Protocol
 
 import numpy as np
 
-from pipeline.estimation.cascaded import cascade as cs
-from pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup, NumbaStepper
-from pipeline.estimation.contract import Backend
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline.estimation.cascaded import cascade as cs
+from navreplay.pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup, NumbaStepper
+from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.nav.earth import F64, I64
 
 
 class Stepper(Protocol):
@@ -41,7 +41,7 @@ def make_stepper(setup: CascadeSetup, capacity: int, backend: Backend, n_gps: in
     """A stepper of ``backend`` for up to ``capacity`` samples (and ``n_gps`` extra fixes)."""
     if backend == "numba":
         return NumbaStepper(setup, capacity, n_gps)
-    from pipeline.estimation.cascaded.reference import FilterpyStepper
+    from navreplay.pipeline.estimation.cascaded.reference import FilterpyStepper
 
     return FilterpyStepper(setup, capacity, n_gps)
 

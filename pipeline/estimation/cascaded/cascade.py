@@ -37,8 +37,8 @@ import math
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.estimation.cascaded.filters import (
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.cascaded.filters import (
     EST_EKF,
     EST_UKF,
     apply_update,
@@ -46,7 +46,7 @@ from pipeline.estimation.cascaded.filters import (
     prepare_update,
     ukf_predict,
 )
-from pipeline.estimation.cascaded.model import (
+from navreplay.pipeline.estimation.cascaded.model import (
     DISC_DIM,
     MODEL_CTL,
     MODEL_NAV,
@@ -57,8 +57,8 @@ from pipeline.estimation.cascaded.model import (
     NX,
     model_noise,
 )
-from pipeline.estimation.cascaded.numerics import check_filter
-from pipeline.estimation.kernels.common import (
+from navreplay.pipeline.estimation.cascaded.numerics import check_filter
+from navreplay.pipeline.estimation.kernels.common import (
     CNT_OUT,
     CNT_STOP,
     STATUS_INDEFINITE,
@@ -68,7 +68,7 @@ from pipeline.estimation.kernels.common import (
     keep_pd,
     record_event,
 )
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline.nav.earth import F64, I64
 
 # measurement streams (innovations.parquet ``stream``)
 S_GPS_POS, S_GPS_HEADING, S_YAW_RATE, S_SPEED, S_STEER = 0, 1, 2, 3, 4

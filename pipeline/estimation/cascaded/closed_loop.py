@@ -23,11 +23,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.control.lqr import lqr_command, tractor_lqr_gain
-from pipeline.estimation.cascaded import cascade as cs
-from pipeline.estimation.cascaded.backends import make_stepper
-from pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup
-from pipeline.estimation.cascaded.model import (
+from navreplay.pipeline.control.lqr import lqr_command, tractor_lqr_gain
+from navreplay.pipeline.estimation.cascaded import cascade as cs
+from navreplay.pipeline.estimation.cascaded.backends import make_stepper
+from navreplay.pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup
+from navreplay.pipeline.estimation.cascaded.model import (
     CTL_DEL,
     CTL_DELD,
     CTL_PD,
@@ -37,9 +37,9 @@ from pipeline.estimation.cascaded.model import (
     NAV_PSI,
     NX,
 )
-from pipeline.estimation.contract import Backend
-from pipeline.nav.earth import F64
-from pipeline.synth.tractor import TractorSim, TractorState, TractorStraightParams
+from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.nav.earth import F64
+from navreplay.pipeline.synth.tractor import TractorSim, TractorState, TractorStraightParams
 
 
 @dataclass(frozen=True)

@@ -23,19 +23,19 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from pipeline.errors import DivergenceError
-from pipeline.estimation.cascaded import cascade as cs
-from pipeline.estimation.cascaded.filters import EST_EKF, EST_HYBRID, EST_UKF
-from pipeline.estimation.cascaded.model import NX, ctl_discretize, model_params
-from pipeline.estimation.cascaded_config import (
+from navreplay.pipeline.errors import DivergenceError
+from navreplay.pipeline.estimation.cascaded import cascade as cs
+from navreplay.pipeline.estimation.cascaded.filters import EST_EKF, EST_HYBRID, EST_UKF
+from navreplay.pipeline.estimation.cascaded.model import NX, ctl_discretize, model_params
+from navreplay.pipeline.estimation.cascaded_config import (
     CASCADED_KINDS,
     NAV_STATE_NAMES,
     CascadedFilterParams,
 )
-from pipeline.estimation.inputs import Event
-from pipeline.estimation.kernels import common as cm
-from pipeline.estimation.kernels.unscented import ukf_weights
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline.estimation.inputs import Event
+from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.estimation.kernels.unscented import ukf_weights
+from navreplay.pipeline.nav.earth import F64, I64
 
 _EST_CODE = {"ekf": EST_EKF, "ukf": EST_UKF, "hybrid": EST_HYBRID}
 EVENT_NAMES = {**cm.EVENT_NAMES, cs.EV_GAP: "input_gap"}

@@ -55,8 +55,8 @@ import math
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.estimation.cascaded.model import (
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.cascaded.model import (
     NX,
     NZ,
     is_angle_row,
@@ -66,13 +66,13 @@ from pipeline.estimation.cascaded.model import (
     model_meas_jacobian,
     wrap_pi,
 )
-from pipeline.estimation.cascaded.numerics import (
+from navreplay.pipeline.estimation.cascaded.numerics import (
     advance_stream_clocks,
     centered_mean_cov,
     reset_observed,
     stream_resets,
 )
-from pipeline.estimation.kernels.common import (
+from navreplay.pipeline.estimation.kernels.common import (
     EV_RESET,
     accepted_rows,
     cho_solve,
@@ -83,9 +83,9 @@ from pipeline.estimation.kernels.common import (
     record_event,
     record_innovations,
 )
-from pipeline.estimation.kernels.ekf import joseph_update
-from pipeline.estimation.kernels.unscented import cross_cov, draw_sigmas
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline.estimation.kernels.ekf import joseph_update
+from navreplay.pipeline.estimation.kernels.unscented import cross_cov, draw_sigmas
+from navreplay.pipeline.nav.earth import F64, I64
 
 EST_EKF, EST_UKF, EST_HYBRID = 0, 1, 2
 NSIG = 2 * NX + 1

@@ -22,12 +22,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyarrow as pa
 
-from ingest.schema import FixType
-from pipeline.estimation.cascaded import cascade as cs
-from pipeline.estimation.inputs import Event
-from pipeline.estimation.replay import ReplayInputError
-from pipeline.nav.earth import F64, I64
-from pipeline.nav.local import LocalFrame
+from navreplay.ingest.schema import FixType
+from navreplay.pipeline.estimation.cascaded import cascade as cs
+from navreplay.pipeline.estimation.inputs import Event
+from navreplay.pipeline.estimation.replay import ReplayInputError
+from navreplay.pipeline.nav.earth import F64, I64
+from navreplay.pipeline.nav.local import LocalFrame
 
 
 @dataclass(frozen=True)

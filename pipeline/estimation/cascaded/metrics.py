@@ -22,15 +22,15 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from pipeline.estimation.cascaded.cascade import STREAM_NAMES
-from pipeline.estimation.cascaded.engine import CascadedResult
-from pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, NX
-from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
-from pipeline.estimation.cascaded_config import ConvergenceBand
-from pipeline.estimation.contract import run_metrics
-from pipeline.estimation.metrics import nis_by_stream
-from pipeline.nav.earth import F64
-from pipeline.nav.local import LocalFrame
+from navreplay.pipeline.estimation.cascaded.cascade import STREAM_NAMES
+from navreplay.pipeline.estimation.cascaded.engine import CascadedResult
+from navreplay.pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, NX
+from navreplay.pipeline.estimation.cascaded.outputs import STATE_COLUMNS
+from navreplay.pipeline.estimation.cascaded_config import ConvergenceBand
+from navreplay.pipeline.estimation.contract import run_metrics
+from navreplay.pipeline.estimation.metrics import nis_by_stream
+from navreplay.pipeline.nav.earth import F64
+from navreplay.pipeline.nav.local import LocalFrame
 
 #: the four biases: (metric name, index into [X1, X2])
 BIASES: tuple[tuple[str, int], ...] = (

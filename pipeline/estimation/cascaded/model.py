@@ -48,9 +48,9 @@ import math
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.control.lqr import discretize
-from pipeline.nav.earth import F64
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.control.lqr import discretize
+from navreplay.pipeline.nav.earth import F64
 
 NX = 6  #: dimension of each filter's state
 NZ = 3  #: rows of each filter's measurement vector

@@ -26,8 +26,8 @@ import math
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.nav.earth import F64, I64
 
 
 @njit(cache=True, error_model="numpy")

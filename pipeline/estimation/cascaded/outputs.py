@@ -23,12 +23,12 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
-from ingest.schema import from_columns
-from pipeline.estimation.cascaded.cascade import STREAM_NAMES
-from pipeline.estimation.cascaded.engine import CascadedResult
-from pipeline.estimation.cascaded.model import CTL_VX, NAV_E, NAV_N, NAV_PSI, NX, wrap_pi
-from pipeline.nav.earth import F64
-from pipeline.nav.local import LocalFrame
+from navreplay.ingest.schema import from_columns
+from navreplay.pipeline.estimation.cascaded.cascade import STREAM_NAMES
+from navreplay.pipeline.estimation.cascaded.engine import CascadedResult
+from navreplay.pipeline.estimation.cascaded.model import CTL_VX, NAV_E, NAV_N, NAV_PSI, NX, wrap_pi
+from navreplay.pipeline.nav.earth import F64
+from navreplay.pipeline.nav.local import LocalFrame
 
 #: (index into [X1, X2], column, sigma column)
 STATE_COLUMNS: tuple[tuple[int, str, str], ...] = (

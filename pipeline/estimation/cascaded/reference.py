@@ -27,15 +27,15 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-from pipeline.estimation.cascaded import cascade as cs
-from pipeline.estimation.cascaded.engine import (
+from navreplay.pipeline.estimation.cascaded import cascade as cs
+from navreplay.pipeline.estimation.cascaded.engine import (
     CascadedResult,
     CascadeSetup,
     CascadeState,
     raise_if_diverged,
 )
-from pipeline.estimation.cascaded.filters import EST_EKF, EST_UKF, prepare_update
-from pipeline.estimation.cascaded.model import (
+from navreplay.pipeline.estimation.cascaded.filters import EST_EKF, EST_UKF, prepare_update
+from navreplay.pipeline.estimation.cascaded.model import (
     MODEL_CTL,
     MODEL_NAV,
     NAV_GB,
@@ -48,8 +48,8 @@ from pipeline.estimation.cascaded.model import (
     model_noise,
     wrap_pi,
 )
-from pipeline.estimation.kernels import common as cm
-from pipeline.nav.earth import F64
+from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.nav.earth import F64
 
 
 def centered_mean(sigmas: F64, Wm: F64) -> F64:

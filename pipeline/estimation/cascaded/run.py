@@ -9,16 +9,22 @@ from __future__ import annotations
 
 import logging
 
-from ingest.schema import TableName
-from ingest.typed import to_plain
-from pipeline.estimation.cascaded.backends import replay
-from pipeline.estimation.cascaded.engine import make_setup
-from pipeline.estimation.cascaded.inputs import prepare_inputs
-from pipeline.estimation.cascaded.metrics import compute_metrics, truth_from_table
-from pipeline.estimation.cascaded.outputs import estimate_table, innovations_table
-from pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.contract import Backend, RunInputs, RunOutput, RunTables, events_table
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.typed import to_plain
+from navreplay.pipeline.estimation.cascaded.backends import replay
+from navreplay.pipeline.estimation.cascaded.engine import make_setup
+from navreplay.pipeline.estimation.cascaded.inputs import prepare_inputs
+from navreplay.pipeline.estimation.cascaded.metrics import compute_metrics, truth_from_table
+from navreplay.pipeline.estimation.cascaded.outputs import estimate_table, innovations_table
+from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.contract import (
+    Backend,
+    RunInputs,
+    RunOutput,
+    RunTables,
+    events_table,
+)
 
 log = logging.getLogger(__name__)
 

@@ -17,19 +17,19 @@ import math
 import numba as nb
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.estimation.kernels.records import CNT_DIM as CNT_DIM
-from pipeline.estimation.kernels.records import CNT_EV as CNT_EV
-from pipeline.estimation.kernels.records import CNT_INN as CNT_INN
-from pipeline.estimation.kernels.records import CNT_OUT as CNT_OUT
-from pipeline.estimation.kernels.records import CNT_STOP as CNT_STOP
-from pipeline.estimation.kernels.records import CNT_T_FAIL as CNT_T_FAIL
-from pipeline.estimation.kernels.records import INN_F_COLS as INN_F_COLS
-from pipeline.estimation.kernels.records import INN_I_COLS as INN_I_COLS
-from pipeline.estimation.kernels.records import EpochBuffers, RunLog, Settings
-from pipeline.estimation.models.ins import E_CB, E_POS, E_VEL, N_LOOSE, X_VEL
-from pipeline.estimation.models.measurement import S_NHC, S_OBS, S_VEL
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.kernels.records import CNT_DIM as CNT_DIM
+from navreplay.pipeline.estimation.kernels.records import CNT_EV as CNT_EV
+from navreplay.pipeline.estimation.kernels.records import CNT_INN as CNT_INN
+from navreplay.pipeline.estimation.kernels.records import CNT_OUT as CNT_OUT
+from navreplay.pipeline.estimation.kernels.records import CNT_STOP as CNT_STOP
+from navreplay.pipeline.estimation.kernels.records import CNT_T_FAIL as CNT_T_FAIL
+from navreplay.pipeline.estimation.kernels.records import INN_F_COLS as INN_F_COLS
+from navreplay.pipeline.estimation.kernels.records import INN_I_COLS as INN_I_COLS
+from navreplay.pipeline.estimation.kernels.records import EpochBuffers, RunLog, Settings
+from navreplay.pipeline.estimation.models.ins import E_CB, E_POS, E_VEL, N_LOOSE, X_VEL
+from navreplay.pipeline.estimation.models.measurement import S_NHC, S_OBS, S_VEL
+from navreplay.pipeline.nav.earth import F64, I64
 
 EV_REJECT, EV_RESET, EV_REPAIR, EV_DIVERGED = 1, 2, 3, 4
 EVENT_NAMES = {EV_REJECT: "gate_reject", EV_RESET: "gate_reset", EV_REPAIR: "cov_repair"}

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.estimation.kernels.common import (
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.kernels.common import (
     CNT_STOP,
     EV_RESET,
     N_STREAMS,
@@ -43,10 +43,10 @@ from pipeline.estimation.kernels.common import (
     streams_to_reset,
     update_reject_since,
 )
-from pipeline.estimation.kernels.records import EpochBuffers, RunLog, Schedule, Settings
-from pipeline.estimation.models.ins import ACC_DIM, inject, propagate_span
-from pipeline.estimation.models.ins_errors import transition
-from pipeline.estimation.models.measurement import (
+from navreplay.pipeline.estimation.kernels.records import EpochBuffers, RunLog, Schedule, Settings
+from navreplay.pipeline.estimation.models.ins import ACC_DIM, inject, propagate_span
+from navreplay.pipeline.estimation.models.ins_errors import transition
+from navreplay.pipeline.estimation.models.measurement import (
     ST_OUT,
     ST_T,
     epoch_h,
@@ -55,7 +55,7 @@ from pipeline.estimation.models.measurement import (
     epoch_z,
     gate_shift,
 )
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline.nav.earth import F64, I64
 
 
 @njit(cache=True, error_model="numpy", inline="always")

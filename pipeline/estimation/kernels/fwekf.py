@@ -44,9 +44,9 @@ import math
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
-from pipeline.estimation.kernels.common import (
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
+from navreplay.pipeline.estimation.kernels.common import (
     CNT_OUT,
     CNT_STOP,
     STATUS_INDEFINITE,
@@ -57,12 +57,18 @@ from pipeline.estimation.kernels.common import (
     keep_pd,
     record_output,
 )
-from pipeline.estimation.kernels.ekf import ekf_prepare, joseph_update
-from pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
-from pipeline.estimation.models.ins import ACC_DIM, inject, propagate_span
-from pipeline.estimation.models.ins_errors import transition
-from pipeline.estimation.models.measurement import K_PR, ST_FIX, ST_OUT, ST_T, epoch_layout
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline.estimation.kernels.ekf import ekf_prepare, joseph_update
+from navreplay.pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
+from navreplay.pipeline.estimation.models.ins import ACC_DIM, inject, propagate_span
+from navreplay.pipeline.estimation.models.ins_errors import transition
+from navreplay.pipeline.estimation.models.measurement import (
+    K_PR,
+    ST_FIX,
+    ST_OUT,
+    ST_T,
+    epoch_layout,
+)
+from navreplay.pipeline.nav.earth import F64, I64
 
 RING_COLS = 6  # north, east, down position; north, east, down velocity
 

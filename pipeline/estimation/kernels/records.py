@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline.nav.earth import F64, I64
 
 CNT_OUT, CNT_INN, CNT_EV, CNT_STOP, CNT_T_FAIL = 0, 1, 2, 3, 4
 CNT_DIM = 5

@@ -40,8 +40,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.estimation.kernels.common import (
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.kernels.common import (
     CNT_STOP,
     EV_RESET,
     N_STREAMS,
@@ -63,20 +63,20 @@ from pipeline.estimation.kernels.common import (
     streams_to_reset,
     update_reject_since,
 )
-from pipeline.estimation.kernels.records import (
+from navreplay.pipeline.estimation.kernels.records import (
     EpochBuffers,
     RunLog,
     Schedule,
     Settings,
     SigmaWork,
 )
-from pipeline.estimation.kernels.unscented import (
+from navreplay.pipeline.estimation.kernels.unscented import (
     cross_cov,
     draw_sigmas,
     sigma_h,
     unscented_mean_cov,
 )
-from pipeline.estimation.models.ins import (
+from navreplay.pipeline.estimation.models.ins import (
     ACC_DIM,
     E_CB,
     FULL_DIM,
@@ -88,8 +88,8 @@ from pipeline.estimation.models.ins import (
     propagate_sigmas,
     to_full,
 )
-from pipeline.estimation.models.ins_errors import transition
-from pipeline.estimation.models.measurement import (
+from navreplay.pipeline.estimation.models.ins_errors import transition
+from navreplay.pipeline.estimation.models.measurement import (
     ST_OUT,
     ST_T,
     epoch_h,
@@ -97,8 +97,8 @@ from pipeline.estimation.models.measurement import (
     epoch_z,
     gate_shift,
 )
-from pipeline.nav.earth import F64, I64
-from pipeline.nav.mechanization import LANES, LN_DIM
+from navreplay.pipeline.nav.earth import F64, I64
+from navreplay.pipeline.nav.mechanization import LANES, LN_DIM
 
 
 @njit(cache=True, error_model="numpy")

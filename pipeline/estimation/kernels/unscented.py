@@ -11,11 +11,11 @@ import math
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.estimation.kernels.common import cholesky
-from pipeline.estimation.models.ins import to_full
-from pipeline.estimation.models.measurement import epoch_h
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.kernels.common import cholesky
+from navreplay.pipeline.estimation.models.ins import to_full
+from navreplay.pipeline.estimation.models.measurement import epoch_h
+from navreplay.pipeline.nav.earth import F64, I64
 
 
 def ukf_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[F64, F64, float]:

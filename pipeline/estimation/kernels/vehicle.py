@@ -34,8 +34,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.estimation.kernels.common import (
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.kernels.common import (
     CNT_OUT,
     CNT_STOP,
     EV_RESET,
@@ -54,10 +54,10 @@ from pipeline.estimation.kernels.common import (
     symmetrize,
     update_reject_since,
 )
-from pipeline.estimation.kernels.ekf import joseph_update
-from pipeline.estimation.kernels.records import RunLog
-from pipeline.estimation.models import vehicle as vm
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline.estimation.kernels.ekf import joseph_update
+from navreplay.pipeline.estimation.kernels.records import RunLog
+from navreplay.pipeline.estimation.models import vehicle as vm
+from navreplay.pipeline.nav.earth import F64, I64
 
 
 class VehicleSchedule(NamedTuple):

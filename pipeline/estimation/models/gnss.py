@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import math
 
-from pipeline._jit import njit
-from pipeline.estimation.models.ins import (
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.models.ins import (
     E_ATT,
     E_BG,
     E_CB,
@@ -45,7 +45,7 @@ from pipeline.estimation.models.ins import (
     X_VEL,
     dcm_into,
 )
-from pipeline.nav.earth import E2, F64, OMEGA_IE, A, radii
+from navreplay.pipeline.nav.earth import E2, F64, OMEGA_IE, A, radii
 
 # Layout of the antenna context filled by ``antenna``: everything the rows of one state need.
 AN_LLH = 0  # 0..2: antenna latitude, longitude (rad), height (m)

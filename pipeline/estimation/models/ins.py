@@ -38,9 +38,9 @@ import math
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.nav.earth import F64, I64, radii
-from pipeline.nav.mechanization import (
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.nav.earth import F64, I64, radii
+from navreplay.pipeline.nav.mechanization import (
     LANES,
     LN_COS,
     LN_DF,

@@ -14,8 +14,8 @@ import math
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.estimation.models.ins import (
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.models.ins import (
     ACC_C,
     ACC_FN,
     ACC_GAP,
@@ -34,7 +34,7 @@ from pipeline.estimation.models.ins import (
     X_VEL,
     dcm_into,
 )
-from pipeline.nav.earth import E2, F64, OMEGA_IE, A, gravity
+from navreplay.pipeline.nav.earth import E2, F64, OMEGA_IE, A, gravity
 
 # Indices of the noise vector handed to ``transition`` (see ``noise_vector``).
 NZ_ACC, NZ_GYR, NZ_BA, NZ_BG, NZ_CB, NZ_CD, NZ_GAP_ACC, NZ_GAP_GYR = range(8)

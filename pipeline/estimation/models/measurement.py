@@ -32,8 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.estimation.models.gnss import (
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.models.gnss import (
     AN_DIM,
     AN_LLH,
     AN_VN,
@@ -46,8 +46,8 @@ from pipeline.estimation.models.gnss import (
     pseudorange_rate_jac,
     velocity_jac,
 )
-from pipeline.estimation.models.nhc import body_velocity, nhc_jac
-from pipeline.nav.earth import F64, I64
+from navreplay.pipeline.estimation.models.nhc import body_velocity, nhc_jac
+from navreplay.pipeline.nav.earth import F64, I64
 
 FX_LAT, FX_LON, FX_ALT, FX_VN, FX_VE, FX_VD = 0, 1, 2, 3, 4, 5
 FX_SIG_H, FX_SIG_V, FX_SIG_VEL, FX_POS_DIM, FX_VEL_DIM, FX_POS_INFL = 6, 7, 8, 9, 10, 11

@@ -12,10 +12,10 @@ With ``C_true = Exp(phi) C`` the body velocity perturbs as
 
 from __future__ import annotations
 
-from pipeline._jit import njit
-from pipeline.estimation.models.gnss import AN_C, sk
-from pipeline.estimation.models.ins import E_ATT, E_VEL, X_VEL
-from pipeline.nav.earth import F64
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.models.gnss import AN_C, sk
+from navreplay.pipeline.estimation.models.ins import E_ATT, E_VEL, X_VEL
+from navreplay.pipeline.nav.earth import F64
 
 
 @njit(cache=True, error_model="numpy")

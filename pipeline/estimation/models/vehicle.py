@@ -51,8 +51,8 @@ import math
 
 import numpy as np
 
-from pipeline._jit import njit
-from pipeline.nav.earth import F64
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.nav.earth import F64
 
 NX = 5
 X_V, X_BETA, X_PSI, X_N, X_E = 0, 1, 2, 3, 4

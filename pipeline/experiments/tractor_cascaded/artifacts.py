@@ -33,19 +33,19 @@ from typing import Any
 
 import numpy as np
 
-from ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
-from ingest.typed import to_plain
-from pipeline.estimation.cascaded.metrics import BIASES
-from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
-from pipeline.experiments.tractor_cascaded.comparison import (
+from navreplay.ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
+from navreplay.ingest.typed import to_plain
+from navreplay.pipeline.estimation.cascaded.metrics import BIASES
+from navreplay.pipeline.estimation.cascaded.outputs import STATE_COLUMNS
+from navreplay.pipeline.experiments.tractor_cascaded.comparison import (
     mechanisms,
     paper_comparison,
     reading_name,
 )
-from pipeline.experiments.tractor_cascaded.config import BASELINE, NOMINAL
-from pipeline.experiments.tractor_cascaded.figures import draw_all
-from pipeline.experiments.tractor_cascaded.note import vs_paper
-from pipeline.experiments.tractor_cascaded.runs import (
+from navreplay.pipeline.experiments.tractor_cascaded.config import BASELINE, NOMINAL
+from navreplay.pipeline.experiments.tractor_cascaded.figures import draw_all
+from navreplay.pipeline.experiments.tractor_cascaded.note import vs_paper
+from navreplay.pipeline.experiments.tractor_cascaded.runs import (
     ExperimentInputs,
     RunSummary,
     labels,

@@ -45,14 +45,14 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from pipeline.estimation.cascaded_config import CascadedFilterParams
-from pipeline.experiments.tractor_cascaded.config import (
+from navreplay.pipeline.estimation.cascaded_config import CascadedFilterParams
+from navreplay.pipeline.experiments.tractor_cascaded.config import (
     BASELINE,
     NOMINAL,
     PSI_D_LABEL,
     TractorExperimentParams,
 )
-from pipeline.synth.tractor import TractorStraightParams
+from navreplay.pipeline.synth.tractor import TractorStraightParams
 
 UKF, HYBRID = "cascaded_ukf", "cascaded_hybrid"
 _RADAR_SETTLED = "bias_err_mean_settled_radar_bias_mps"

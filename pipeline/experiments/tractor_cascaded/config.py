@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ingest.typed import FieldError
-from pipeline.estimation.cascaded_config import CASCADED_KINDS
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS
 
 #: the EKF linearized about psi_d (paper 000 eq. 17 as printed); nominal runs only
 PSI_D_LABEL = "cascaded_ekf_psi_d"

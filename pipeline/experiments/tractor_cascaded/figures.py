@@ -31,9 +31,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from pipeline.estimation.cascaded.metrics import BIASES
-from pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_RB
-from pipeline.nav.earth import F64
+from navreplay.pipeline.estimation.cascaded.metrics import BIASES
+from navreplay.pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_RB
+from navreplay.pipeline.nav.earth import F64
 
 Series = Mapping[str, F64]
 STYLE: dict[str, dict[str, Any]] = {

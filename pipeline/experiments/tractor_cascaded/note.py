@@ -12,9 +12,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from pipeline.estimation.cascaded.metrics import BIASES
-from pipeline.experiments.tractor_cascaded.comparison import reading_name, readings
-from pipeline.experiments.tractor_cascaded.config import NOMINAL, TractorExperimentParams
+from navreplay.pipeline.estimation.cascaded.metrics import BIASES
+from navreplay.pipeline.experiments.tractor_cascaded.comparison import reading_name, readings
+from navreplay.pipeline.experiments.tractor_cascaded.config import NOMINAL, TractorExperimentParams
 
 _BIAS_NAMES = ("radar", "gyro", "heading", "steer")
 

@@ -35,22 +35,25 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from pipeline.estimation.cascaded.closed_loop import ClosedLoopRun, run_closed_loop_scenarios
-from pipeline.estimation.cascaded.engine import make_setup
-from pipeline.estimation.cascaded.metrics import BIASES, bias_convergence
-from pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, NAV_RB, NX
-from pipeline.estimation.cascaded_config import (
+from navreplay.pipeline.estimation.cascaded.closed_loop import (
+    ClosedLoopRun,
+    run_closed_loop_scenarios,
+)
+from navreplay.pipeline.estimation.cascaded.engine import make_setup
+from navreplay.pipeline.estimation.cascaded.metrics import BIASES, bias_convergence
+from navreplay.pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, NAV_RB, NX
+from navreplay.pipeline.estimation.cascaded_config import (
     CascadedFilterParams,
     LinearizationParams,
 )
-from pipeline.experiments.tractor_cascaded.config import (
+from navreplay.pipeline.experiments.tractor_cascaded.config import (
     BASELINE,
     NOMINAL,
     PSI_D_LABEL,
     TractorExperimentParams,
 )
-from pipeline.nav.earth import F64
-from pipeline.synth.tractor import TractorStraightParams
+from navreplay.pipeline.nav.earth import F64
+from navreplay.pipeline.synth.tractor import TractorStraightParams
 
 RADAR_PROBE_S = 5.0  #: time of the ``radar_bias_err_5s_mps`` sample, s
 

@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ingest.errors import IngestError
-from ingest.writers.csv import CsvColumn, quantize, write_csv
+from navreplay.ingest.errors import IngestError
+from navreplay.ingest.writers.csv import CsvColumn, quantize, write_csv
 
 
 def test_written_columns_read_back_with_pandas_as_quantize_predicts(tmp_path: Path) -> None:

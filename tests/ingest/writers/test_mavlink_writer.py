@@ -10,9 +10,9 @@ import pyarrow as pa
 import pytest
 from pymavlink import mavutil
 
-from ingest.errors import IngestError
-from ingest.schema import FixType, from_columns
-from ingest.writers.mavlink import (
+from navreplay.ingest.errors import IngestError
+from navreplay.ingest.schema import FixType, from_columns
+from navreplay.ingest.writers.mavlink import (
     UINT16_MAX,
     TlogWriter,
     as_logged_gnss,

@@ -10,10 +10,10 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from ingest.gnss import LAMBDA_L1_M, Ephemeris, orbit
-from ingest.gpstime import NS_PER_S, gps_from_calendar
-from ingest.schema import from_columns
-from ingest.writers import rinex
+from navreplay.ingest.gnss import LAMBDA_L1_M, Ephemeris, orbit
+from navreplay.ingest.gpstime import NS_PER_S, gps_from_calendar
+from navreplay.ingest.schema import from_columns
+from navreplay.ingest.writers import rinex
 from tests.ingest.navfile import read_gps_nav
 
 T0 = gps_from_calendar("2026-11-18T02:30:00")

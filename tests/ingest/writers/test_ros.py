@@ -13,9 +13,9 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
-from ingest.gpstime import NS_PER_S, gps_from_calendar
-from ingest.schema import from_columns
-from ingest.writers import ros, rosserial
+from navreplay.ingest.gpstime import NS_PER_S, gps_from_calendar
+from navreplay.ingest.schema import from_columns
+from navreplay.ingest.writers import ros, rosserial
 
 T0 = gps_from_calendar("2026-11-18T02:30:00")
 UTC0 = int(np.datetime64("2026-11-18T02:29:42", "ns").astype(np.int64))  # 18 leap seconds

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.control.lqr import (
+from navreplay.pipeline.control.lqr import (
     PAPER_Q_C,
     PAPER_R_C,
     StraightLine,

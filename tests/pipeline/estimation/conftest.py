@@ -11,13 +11,13 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from ingest.meta import SensorMeta
-from pipeline.estimation.alignment import Alignment
-from pipeline.estimation.config import FILTER_KINDS, FiltersParams, InsFilterParams
-from pipeline.estimation.models import ins
-from pipeline.nav.rotations import euler_to_quat
-from pipeline.params import load_params
-from pipeline.synth.seoul_campus import simulate
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation.alignment import Alignment
+from navreplay.pipeline.estimation.config import FILTER_KINDS, FiltersParams, InsFilterParams
+from navreplay.pipeline.estimation.models import ins
+from navreplay.pipeline.nav.rotations import euler_to_quat
+from navreplay.pipeline.params import load_params
+from navreplay.pipeline.synth.seoul_campus import simulate
 
 REPO = Path(__file__).resolve().parents[3]
 # The six filters of paper 001 (issue 5); fwekf (paper 004) has its own tests.

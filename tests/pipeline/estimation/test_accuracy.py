@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import pytest
 
-from ingest.meta import SensorMeta
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.metrics import compute_metrics
-from pipeline.estimation.replay import run_filter
-from pipeline.params import load_params
-from pipeline.synth.seoul_campus import simulate
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.metrics import compute_metrics
+from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.params import load_params
+from navreplay.pipeline.synth.seoul_campus import simulate
 from tests.pipeline.estimation.conftest import ALL_FILTERS, REPO, Tables
 
 

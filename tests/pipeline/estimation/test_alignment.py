@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
-from ingest.meta import SensorMeta
-from pipeline.estimation import inputs as inp
-from pipeline.estimation.alignment import align
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.models import ins
-from pipeline.estimation.replay import run_filter
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation import inputs as inp
+from navreplay.pipeline.estimation.alignment import align
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.models import ins
+from navreplay.pipeline.estimation.replay import run_filter
 from tests.pipeline.estimation.conftest import Tables, t0_ns, truth_state
 
 

@@ -6,10 +6,10 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from ingest.meta import SensorMeta
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.models import ins
-from pipeline.estimation.replay import run_filter
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.models import ins
+from navreplay.pipeline.estimation.replay import run_filter
 from tests.pipeline.estimation.conftest import ALL_FILTERS
 
 

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from ingest.api import ingest
-from pipeline.cli import main
+from navreplay.ingest.api import ingest
+from navreplay.pipeline.cli import main
 from tests.pipeline.estimation.conftest import REPO
 
 SEGMENT = REPO.parent / "shared" / "data" / "comma2k19_example_segment" / "original"

@@ -28,11 +28,11 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from pipeline.estimation.config import FILTER_KINDS, FiltersParams
-from pipeline.estimation.metrics import nees
-from pipeline.estimation.models import measurement as me
-from pipeline.estimation.replay import run_filter
-from pipeline.estimation.truth import error_states
+from navreplay.pipeline.estimation.config import FILTER_KINDS, FiltersParams
+from navreplay.pipeline.estimation.metrics import nees
+from navreplay.pipeline.estimation.models import measurement as me
+from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.truth import error_states
 from tests.pipeline.estimation.conftest import ALL_FILTERS, drawn_start, seoul
 
 N_RUNS = 20

@@ -9,11 +9,11 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from ingest.meta import SensorMeta
-from pipeline.estimation import inputs as inp
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.replay import RunResult, run_filter
-from pipeline.estimation.truth import error_states
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation import inputs as inp
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.replay import RunResult, run_filter
+from navreplay.pipeline.estimation.truth import error_states
 from tests.pipeline.estimation.conftest import seoul, t0_ns
 
 Tables = dict[str, pa.Table]

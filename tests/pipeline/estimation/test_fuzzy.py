@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from ingest.typed import FieldError
-from pipeline.estimation.fuzzy import (
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.estimation.fuzzy import (
     FZ_COV_C,
     FZ_COV_S,
     FZ_MEAN_C,

@@ -8,15 +8,15 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from ingest.meta import SensorMeta
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.kernels.fwekf import fade_prior, weighted_update
-from pipeline.estimation.models import ins
-from pipeline.estimation.replay import run_filter
-from pipeline.experiments.fwekf_faults import optimistic_accuracy
-from pipeline.experiments.fwekf_paper import convergence_rows, run_case
-from pipeline.params import Params, load_params
-from pipeline.synth import fwekf
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.kernels.fwekf import fade_prior, weighted_update
+from navreplay.pipeline.estimation.models import ins
+from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.experiments.fwekf_faults import optimistic_accuracy
+from navreplay.pipeline.experiments.fwekf_paper import convergence_rows, run_case
+from navreplay.pipeline.params import Params, load_params
+from navreplay.pipeline.synth import fwekf
 from tests.pipeline.estimation.conftest import seoul
 
 REPO = Path(__file__).resolve().parents[3]

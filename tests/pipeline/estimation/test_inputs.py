@@ -8,12 +8,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ingest.meta import SensorMeta
-from ingest.schema import from_columns
-from pipeline.estimation import inputs as inp
-from pipeline.estimation.config import GnssNoiseParams, StepParams
-from pipeline.estimation.models import measurement as me
-from pipeline.estimation.replay import resolve_imu_noise
+from navreplay.ingest.meta import SensorMeta
+from navreplay.ingest.schema import from_columns
+from navreplay.pipeline.estimation import inputs as inp
+from navreplay.pipeline.estimation.config import GnssNoiseParams, StepParams
+from navreplay.pipeline.estimation.models import measurement as me
+from navreplay.pipeline.estimation.replay import resolve_imu_noise
 from tests.pipeline.scenarios.drives import params
 
 

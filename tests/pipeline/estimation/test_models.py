@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from pipeline.estimation.models import ins, ins_errors
-from pipeline.estimation.models import measurement as me
-from pipeline.estimation.outputs import euler_covariance, quat_to_euler_batch
-from pipeline.nav.earth import dcm_ecef_to_ned, geodetic_to_ecef
-from pipeline.nav.mechanization import LANES, LN_DIM, imu_from_motion
-from pipeline.nav.rotations import euler_to_quat, quat_to_dcm, quat_to_euler
+from navreplay.pipeline.estimation.models import ins, ins_errors
+from navreplay.pipeline.estimation.models import measurement as me
+from navreplay.pipeline.estimation.outputs import euler_covariance, quat_to_euler_batch
+from navreplay.pipeline.nav.earth import dcm_ecef_to_ned, geodetic_to_ecef
+from navreplay.pipeline.nav.mechanization import LANES, LN_DIM, imu_from_motion
+from navreplay.pipeline.nav.rotations import euler_to_quat, quat_to_dcm, quat_to_euler
 
 N = ins.N_TIGHT
 # finite-difference steps per error state: m, m/s, rad, m/s^2, rad/s, m, m/s

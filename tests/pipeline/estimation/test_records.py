@@ -7,10 +7,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from ingest.meta import SensorMeta
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.kernels.records import CNT_EV, CNT_INN, CNT_OUT, RunLog
-from pipeline.estimation.replay import run_filter
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.kernels.records import CNT_EV, CNT_INN, CNT_OUT, RunLog
+from navreplay.pipeline.estimation.replay import run_filter
 from tests.pipeline.estimation.conftest import Tables
 
 

@@ -13,10 +13,10 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
-from ingest.meta import DatasetMeta, SensorMeta, write_meta
-from ingest.tables import Provenance, read_table, write_table
-from pipeline.cli import main
-from pipeline.params import read_yaml
+from navreplay.ingest.meta import DatasetMeta, SensorMeta, write_meta
+from navreplay.ingest.tables import Provenance, read_table, write_table
+from navreplay.pipeline.cli import main
+from navreplay.pipeline.params import read_yaml
 from tests.pipeline.estimation.conftest import REPO
 
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.estimation.kernels.common import (
+from navreplay.pipeline.estimation.kernels.common import (
     stream_health,
     streams_to_reset,
     update_reject_since,
 )
-from pipeline.estimation.models.measurement import S_OBS
+from navreplay.pipeline.estimation.models.measurement import S_OBS
 
 NS = 1_000_000_000
 

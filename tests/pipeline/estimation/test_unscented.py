@@ -8,18 +8,18 @@ import pyarrow as pa
 import pytest
 from filterpy.kalman import KalmanFilter, MerweScaledSigmaPoints
 
-from ingest.meta import SensorMeta
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.kernels.ekf import joseph_update
-from pipeline.estimation.kernels.ukf import _apply_gain
-from pipeline.estimation.kernels.unscented import (
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.kernels.ekf import joseph_update
+from navreplay.pipeline.estimation.kernels.ukf import _apply_gain
+from navreplay.pipeline.estimation.kernels.unscented import (
     cross_cov,
     draw_sigmas,
     ukf_weights,
     unscented_mean_cov,
 )
-from pipeline.estimation.models import ins
-from pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.models import ins
+from navreplay.pipeline.estimation.replay import run_filter
 
 
 @pytest.mark.parametrize(("alpha", "beta", "kappa"), [(0.99, 2.0, 0.0), (1e-3, 2.0, 0.0)])

@@ -10,18 +10,18 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from ingest.meta import DatasetMeta, SensorMeta, write_meta
-from ingest.schema import TableName
-from ingest.tables import Provenance, read_table, write_table
-from pipeline.cli import main
-from pipeline.estimation.config import FiltersParams
-from pipeline.estimation.kernels import vehicle as kv
-from pipeline.estimation.vehicle_config import VEHICLE_FILTERS
-from pipeline.estimation.vehicle_replay import run_vehicle_filter
-from pipeline.experiments.vehicle_bands_config import VehicleBandsParams
-from pipeline.experiments.vehicle_paired import monte_carlo, note, paired_table
-from pipeline.params import load_params
-from pipeline.synth import car
+from navreplay.ingest.meta import DatasetMeta, SensorMeta, write_meta
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.tables import Provenance, read_table, write_table
+from navreplay.pipeline.cli import main
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.kernels import vehicle as kv
+from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS
+from navreplay.pipeline.estimation.vehicle_replay import run_vehicle_filter
+from navreplay.pipeline.experiments.vehicle_bands_config import VehicleBandsParams
+from navreplay.pipeline.experiments.vehicle_paired import monte_carlo, note, paired_table
+from navreplay.pipeline.params import load_params
+from navreplay.pipeline.synth import car
 
 REPO = Path(__file__).resolve().parents[3]
 

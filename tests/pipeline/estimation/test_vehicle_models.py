@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.estimation.models import vehicle as vm
-from pipeline.estimation.vehicle_replay import virtual_steering
-from pipeline.synth.bicycle import VehicleParams
+from navreplay.pipeline.estimation.models import vehicle as vm
+from navreplay.pipeline.estimation.vehicle_replay import virtual_steering
+from navreplay.pipeline.synth.bicycle import VehicleParams
 
 _V = VehicleParams()
 VP = np.array([_V.cg_to_front_m, _V.cg_to_rear_m, _V.mass_kg,

@@ -8,11 +8,11 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from ingest.api import ingest
-from ingest.schema import TableName
-from ingest.tables import read_table
-from pipeline.experiments.vehicle_smartloc import smartloc_rows, spp_fixes
-from pipeline.params import load_params
+from navreplay.ingest.api import ingest
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.tables import read_table
+from navreplay.pipeline.experiments.vehicle_smartloc import smartloc_rows, spp_fixes
+from navreplay.pipeline.params import load_params
 
 REPO = Path(__file__).resolve().parents[3]
 DATA = REPO.parent / "shared" / "data" / "smartloc_berlin_potsdamer_platz"

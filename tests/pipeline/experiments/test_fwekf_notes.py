@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from pipeline.estimation.fuzzy import FuzzyParams
-from pipeline.experiments.fwekf_notes import convergence_note, faults_note
+from navreplay.pipeline.estimation.fuzzy import FuzzyParams
+from navreplay.pipeline.experiments.fwekf_notes import convergence_note, faults_note
 
 FZ = FuzzyParams()
 

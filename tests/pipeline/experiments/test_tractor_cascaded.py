@@ -10,15 +10,15 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams
-from pipeline.experiments.tractor_cascaded.artifacts import write_experiment
-from pipeline.experiments.tractor_cascaded.config import TractorExperimentParams
-from pipeline.experiments.tractor_cascaded.runs import (
+from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams
+from navreplay.pipeline.experiments.tractor_cascaded.artifacts import write_experiment
+from navreplay.pipeline.experiments.tractor_cascaded.config import TractorExperimentParams
+from navreplay.pipeline.experiments.tractor_cascaded.runs import (
     ExperimentInputs,
     mean_ci,
 )
-from pipeline.params import load_params
-from pipeline.synth.tractor import TractorStraightParams
+from navreplay.pipeline.params import load_params
+from navreplay.pipeline.synth.tractor import TractorStraightParams
 
 REPO = Path(__file__).resolve().parents[3]
 

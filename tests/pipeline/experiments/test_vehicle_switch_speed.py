@@ -7,9 +7,9 @@ from typing import Any
 
 import pytest
 
-from ingest.typed import FieldError
-from pipeline.experiments.vehicle_bands_config import VehicleBandsParams
-from pipeline.experiments.vehicle_switch_speed import (
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.experiments.vehicle_bands_config import VehicleBandsParams
+from navreplay.pipeline.experiments.vehicle_switch_speed import (
     calibration_seeds,
     dynamic_vs_kinematic,
     note,

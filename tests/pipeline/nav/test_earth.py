@@ -8,7 +8,7 @@ import numpy as np
 import pymap3d
 import pytest
 
-from pipeline.nav import earth
+from navreplay.pipeline.nav import earth
 
 
 @pytest.mark.parametrize(

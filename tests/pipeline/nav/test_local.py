@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from ingest.typed import FieldError
-from pipeline.nav.earth import geodetic_to_ecef
-from pipeline.nav.local import LocalFrame
+from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.nav.earth import geodetic_to_ecef
+from navreplay.pipeline.nav.local import LocalFrame
 
 
 def test_to_geodetic_and_to_ned_are_inverse() -> None:

@@ -9,9 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.nav import earth
-from pipeline.nav import mechanization as m
-from pipeline.nav.rotations import euler_to_quat, quat_to_dcm
+from navreplay.pipeline.nav import earth
+from navreplay.pipeline.nav import mechanization as m
+from navreplay.pipeline.nav.rotations import euler_to_quat, quat_to_dcm
 
 
 def state(

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.nav import earth, spp
+from navreplay.pipeline.nav import earth, spp
 
 
 def _geometry(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:

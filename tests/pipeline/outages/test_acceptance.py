@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pipeline.estimation.windows import NS
-from pipeline.outages.montecarlo import Case, Start, run_montecarlo
-from pipeline.scenarios.config import Policy
+from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.outages.montecarlo import Case, Start, run_montecarlo
+from navreplay.pipeline.scenarios.config import Policy
 from tests.pipeline.scenarios.drives import drive, params
 
 STARTS_S = (60.0, 130.0, 200.0)

@@ -8,12 +8,18 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pipeline.estimation.metrics import compute_metrics
-from pipeline.estimation.replay import run_filter
-from pipeline.estimation.windows import NS
-from pipeline.outages.montecarlo import Case, Start, cases_for, draw_starts, run_montecarlo
-from pipeline.scenarios.apply import apply_scenario
-from pipeline.scenarios.config import SatellitesSpec, ScenarioSpec, WindowsSpec
+from navreplay.pipeline.estimation.metrics import compute_metrics
+from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.outages.montecarlo import (
+    Case,
+    Start,
+    cases_for,
+    draw_starts,
+    run_montecarlo,
+)
+from navreplay.pipeline.scenarios.apply import apply_scenario
+from navreplay.pipeline.scenarios.config import SatellitesSpec, ScenarioSpec, WindowsSpec
 from tests.pipeline.scenarios.drives import drive, params
 
 DURATION_S, START_S, LENGTH_S = 150.0, 60.5, 30.0

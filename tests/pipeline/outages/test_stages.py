@@ -14,11 +14,11 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
-from ingest.meta import DatasetMeta, read_meta, write_meta
-from ingest.tables import Provenance, read_table, write_table
-from pipeline.cli import main
-from pipeline.outages.tables import SAT_REDUCTION_COLUMNS
-from pipeline.params import read_yaml
+from navreplay.ingest.meta import DatasetMeta, read_meta, write_meta
+from navreplay.ingest.tables import Provenance, read_table, write_table
+from navreplay.pipeline.cli import main
+from navreplay.pipeline.outages.tables import SAT_REDUCTION_COLUMNS
+from navreplay.pipeline.params import read_yaml
 from tests.pipeline.scenarios.drives import REPO, drive
 
 WINDOWS = {

@@ -7,7 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.outages.stats import delta_reduction, mean_interval, paired_reduction, reduction_pct
+from navreplay.pipeline.outages.stats import (
+    delta_reduction,
+    mean_interval,
+    paired_reduction,
+    reduction_pct,
+)
 
 
 def pairs(rng: np.random.Generator, n: int, ratio: float) -> tuple[np.ndarray, np.ndarray]:

@@ -7,18 +7,18 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.estimation.metrics import compute_metrics
-from pipeline.estimation.outage_metrics import (
+from navreplay.pipeline.estimation.metrics import compute_metrics
+from navreplay.pipeline.estimation.outage_metrics import (
     ErrorTrack,
     fixes_track,
     reconverge_s,
     truth_track,
     window_metrics,
 )
-from pipeline.estimation.replay import run_filter
-from pipeline.estimation.windows import NS, Window, WindowMetricsParams
-from pipeline.scenarios.apply import apply_scenario
-from pipeline.scenarios.config import ScenarioSpec, WindowsSpec
+from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.windows import NS, Window, WindowMetricsParams
+from navreplay.pipeline.scenarios.apply import apply_scenario
+from navreplay.pipeline.scenarios.config import ScenarioSpec, WindowsSpec
 from tests.pipeline.scenarios.drives import drive, params
 
 

@@ -18,13 +18,13 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from ingest.meta import DatasetMeta, SourceRecord, write_meta
-from ingest.schema import TableName
-from ingest.tables import Provenance, write_table
-from pipeline.estimation.contract import write_run
-from pipeline.estimation.families import run_tables
-from pipeline.params import load_params
-from pipeline.synth.seoul_campus import simulate
+from navreplay.ingest.meta import DatasetMeta, SourceRecord, write_meta
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.tables import Provenance, write_table
+from navreplay.pipeline.estimation.contract import write_run
+from navreplay.pipeline.estimation.families import run_tables
+from navreplay.pipeline.params import load_params
+from navreplay.pipeline.synth.seoul_campus import simulate
 
 REPO = Path(__file__).resolve().parents[3]
 OUTAGE_START_S = 30.0

@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.report.experiments import load_experiments
-from pipeline.report.input_files import ReportInputError
-from pipeline.report.inputs import load_dataset
-from pipeline.report.render import render_dataset
-from pipeline.report.summary import paired, ranking, render_summary
-from pipeline.report.svg import decimate_minmax
+from navreplay.pipeline.report.experiments import load_experiments
+from navreplay.pipeline.report.input_files import ReportInputError
+from navreplay.pipeline.report.inputs import load_dataset
+from navreplay.pipeline.report.render import render_dataset
+from navreplay.pipeline.report.summary import paired, ranking, render_summary
+from navreplay.pipeline.report.svg import decimate_minmax
 
 
 def test_decimation_keeps_every_extreme_and_the_order() -> None:

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.cli import main
-from pipeline.report.input_files import ReportInputError
-from pipeline.report.inputs import load_dataset
-from pipeline.report.render import render_dataset
+from navreplay.pipeline.cli import main
+from navreplay.pipeline.report.input_files import ReportInputError
+from navreplay.pipeline.report.inputs import load_dataset
+from navreplay.pipeline.report.render import render_dataset
 from tests.pipeline.report.conftest import OUTAGE_S
 
 PAIRS = (("lc_ekf", "lc_ekf_nhc"),)

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from ingest.meta import SensorMeta
-from pipeline.params import Params, load_params
-from pipeline.synth.seoul_campus import simulate
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.params import Params, load_params
+from navreplay.pipeline.synth.seoul_campus import simulate
 
 REPO = Path(__file__).resolve().parents[3]
 Tables = dict[str, pa.Table]

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import pytest
 
-from pipeline.estimation.replay import RunResult, run_filter
-from pipeline.scenarios.apply import apply_scenario
-from pipeline.scenarios.config import FaultSpec, ScenarioSpec
-from pipeline.scenarios.criteria import Check, check_fault
+from navreplay.pipeline.estimation.replay import RunResult, run_filter
+from navreplay.pipeline.scenarios.apply import apply_scenario
+from navreplay.pipeline.scenarios.config import FaultSpec, ScenarioSpec
+from navreplay.pipeline.scenarios.criteria import Check, check_fault
 from tests.pipeline.scenarios.drives import drive, params
 
 # fault -> (drive length s, fault time s): long enough for the fault and its aftermath

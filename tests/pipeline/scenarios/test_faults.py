@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ingest.schema import validate
-from pipeline.estimation.windows import NS
-from pipeline.nav import earth
-from pipeline.scenarios.apply import apply_scenario
-from pipeline.scenarios.config import FaultSpec, ScenarioSpec, WindowsSpec
-from pipeline.scenarios.faults import ScenarioError, column
+from navreplay.ingest.schema import validate
+from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.nav import earth
+from navreplay.pipeline.scenarios.apply import apply_scenario
+from navreplay.pipeline.scenarios.config import FaultSpec, ScenarioSpec, WindowsSpec
+from navreplay.pipeline.scenarios.faults import ScenarioError, column
 from tests.pipeline.scenarios.drives import Tables, drive
 
 

@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.estimation.windows import NS
-from pipeline.scenarios.apply import apply_scenario
-from pipeline.scenarios.config import SatellitesSpec, ScenarioSpec, WindowsSpec
-from pipeline.scenarios.faults import column
-from pipeline.scenarios.satellites import gdop, los_rows, policy_order, select
+from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.scenarios.apply import apply_scenario
+from navreplay.pipeline.scenarios.config import SatellitesSpec, ScenarioSpec, WindowsSpec
+from navreplay.pipeline.scenarios.faults import column
+from navreplay.pipeline.scenarios.satellites import gdop, los_rows, policy_order, select
 from tests.pipeline.scenarios.drives import drive
 
 EL = np.array([15.0, 80.0, 45.0, 30.0, 60.0, 25.0, 70.0])

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy.stats import kstest
 
-from pipeline.estimation.windows import NS
-from pipeline.scenarios.config import WindowsSpec
-from pipeline.scenarios.windows import in_any, place_windows
+from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.scenarios.config import WindowsSpec
+from navreplay.pipeline.scenarios.windows import in_any, place_windows
 
 T0 = 1_000 * NS
 END = T0 + 900 * NS

@@ -8,12 +8,12 @@ from pathlib import Path
 
 import yaml
 
-from ingest.meta import DatasetMeta, write_meta
-from ingest.schema import TableName
-from ingest.tables import Provenance, write_table
-from pipeline.cli import main
-from pipeline.params import load_params
-from pipeline.synth import car
+from navreplay.ingest.meta import DatasetMeta, write_meta
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.tables import Provenance, write_table
+from navreplay.pipeline.cli import main
+from navreplay.pipeline.params import load_params
+from navreplay.pipeline.synth import car
 
 REPO = Path(__file__).resolve().parents[3]
 

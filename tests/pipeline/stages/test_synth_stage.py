@@ -13,10 +13,10 @@ import yaml
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
-from ingest.meta import read_meta
-from ingest.tables import read_table
-from pipeline.cli import main
-from pipeline.synth import DATASETS
+from navreplay.ingest.meta import read_meta
+from navreplay.ingest.tables import read_table
+from navreplay.pipeline.cli import main
+from navreplay.pipeline.synth import DATASETS
 from tests.ingest.navfile import read_gps_nav
 
 REPO = Path(__file__).resolve().parents[3]

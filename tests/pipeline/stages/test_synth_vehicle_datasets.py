@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from ingest.meta import read_meta
-from pipeline.cli import main
-from pipeline.synth import DATASETS
+from navreplay.ingest.meta import read_meta
+from navreplay.pipeline.cli import main
+from navreplay.pipeline.synth import DATASETS
 
 REPO = Path(__file__).resolve().parents[3]
 

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from pipeline._numba_cache import installed_digest
-from pipeline.estimation.families import filter_names
-from pipeline.warm import groups
+from navreplay.pipeline._numba_cache import installed_digest
+from navreplay.pipeline.estimation.families import filter_names
+from navreplay.pipeline.warm import groups
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -22,10 +22,10 @@ PROBE = """
 import json, sys, tempfile
 from dataclasses import replace
 from pathlib import Path
-from pipeline.params import load_params
-from pipeline.warm import _drive
-from pipeline.estimation.families import run_tables
-from pipeline.estimation.kernels.ekf import run_ekf
+from navreplay.pipeline.params import load_params
+from navreplay.pipeline.warm import _drive
+from navreplay.pipeline.estimation.families import run_tables
+from navreplay.pipeline.estimation.kernels.ekf import run_ekf
 params = load_params(Path(sys.argv[1]))
 with tempfile.TemporaryDirectory() as tmp:
     tables = _drive("ins", params, Path(tmp) / "t")
@@ -63,7 +63,7 @@ def test_after_warm_the_first_run_loads_the_kernel_and_compiles_nothing(tmp_path
     stamp = tmp_path / "warm.json"
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
     done = subprocess.run(
-        [sys.executable, "-m", "pipeline.cli", "warm", "--filter", "tc_ekf",
+        [sys.executable, "-m", "navreplay.pipeline.cli", "warm", "--filter", "tc_ekf",
          "--filter", "lc_ekf_nhc", "--stamp", str(stamp)],
         env=env, capture_output=True, text=True, check=False, cwd=REPO,
     )  # fmt: skip
@@ -77,6 +77,6 @@ def test_after_warm_the_first_run_loads_the_kernel_and_compiles_nothing(tmp_path
 
 
 def test_an_unknown_filter_is_a_parameter_error(tmp_path: Path) -> None:
-    from pipeline.cli import EXIT_ERROR, main
+    from navreplay.pipeline.cli import EXIT_ERROR, main
 
     assert main(["warm", "--filter", "nope", "--params", str(REPO / "params.yaml")]) == EXIT_ERROR

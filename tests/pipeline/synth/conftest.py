@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.params import Params, load_params
-from pipeline.synth import SynthResult
-from pipeline.synth.seoul_campus import SeoulCampusParams, simulate
+from navreplay.pipeline.params import Params, load_params
+from navreplay.pipeline.synth import SynthResult
+from navreplay.pipeline.synth.seoul_campus import SeoulCampusParams, simulate
 
 REPO = Path(__file__).resolve().parents[3]
 

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.nav.earth import OMEGA_IE
-from pipeline.params import load_params
-from pipeline.synth import SynthResult, car
-from pipeline.synth.bicycle import COLUMNS, VehicleParams, simulate
+from navreplay.pipeline.nav.earth import OMEGA_IE
+from navreplay.pipeline.params import load_params
+from navreplay.pipeline.synth import SynthResult, car
+from navreplay.pipeline.synth.bicycle import COLUMNS, VehicleParams, simulate
 
 REPO = Path(__file__).resolve().parents[3]
 PAPER = car.CarSpeedRampParams()

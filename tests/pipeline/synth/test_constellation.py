@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from ingest import gnss
-from ingest.gpstime import NS_PER_S, gps_from_calendar
-from pipeline.nav import earth
-from pipeline.synth import constellation as cst
-from pipeline.synth.seoul_params import ConstellationParams
+from navreplay.ingest import gnss
+from navreplay.ingest.gpstime import NS_PER_S, gps_from_calendar
+from navreplay.pipeline.nav import earth
+from navreplay.pipeline.synth import constellation as cst
+from navreplay.pipeline.synth.seoul_params import ConstellationParams
 
 PARAMS = ConstellationParams(0.01, 0.0, 7200, 2e-4, 3e-12, 5e-9)
 T0 = gps_from_calendar("2026-11-18T00:00:00")

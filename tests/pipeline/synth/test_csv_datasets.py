@@ -10,12 +10,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ingest.config import CsvSource, load_dataset_config
-from ingest.meta import read_meta
-from ingest.tables import read_table
-from pipeline.params import load_params
-from pipeline.synth import car, tractor_log
-from pipeline.synth.tractor import TractorStraightParams
+from navreplay.ingest.config import CsvSource, load_dataset_config
+from navreplay.ingest.meta import read_meta
+from navreplay.ingest.tables import read_table
+from navreplay.pipeline.params import load_params
+from navreplay.pipeline.synth import car, tractor_log
+from navreplay.pipeline.synth.tractor import TractorStraightParams
 
 REPO = Path(__file__).resolve().parents[3]
 

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from pymavlink import mavutil
 
-from ingest.config import load_dataset_config
-from ingest.tables import read_table
-from pipeline.nav.earth import radii
-from pipeline.nav.mechanization import integrate
-from pipeline.params import load_params
-from pipeline.synth import fwekf
+from navreplay.ingest.config import load_dataset_config
+from navreplay.ingest.tables import read_table
+from navreplay.pipeline.nav.earth import radii
+from navreplay.pipeline.nav.mechanization import integrate
+from navreplay.pipeline.params import load_params
+from navreplay.pipeline.synth import fwekf
 
 REPO = Path(__file__).resolve().parents[3]
 PAPER = fwekf.FwekfReferenceParams()

@@ -12,15 +12,15 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from ingest.config import load_dataset_config
-from ingest.gnss import C_MPS, Ephemeris, select, transmit_state
-from ingest.writers import rinex
-from pipeline.nav import earth, spp
-from pipeline.nav import mechanization as mech
-from pipeline.nav.rotations import euler_to_dcm, euler_to_quat
-from pipeline.params import Params
-from pipeline.synth import SynthResult
-from pipeline.synth.seoul_campus import SeoulCampusParams, route, simulate
+from navreplay.ingest.config import load_dataset_config
+from navreplay.ingest.gnss import C_MPS, Ephemeris, select, transmit_state
+from navreplay.ingest.writers import rinex
+from navreplay.pipeline.nav import earth, spp
+from navreplay.pipeline.nav import mechanization as mech
+from navreplay.pipeline.nav.rotations import euler_to_dcm, euler_to_quat
+from navreplay.pipeline.params import Params
+from navreplay.pipeline.synth import SynthResult
+from navreplay.pipeline.synth.seoul_campus import SeoulCampusParams, route, simulate
 from tests.ingest.navfile import read_gps_nav
 from tests.pipeline.synth.conftest import REPO
 

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from pipeline.control.lqr import YawSteerModel, lqr_command, tractor_lqr_gain
-from pipeline.params import load_params
-from pipeline.synth import tractor_log
-from pipeline.synth.output import dataset_seed
-from pipeline.synth.tractor import (
+from navreplay.pipeline.control.lqr import YawSteerModel, lqr_command, tractor_lqr_gain
+from navreplay.pipeline.params import load_params
+from navreplay.pipeline.synth import tractor_log
+from navreplay.pipeline.synth.output import dataset_seed
+from navreplay.pipeline.synth.tractor import (
     TractorMeasurement,
     TractorSim,
     TractorState,

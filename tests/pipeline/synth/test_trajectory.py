@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.nav.rotations import quat_to_dcm
-from pipeline.synth.profile import ProfileBuilder
-from pipeline.synth.trajectory import Leg, Limits, build_profiles, sample
+from navreplay.pipeline.nav.rotations import quat_to_dcm
+from navreplay.pipeline.synth.profile import ProfileBuilder
+from navreplay.pipeline.synth.trajectory import Leg, Limits, build_profiles, sample
 
 LIMITS = Limits(accel_mps2=1.5, yaw_accel_radps2=0.3, grade_rate_ps=0.05)
 LEGS = [

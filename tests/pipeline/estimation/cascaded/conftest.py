@@ -8,10 +8,10 @@ from pathlib import Path
 import pyarrow as pa
 import pytest
 
-from pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams
-from pipeline.params import Params, load_params
-from pipeline.synth.tractor import TractorStraightParams
-from pipeline.synth.tractor_log import synthesize
+from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams
+from navreplay.pipeline.params import Params, load_params
+from navreplay.pipeline.synth.tractor import TractorStraightParams
+from navreplay.pipeline.synth.tractor_log import synthesize
 
 REPO = Path(__file__).resolve().parents[4]
 CASCADED = tuple(CASCADED_KINDS)

@@ -10,16 +10,16 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pipeline.estimation.cascaded.closed_loop import (
+from navreplay.pipeline.estimation.cascaded.closed_loop import (
     ClosedLoopRun,
     run_closed_loop,
     run_closed_loop_scenarios,
 )
-from pipeline.estimation.cascaded.engine import make_setup
-from pipeline.estimation.cascaded.metrics import BIASES, bias_convergence
-from pipeline.estimation.cascaded.model import NAV_PSI, NAV_RB
-from pipeline.estimation.cascaded_config import CascadedFilterParams
-from pipeline.synth.tractor import TractorStraightParams
+from navreplay.pipeline.estimation.cascaded.engine import make_setup
+from navreplay.pipeline.estimation.cascaded.metrics import BIASES, bias_convergence
+from navreplay.pipeline.estimation.cascaded.model import NAV_PSI, NAV_RB
+from navreplay.pipeline.estimation.cascaded_config import CascadedFilterParams
+from navreplay.pipeline.synth.tractor import TractorStraightParams
 from tests.pipeline.estimation.cascaded.conftest import CASCADED
 
 

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.estimation.cascaded.cascade import NAV_BLOCK_OF_ROW, NAV_STREAMS, S_GPS_POS
-from pipeline.estimation.cascaded.filters import (
+from navreplay.pipeline.estimation.cascaded.cascade import NAV_BLOCK_OF_ROW, NAV_STREAMS, S_GPS_POS
+from navreplay.pipeline.estimation.cascaded.filters import (
     EST_EKF,
     EST_UKF,
     apply_update,
@@ -17,7 +17,7 @@ from pipeline.estimation.cascaded.filters import (
     prepare_update,
     ukf_predict,
 )
-from pipeline.estimation.cascaded.model import (
+from navreplay.pipeline.estimation.cascaded.model import (
     MODEL_CTL,
     MODEL_NAV,
     NAV_E,
@@ -29,8 +29,8 @@ from pipeline.estimation.cascaded.model import (
     model_f,
     model_params,
 )
-from pipeline.estimation.kernels import common as cm
-from pipeline.estimation.kernels.unscented import ukf_weights
+from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.estimation.kernels.unscented import ukf_weights
 
 WM, WC, GAMMA = ukf_weights(NX, 1e-3, 2.0, 0.0)
 GATE = np.array([math.inf, 15.13, 18.42, 21.11])  # chi2(0.9999) by dimension

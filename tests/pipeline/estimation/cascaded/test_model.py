@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.control.lqr import YawSteerModel
-from pipeline.estimation.cascaded.model import (
+from navreplay.pipeline.control.lqr import YawSteerModel
+from navreplay.pipeline.estimation.cascaded.model import (
     CTL_DEL,
     CTL_PD,
     MODEL_CTL,

@@ -12,17 +12,17 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from ingest.schema import TableName
-from ingest.tables import read_table
-from pipeline.cli import main
-from pipeline.estimation.cascaded.backends import replay
-from pipeline.estimation.cascaded.engine import make_setup
-from pipeline.estimation.cascaded.inputs import prepare_inputs
-from pipeline.estimation.cascaded.outputs import STATE_COLUMNS
-from pipeline.estimation.cascaded_config import CascadedFilterParams
-from pipeline.estimation.families import FAMILIES, family_of
-from pipeline.synth.tractor import TractorStraightParams
-from pipeline.synth.tractor_log import synthesize, write
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.tables import read_table
+from navreplay.pipeline.cli import main
+from navreplay.pipeline.estimation.cascaded.backends import replay
+from navreplay.pipeline.estimation.cascaded.engine import make_setup
+from navreplay.pipeline.estimation.cascaded.inputs import prepare_inputs
+from navreplay.pipeline.estimation.cascaded.outputs import STATE_COLUMNS
+from navreplay.pipeline.estimation.cascaded_config import CascadedFilterParams
+from navreplay.pipeline.estimation.families import FAMILIES, family_of
+from navreplay.pipeline.synth.tractor import TractorStraightParams
+from navreplay.pipeline.synth.tractor_log import synthesize, write
 from tests.pipeline.estimation.cascaded.conftest import REPO
 
 

@@ -22,11 +22,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pipeline.estimation.cascaded import cascade as cs
-from pipeline.estimation.cascaded.backends import replay
-from pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup, make_setup
-from pipeline.estimation.cascaded.model import NAV_PSI, NAV_PSIB, NAV_RB, NX
-from pipeline.estimation.cascaded_config import CascadedFilterParams
+from navreplay.pipeline.estimation.cascaded import cascade as cs
+from navreplay.pipeline.estimation.cascaded.backends import replay
+from navreplay.pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup, make_setup
+from navreplay.pipeline.estimation.cascaded.model import NAV_PSI, NAV_PSIB, NAV_RB, NX
+from navreplay.pipeline.estimation.cascaded_config import CascadedFilterParams
 
 SPEED, RADAR_BIAS, GYRO_BIAS, HEADING_BIAS, STEER_BIAS = 3.0, 0.4, 0.3, 0.2, 0.1
 DT_NS, DURATION_S = 20_000_000, 80.0  # the paper's 50 Hz and 80 s
