@@ -35,13 +35,13 @@ from navreplay.pipeline.nav.earth import F64
 class _ModelEKF(ExtendedKalmanFilter):  # type: ignore[misc]
     """filterpy's EKF on one vehicle model; the prediction sub-steps run the shared model."""
 
-    def __init__(self, model: int, x0: F64, P0: F64, vp: F64, q: F64, cfg: F64) -> None:
+    def __init__(self, model: int, x0: F64, P0: F64, vs: kv.VehicleSettings) -> None:
         super().__init__(dim_x=vm.NX, dim_z=1)
         self.model = model
         self.x = x0.copy()
         self.P = P0.copy()
-        self.vp, self.q, self.cfg = vp, q, cfg
-        self.sig_u = np.array([cfg[kv.VC_SIG_VWHL], cfg[kv.VC_SIG_DELTA]])
+        self.vp, self.q, self.max_step_s = vs.vp, vs.q, vs.max_step_s
+        self.sig_u = np.array([vs.sig_wheel_speed_mps, vs.sig_steer_rad])
         self.u = np.zeros(kv.VH_COLS)
         self.dt = 0.0
         self.pending: tuple[F64, F64, F64, F64] | None = None
@@ -65,7 +65,7 @@ class _ModelEKF(ExtendedKalmanFilter):  # type: ignore[misc]
         dt = self.dt
         if dt <= 0.0:
             return
-        max_step = self.cfg[kv.VC_MAX_STEP]
+        max_step = self.max_step_s
         n_sub = max(1, math.ceil(dt / max_step - 1e-9))
         self._h = dt / n_sub
         F, Q = np.empty((vm.NX, vm.NX)), np.empty((vm.NX, vm.NX))
@@ -99,22 +99,21 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
 ) -> int:  # fmt: skip
     """``kernels.vehicle.run_vehicle`` with filterpy's EKF / IMMEstimator doing the arithmetic."""
     t0, u0, stops, veh, fix = sched
-    vp, q, cfg, gate = vs
+    vp, gate = vs.vp, vs.gate
     _, _, _, inn_i, inn_f, ev_i, ev_f, counts = log
-    mode = int(cfg[kv.VC_MODE])
+    mode = vs.mode
     imm_on = mode == kv.MODE_IMM
     if imm_on:
-        filters = [_ModelEKF(j, x0, P0, vp, q, cfg) for j in (vm.KINEMATIC, vm.DYNAMIC)]
-        M = np.array(
-            [[cfg[kv.VC_P_KK], 1.0 - cfg[kv.VC_P_KK]], [1.0 - cfg[kv.VC_P_DD], cfg[kv.VC_P_DD]]]
-        )
-        imm = IMMEstimator(filters, np.array([1.0 - cfg[kv.VC_MU0_DYN], cfg[kv.VC_MU0_DYN]]), M)
+        filters = [_ModelEKF(j, x0, P0, vs) for j in (vm.KINEMATIC, vm.DYNAMIC)]
+        pk, pd = vs.p_stay_kinematic, vs.p_stay_dynamic
+        M = np.array([[pk, 1.0 - pk], [1.0 - pd, pd]])
+        imm = IMMEstimator(filters, np.array([1.0 - vs.mu0_dynamic, vs.mu0_dynamic]), M)
         aux = float(imm.mu[1])
     else:
         model = vm.DYNAMIC if mode == kv.MODE_DYNAMIC else vm.KINEMATIC
         if mode == kv.MODE_SWITCHED:
-            model = int(kv.switch_model(vm.KINEMATIC, u0[kv.VH_V], cfg))
-        filters = [_ModelEKF(model, x0, P0, vp, q, cfg)]
+            model = int(kv.switch_model(vm.KINEMATIC, u0[kv.VH_V], vs))
+        filters = [_ModelEKF(model, x0, P0, vs)]
         aux = float(model)
     u = u0.copy()
     L = np.empty((vm.NX, vm.NX))
@@ -142,7 +141,7 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
         if vi >= 0:
             u[:] = veh[vi]
         if mode == kv.MODE_SWITCHED and vi >= 0:
-            filters[0].model = int(kv.switch_model(filters[0].model, u[kv.VH_V], cfg))
+            filters[0].model = int(kv.switch_model(filters[0].model, u[kv.VH_V], vs))
         m, nb_, _ = kv.epoch_rows(stops[k], veh, fix, rows, blocks)
         for f in filters:
             f._lik = 1.0
@@ -151,7 +150,7 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
             r_of: list[F64] = []  # the yaw-rate variance depends on the model
             for f in filters:
                 xf = np.ascontiguousarray(f.x, dtype=float)
-                kv.epoch_values(f.model, xf, rows, m, veh, fix, u, vp, cfg, z, r, nu, H)
+                kv.epoch_values(f.model, xf, rows, m, veh, fix, u, vp, vs, z, r, nu, H)
                 per.append((nu.copy(), H.copy(), np.empty_like(S)))
                 r_of.append(r.copy())
             g = 0 if not imm_on or imm.cbar[0] >= imm.cbar[1] else 1
@@ -161,9 +160,7 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
                 cm.gate_blocks(per[g][0], per[g][2], blocks, nb_, gate, nis, accepted, work)
                 if attempt == 1:
                     break
-                reset = cm.streams_to_reset(
-                    t, blocks, nb_, accepted, reject_since, cfg[kv.VC_TIMEOUT_S]
-                )
+                reset = cm.streams_to_reset(t, blocks, nb_, accepted, reject_since, vs.timeout_s)
                 if reset.sum() == 0:
                     break
                 for st in np.flatnonzero(reset):
@@ -186,7 +183,7 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
                 hx = z[a] - nu_f[a]
                 f.pending = (z[a].copy(), hx, H_f[a].copy(), np.diag(r_f[a]))
                 ll = kv.log_likelihood(nu_f, S_f, acc, ma)
-                f._lik = float(kv.likelihood(ll, cfg[kv.VC_LIK_FLOOR]))
+                f._lik = float(kv.likelihood(ll, vs.likelihood_floor))
         if imm_on:
             imm.update(None)
             x, P = np.asarray(imm.x, dtype=float), np.asarray(imm.P, dtype=float)
@@ -204,7 +201,7 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
             f.P = Pf
         if not imm_on:
             P = np.asarray(filters[0].P, dtype=float)
-        status = int(kv.check(np.ascontiguousarray(x), np.ascontiguousarray(P), cfg)) if ok else 3
+        status = int(kv.check(np.ascontiguousarray(x), np.ascontiguousarray(P), vs)) if ok else 3
         if status != cm.STATUS_OK:
             return int(cm.fail(t, status, ev_i, ev_f, counts))
         if stops[k, kv.VS_OUT] > 0:

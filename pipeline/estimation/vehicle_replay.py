@@ -266,24 +266,30 @@ def schedule(t0: int, data: VehicleData, output_s: float) -> I64:
     return stops
 
 
-def make_cfg(name: str, params: VehicleFilterParams) -> tuple[F64, F64, F64]:
-    """(cfg, q, gate) of filter ``name`` (``kernels.vehicle.VC_*``)."""
+def make_settings(name: str, params: VehicleFilterParams) -> kv.VehicleSettings:
+    """The kernel's settings of vehicle filter ``name``."""
     n, s, im = params.noise, params.switching, params.imm
-    cfg = np.zeros(kv.VC_DIM)
-    cfg[kv.VC_MODE] = kv.MODE_NAMES[name]
-    cfg[kv.VC_MAX_STEP] = params.max_step_s
-    cfg[kv.VC_V_UP], cfg[kv.VC_V_DOWN] = s.speed_up_mps, s.speed_down_mps
-    cfg[kv.VC_SIG_VWHL], cfg[kv.VC_SIG_DELTA] = n.wheel_speed_sigma_mps, n.steer_sigma_rad
-    cfg[kv.VC_SIG_YAW] = n.yaw_rate_sigma_radps
-    cfg[kv.VC_P_KK], cfg[kv.VC_P_DD] = im.p_stay_kinematic, im.p_stay_dynamic
-    cfg[kv.VC_MU0_DYN] = im.mu0_dynamic
-    cfg[kv.VC_MAX_POS_SIGMA] = params.max_pos_sigma_m
-    cfg[kv.VC_LIK_FLOOR] = im.likelihood_floor
-    cfg[kv.VC_TIMEOUT_S] = params.gate_timeout_s
     q = np.array([n.speed_psd_m2ps3, n.slip_psd_rad2ps, n.heading_psd_rad2ps,
                   n.position_psd_m2ps, n.position_psd_m2ps])  # fmt: skip
     gate = np.array([math.inf] + [float(chi2.ppf(params.gate_probability, d)) for d in (1, 2, 3)])
-    return cfg, q, gate
+    return kv.VehicleSettings(
+        vp=vehicle_vector(params),
+        q=q,
+        gate=gate,
+        mode=int(kv.MODE_NAMES[name]),
+        max_step_s=float(params.max_step_s),
+        v_up_mps=float(s.speed_up_mps),
+        v_down_mps=float(s.speed_down_mps),
+        sig_wheel_speed_mps=float(n.wheel_speed_sigma_mps),
+        sig_steer_rad=float(n.steer_sigma_rad),
+        sig_yaw_rate_radps=float(n.yaw_rate_sigma_radps),
+        p_stay_kinematic=float(im.p_stay_kinematic),
+        p_stay_dynamic=float(im.p_stay_dynamic),
+        mu0_dynamic=float(im.mu0_dynamic),
+        max_pos_sigma_m=float(params.max_pos_sigma_m),
+        likelihood_floor=float(im.likelihood_floor),
+        timeout_s=float(params.gate_timeout_s),
+    )
 
 
 KernelFn = Callable[..., int]
@@ -317,13 +323,12 @@ def run_vehicle_filter(
         raise ReplayInputError(f"filter {name}: no GPS fix gives an initial heading")
     t0, x0, P0, desc = start
     stops = schedule(t0, data, params.output_interval_s)
-    cfg, q, gate = make_cfg(name, params)
     i0 = int(np.searchsorted(data.veh_t, t0, side="right")) - 1
     n_out = int(stops[:, kv.VS_OUT].sum()) + 1
     n_inn = len(stops) * kv.M_MAX
     n_ev = n_inn + 2 * len(stops) + 16
     sched = kv.VehicleSchedule(int(t0), data.veh[i0].copy(), stops, data.veh, data.fix)
-    vs = kv.VehicleSettings(vehicle_vector(params), q, cfg, gate)
+    vs = make_settings(name, params)
     log_ = RunLog.allocate(n_out, n_inn, n_ev, vm.NX, vm.NX)
     while True:  # a log too small for the run is grown and the run made again
         out_aux = np.zeros(log_.capacity()[0])

@@ -1,11 +1,11 @@
 """Replay loops of the vehicle-model filters (paper 003), compiled whole with numba.
 
-One loop serves the four filters, selected by ``cfg[VC_MODE]``:
+One loop serves the four filters, selected by ``VehicleSettings.mode``:
 
 - ``MODE_KINEMATIC`` / ``MODE_DYNAMIC``: one EKF on that model (``models.vehicle``);
 - ``MODE_SWITCHED``: one EKF whose process and yaw-rate models are chosen per step by the
-  wheel speed with hysteresis (dynamic above ``VC_V_UP``, back to kinematic below
-  ``VC_V_DOWN``; the paper selects the model by the speed range);
+  wheel speed with hysteresis (dynamic above ``v_up_mps``, back to kinematic below
+  ``v_down_mps``; the paper selects the model by the speed range);
 - ``MODE_IMM``: an interacting multiple model filter of both EKFs (Markov switching matrix,
   mixing, model likelihoods; the same arithmetic as filterpy's ``IMMEstimator``).
 
@@ -13,7 +13,7 @@ Array layouts (filled by ``pipeline.estimation.vehicle_replay``):
 
 - ``stops`` (S, ``VS_COLS``): time (ns), vehicle-sample index (-1 = none), fix index (-1 =
   none), output flag. Between stops the state is predicted with the last vehicle input held
-  (zero order), in sub-steps of at most ``VC_MAX_STEP`` s.
+  (zero order), in sub-steps of at most ``max_step_s``.
 - ``veh`` (V, ``VH_COLS``): wheel speed, steering of the kinematic and of the dynamic model
   (equal when the log has a steering angle; per-model virtual steering from the yaw rate
   otherwise), measured yaw rate and its flag (1 = fuse it).
@@ -76,17 +76,37 @@ class VehicleSchedule(NamedTuple):
 
 
 class VehicleSettings(NamedTuple):
-    """A vehicle filter's model and settings.
+    """A vehicle filter's model and settings (``VehicleFilterParams``, resolved).
 
     Attributes:
         vp: the vehicle (``models.vehicle.VP_*``); q: model-error densities (5,).
-        cfg: settings (``VC_*``); gate: chi-square threshold by block dimension.
+        gate: chi-square threshold by block dimension.
+        mode: ``MODE_*``: which filter the loop runs.
+        max_step_s: longest model integration step, s.
+        v_up_mps, v_down_mps: the switched filter's hysteresis (dynamic above ``v_up_mps``,
+            kinematic again below ``v_down_mps``).
+        sig_wheel_speed_mps, sig_steer_rad, sig_yaw_rate_radps: input and yaw-rate 1-sigma.
+        p_stay_kinematic, p_stay_dynamic, mu0_dynamic: the IMM's Markov chain and start.
+        max_pos_sigma_m: divergence limit; likelihood_floor: the IMM's least likelihood.
+        timeout_s: a stream rejected this long is reset.
     """
 
     vp: F64
     q: F64
-    cfg: F64
     gate: F64
+    mode: int
+    max_step_s: float
+    v_up_mps: float
+    v_down_mps: float
+    sig_wheel_speed_mps: float
+    sig_steer_rad: float
+    sig_yaw_rate_radps: float
+    p_stay_kinematic: float
+    p_stay_dynamic: float
+    mu0_dynamic: float
+    max_pos_sigma_m: float
+    likelihood_floor: float
+    timeout_s: float
 
 
 MODE_KINEMATIC, MODE_DYNAMIC, MODE_SWITCHED, MODE_IMM = 0, 1, 2, 3
@@ -105,17 +125,6 @@ FX_N, FX_E, FX_SPEED, FX_COURSE = 0, 1, 2, 3
 FX_SIG_POS, FX_SIG_SPEED, FX_SIG_COURSE, FX_POS_OK, FX_SPEED_OK, FX_COURSE_OK = 4, 5, 6, 7, 8, 9
 FX_COLS = 10
 
-VC_MODE, VC_MAX_STEP, VC_V_UP, VC_V_DOWN, VC_SIG_VWHL, VC_SIG_DELTA, VC_SIG_YAW = (
-    0,
-    1,
-    2,
-    3,
-    4,
-    5,
-    6,
-)
-VC_P_KK, VC_P_DD, VC_MU0_DYN, VC_MAX_POS_SIGMA, VC_LIK_FLOOR, VC_TIMEOUT_S = 7, 8, 9, 10, 11, 12
-VC_DIM = 13
 
 S_POS, S_SPEED, S_COURSE, S_YAW = 0, 1, 2, 3
 STREAM_NAMES = ("gnss_pos", "gnss_speed", "gnss_course", "yaw_rate")
@@ -167,7 +176,7 @@ def epoch_values(
     fix: F64,
     u: F64,
     vp: F64,
-    cfg: F64,
+    vs: VehicleSettings,
     z: F64,
     r: F64,
     nu: F64,
@@ -192,10 +201,10 @@ def epoch_values(
         elif kind == vm.Z_COURSE:
             z[k], sig = fix[src, FX_COURSE], fix[src, FX_SIG_COURSE]
         else:
-            z[k], sig = veh[src, VH_YAW], cfg[VC_SIG_YAW]
+            z[k], sig = veh[src, VH_YAW], vs.sig_yaw_rate_radps
         r[k] = sig * sig
         if kind == vm.Z_YAW_RATE:  # the steering sample's noise enters the prediction too
-            sens = vm.yaw_rate_steer_sens(model, x, delta, vp) * cfg[VC_SIG_DELTA]
+            sens = vm.yaw_rate_steer_sens(model, x, delta, vp) * vs.sig_steer_rad
             r[k] += sens * sens
         nu[k] = vm.residual(kind, z[k], vm.measure(model, x, delta, kind, vp))
         vm.measure_jac(model, x, delta, kind, vp, H[k])
@@ -329,17 +338,17 @@ def reset_stream(P: F64, stream: int, nu: F64, blocks: I64, nb_: int) -> float:
 @njit(cache=True)
 def gate_with_reset(
     t: int, x: F64, P: F64, H: F64, r: F64, nu: F64, m: int, S: F64, blocks: I64, nb_: int,
-    gate: F64, cfg: F64, reject_since: I64, nis: F64, accepted: I64, gwork: F64, ev_i: I64,
+    vs: VehicleSettings, reject_since: I64, nis: F64, accepted: I64, gwork: F64, ev_i: I64,
     ev_f: F64, counts: I64,
 ) -> None:  # fmt: skip
-    """Gate every block; a stream rejected for longer than ``VC_TIMEOUT_S`` has its states'
+    """Gate every block; a stream rejected for longer than ``vs.timeout_s`` has its states'
     covariance reset (``reset_stream``, event ``gate_reset``) and is gated again."""
     for attempt in range(2):
         innovation_cov(P, H, r, m, S)
-        gate_blocks(nu, S, blocks, nb_, gate, nis, accepted, gwork)
+        gate_blocks(nu, S, blocks, nb_, vs.gate, nis, accepted, gwork)
         if attempt == 1:
             break
-        reset = streams_to_reset(t, blocks, nb_, accepted, reject_since, cfg[VC_TIMEOUT_S])
+        reset = streams_to_reset(t, blocks, nb_, accepted, reject_since, vs.timeout_s)
         if reset.sum() == 0:
             break
         for s in range(reset.size):
@@ -350,7 +359,7 @@ def gate_with_reset(
 
 
 @njit(cache=True)
-def check(x: F64, P: F64, cfg: F64) -> int:
+def check(x: F64, P: F64, vs: VehicleSettings) -> int:
     """The NaN barrier and the divergence limit for a vehicle state."""
     for i in range(vm.NX):
         if not math.isfinite(x[i]):
@@ -358,17 +367,17 @@ def check(x: F64, P: F64, cfg: F64) -> int:
         for j in range(vm.NX):
             if not math.isfinite(P[i, j]):
                 return STATUS_NONFINITE
-    if math.sqrt(P[vm.X_N, vm.X_N] + P[vm.X_E, vm.X_E]) > cfg[VC_MAX_POS_SIGMA]:
+    if math.sqrt(P[vm.X_N, vm.X_N] + P[vm.X_E, vm.X_E]) > vs.max_pos_sigma_m:
         return STATUS_LIMIT
     return STATUS_OK
 
 
 @njit(cache=True)
-def switch_model(current: int, v_whl: float, cfg: F64) -> int:
-    """Speed-based model choice with hysteresis (``VC_V_UP`` > ``VC_V_DOWN``)."""
-    if current == vm.KINEMATIC and v_whl > cfg[VC_V_UP]:
+def switch_model(current: int, v_whl: float, vs: VehicleSettings) -> int:
+    """Speed-based model choice with hysteresis (``v_up_mps`` > ``v_down_mps``)."""
+    if current == vm.KINEMATIC and v_whl > vs.v_up_mps:
         return vm.DYNAMIC
-    if current == vm.DYNAMIC and v_whl < cfg[VC_V_DOWN]:
+    if current == vm.DYNAMIC and v_whl < vs.v_down_mps:
         return vm.KINEMATIC
     return current
 
@@ -390,23 +399,24 @@ def run_vehicle(
         a ``common.STATUS_*`` code.
     """
     t0, u0, stops, veh, fix = sched
-    vp, q, cfg, gate = vs
+    vp, q, gate = vs.vp, vs.q, vs.gate
     _, _, _, inn_i, inn_f, ev_i, ev_f, counts = log
-    mode = int(cfg[VC_MODE])
-    sig_u = np.array([cfg[VC_SIG_VWHL], cfg[VC_SIG_DELTA]])
-    max_step = cfg[VC_MAX_STEP]
+    mode = vs.mode
+    sig_u = np.array([vs.sig_wheel_speed_mps, vs.sig_steer_rad])
+    max_step = vs.max_step_s
     nmod = 2 if mode == MODE_IMM else 1
     xs = np.empty((nmod, vm.NX))
     Ps = np.empty((nmod, vm.NX, vm.NX))
     for i in range(nmod):
         xs[i] = x0
         Ps[i] = P0
-    M = np.array([[cfg[VC_P_KK], 1.0 - cfg[VC_P_KK]], [1.0 - cfg[VC_P_DD], cfg[VC_P_DD]]])
-    mu = np.array([1.0 - cfg[VC_MU0_DYN], cfg[VC_MU0_DYN]])
+    pk, pd = vs.p_stay_kinematic, vs.p_stay_dynamic
+    M = np.array([[pk, 1.0 - pk], [1.0 - pd, pd]])
+    mu = np.array([1.0 - vs.mu0_dynamic, vs.mu0_dynamic])
     cbar, omega = imm_mixing(mu, M)
     model = vm.DYNAMIC if mode == MODE_DYNAMIC else vm.KINEMATIC
     if mode == MODE_SWITCHED:
-        model = switch_model(vm.KINEMATIC, u0[VH_V], cfg)
+        model = switch_model(vm.KINEMATIC, u0[VH_V], vs)
     u = u0.copy()
     x = x0.copy()
     P = P0.copy()
@@ -447,22 +457,20 @@ def run_vehicle(
         if vi >= 0:
             u[:] = veh[vi]
         if mode == MODE_SWITCHED and vi >= 0:
-            model = switch_model(model, u[VH_V], cfg)
+            model = switch_model(model, u[VH_V], vs)
         m, nb_, _ = epoch_rows(stops[k], veh, fix, rows, blocks)
         if mode == MODE_IMM:
             lik = np.ones(2)
             if m > 0:
                 for j in range(2):
-                    epoch_values(j, xs[j], rows, m, veh, fix, u, vp, cfg, z, rs[j], nus[j], Hs[j])
+                    epoch_values(j, xs[j], rows, m, veh, fix, u, vp, vs, z, rs[j], nus[j], Hs[j])
                     innovation_cov(Ps[j], Hs[j], rs[j], m, Ss[j])
                 g = 0 if cbar[0] >= cbar[1] else 1
                 for attempt in range(2):
                     gate_blocks(nus[g], Ss[g], blocks, nb_, gate, nis, accepted, gwork)
                     if attempt == 1:
                         break
-                    reset = streams_to_reset(
-                        t, blocks, nb_, accepted, reject_since, cfg[VC_TIMEOUT_S]
-                    )
+                    reset = streams_to_reset(t, blocks, nb_, accepted, reject_since, vs.timeout_s)
                     if reset.sum() == 0:
                         break
                     for s in range(reset.size):
@@ -482,7 +490,7 @@ def run_vehicle(
                 for j in range(2):
                     if ma > 0:
                         ll = log_likelihood(nus[j], Ss[j], acc, ma)
-                        lik[j] = likelihood(ll, cfg[VC_LIK_FLOOR])
+                        lik[j] = likelihood(ll, vs.likelihood_floor)
                         dx, ok = joseph_update(Ps[j], vm.NX, Hs[j], Ss[j], rs[j], nus[j], acc, ma)
                         if ok:
                             xs[j] += dx
@@ -497,8 +505,8 @@ def run_vehicle(
             aux = mu[1]
         else:
             if m > 0:
-                epoch_values(model, x, rows, m, veh, fix, u, vp, cfg, z, r, nu, H)
-                gate_with_reset(t, x, P, H, r, nu, m, S, blocks, nb_, gate, cfg, reject_since,
+                epoch_values(model, x, rows, m, veh, fix, u, vp, vs, z, r, nu, H)
+                gate_with_reset(t, x, P, H, r, nu, m, S, blocks, nb_, vs, reject_since,
                                 nis, accepted, gwork, ev_i, ev_f, counts)  # fmt: skip
                 record_innovations(
                     t, nu, S, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts, ev_i, ev_f
@@ -510,7 +518,7 @@ def run_vehicle(
                         x += dx
             ok_all = keep_pd(P, vm.NX, L, t, ev_i, ev_f, counts)
             aux = float(model)
-        status = check(x, P, cfg) if ok_all else STATUS_INDEFINITE
+        status = check(x, P, vs) if ok_all else STATUS_INDEFINITE
         if status != STATUS_OK:
             return fail(t, status, ev_i, ev_f, counts)
         if stops[k, VS_OUT] > 0:
