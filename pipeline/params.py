@@ -16,7 +16,9 @@ import yaml
 
 from navreplay.ingest.typed import FieldError, load_dataclass, to_plain
 from navreplay.pipeline.errors import ParamsError
+from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS
 from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS
 from navreplay.pipeline.experiments.tractor_cascaded.config import TractorExperimentParams
 from navreplay.pipeline.experiments.vehicle_bands_config import VehicleBandsParams
 from navreplay.pipeline.outages.config import OutagesParams
@@ -63,18 +65,30 @@ class IngestParams:
 
 
 @dataclass(frozen=True)
+class FamilyRun:
+    """One filter of the vehicle-model or cascaded family replayed over one dataset (their
+    filters run the nominal scenario; the scenario engine drives the INS filters)."""
+
+    dataset: str
+    filter: str
+
+
+@dataclass(frozen=True)
 class RunParams:
     """``run``: the run matrix of dvc.yaml (datasets x filters, each under every scenario of
     ``scenarios``; the Monte Carlo and outage experiments cover the same datasets), the
     backend, and the processes one ``navreplay run`` spreads its scenarios over.
     ``datasets`` may hold built-in and recorded datasets; ``filters`` and ``scenarios`` are
-    also the defaults of ``navreplay analyze``."""
+    also the defaults of ``navreplay analyze``. ``family_runs`` are the vehicle-model and
+    cascaded filters' runs (dataset, filter), each of the nominal scenario, so that every
+    family has runs in the reports and the summary's ranking."""
 
     backend: Literal["numba", "filterpy"]
     datasets: tuple[str, ...]
     filters: tuple[str, ...]
     scenarios: tuple[str, ...]
     workers: int = 1
+    family_runs: tuple[FamilyRun, ...] = ()
 
     def __post_init__(self) -> None:
         if self.workers < 1:
@@ -124,6 +138,18 @@ class Params:
             if ds not in self.datasets and ds not in self.recorded:
                 raise FieldError(
                     f"run.datasets[{i}]", f"{ds!r} is in neither datasets nor recorded"
+                )
+        for i, fr in enumerate(self.run.family_runs):
+            if fr.dataset not in self.datasets and fr.dataset not in self.recorded:
+                raise FieldError(
+                    f"run.family_runs[{i}].dataset",
+                    f"{fr.dataset!r} is in neither datasets nor recorded",
+                )
+            if fr.filter not in VEHICLE_FILTERS and fr.filter not in CASCADED_KINDS:
+                raise FieldError(
+                    f"run.family_runs[{i}].filter",
+                    f"{fr.filter!r} is not a vehicle-model or cascaded filter (the INS filters "
+                    "go in run.filters)",
                 )
         for i, name in enumerate(self.run.scenarios):
             if name not in self.scenarios.named:

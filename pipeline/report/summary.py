@@ -4,8 +4,10 @@ Reads each dataset report's ``tables/runs.json`` (``render``) and ``tables/sat_r
 A *cell* is one (dataset, scenario) in which several filters ran; filters are compared only
 inside cells, on the same data (paired):
 
-- rank: per cell, filters ranked by 3-D RMS position error (1 = best, ties share the mean
-  rank); the table gives the mean rank, the cells it rests on, and the cells won;
+- rank: per cell, filters ranked by 3-D RMS position error, or by horizontal RMS in a cell
+  where a filter has no 3-D error (the planar vehicle-model and cascaded filters) (1 = best,
+  ties share the mean rank); the table gives the mean rank, the cells it rests on, and the
+  cells won;
 - paired difference of B against A over their common cells: the log-ratio
   ``ln(e_B / e_A)`` per cell, its mean with a 95 % t-interval, reported as the ratio
   ``exp(mean)`` (below 1: B is better), and the mean difference in metres with its interval.
@@ -40,6 +42,8 @@ from navreplay.pipeline.report.tables import PAPER_PAIR
 
 Row = dict[str, Any]
 METRIC = "pos_err_3d_rms_m"
+#: the cell's metric where some filter of it has no 3-D error (planar models)
+METRIC_H = "pos_err_h_rms_m"
 
 
 @dataclass(frozen=True)
@@ -74,14 +78,25 @@ _RUN_COLS = ("run", "dataset", "filter", "scenario", "pos_err_h_rms_m", "pos_err
              "pos_err_3d_max_m", "nees_mean", "realtime_factor")  # fmt: skip
 
 
+def _finite(v: Any) -> bool:
+    return isinstance(v, int | float) and math.isfinite(v)
+
+
 def _cells(results: Sequence[DatasetResult]) -> dict[tuple[str, str], dict[str, float]]:
-    cells: dict[tuple[str, str], dict[str, float]] = {}
+    """Per (dataset, scenario) with two or more finished runs: each filter's error, the 3-D
+    RMS where every run of the cell has one, else the horizontal RMS."""
+    runs: dict[tuple[str, str], dict[str, Row]] = {}
     for d in results:
         for r in d.runs:
-            v = r.get(METRIC)
-            if r.get("status") == "ok" and isinstance(v, int | float) and math.isfinite(v):
-                cells.setdefault((d.dataset, str(r["scenario"])), {})[str(r["filter"])] = float(v)
-    return {k: v for k, v in sorted(cells.items()) if len(v) >= 2}
+            if r.get("status") == "ok" and (_finite(r.get(METRIC)) or _finite(r.get(METRIC_H))):
+                runs.setdefault((d.dataset, str(r["scenario"])), {})[str(r["filter"])] = r
+    cells: dict[tuple[str, str], dict[str, float]] = {}
+    for key, by_filter in sorted(runs.items()):
+        metric = METRIC if all(_finite(r.get(METRIC)) for r in by_filter.values()) else METRIC_H
+        errs = {f: float(r[metric]) for f, r in by_filter.items() if _finite(r.get(metric))}
+        if len(errs) >= 2:
+            cells[key] = errs
+    return cells
 
 
 def ranking(cells: dict[tuple[str, str], dict[str, float]]) -> list[Row]:
@@ -147,7 +162,7 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
         {"run": f"{d.dataset}/{r['filter']}/{r['scenario']}", "dataset": d.dataset, **r}
         for d in results
         for r in d.runs
-        if r.get("status") == "ok" and r.get(METRIC) is not None
+        if r.get("status") == "ok" and (r.get(METRIC) is not None or r.get(METRIC_H) is not None)
     ]
     red_rows: list[Row] = []
     for d in results:

@@ -154,3 +154,19 @@ def test_nested_mappings_and_fixed_tuples() -> None:
     with pytest.raises(KeyPathError) as err:
         load_dataclass(_Outer, {"mode": "a", "table": {"x": {"k": [1, 2], "opt": 1.5}}})
     assert err.value.key_path == "table.x.opt"
+
+
+@pytest.mark.parametrize(
+    ("run", "key", "expect"),
+    [
+        ({"dataset": "nowhere", "filter": "vehicle_imm"}, "dataset", "neither datasets"),
+        ({"dataset": "car_speed_ramp", "filter": "tc_ukf"}, "filter", "INS filters go in"),
+    ],
+)
+def test_a_family_run_names_a_known_dataset_and_a_family_filter(
+    raw: dict[str, Any], run: dict[str, str], key: str, expect: str
+) -> None:
+    raw["run"]["family_runs"] = [{"dataset": "car_speed_ramp", "filter": "vehicle_imm"}, run]
+    with pytest.raises(ParamsError, match=expect) as err:
+        parse_params(raw)
+    assert err.value.key_path == f"run.family_runs[1].{key}"

@@ -233,3 +233,32 @@ def test_window_metrics_the_run_wrote_are_taken_as_they_are(
 def _csv_rows(path: Path) -> list[dict[str, str]]:
     with path.open(newline="") as fh:
         return list(csv.DictReader(fh))
+
+
+def test_a_cell_of_planar_filters_is_ranked_by_horizontal_error() -> None:
+    """The INS cell keeps the 3-D error; the vehicle filters (planar, no 3-D error) are
+    ranked in their own cell by the horizontal one; a diverged run is left out."""
+    from navreplay.pipeline.report.summary import DatasetResult, _cells, ranking
+
+    def run(f: str, h: float, d3: float | None = None, status: str = "ok") -> dict[str, object]:
+        return {"filter": f, "scenario": "nominal", "status": status,
+                "pos_err_h_rms_m": h, "pos_err_3d_rms_m": d3}  # fmt: skip
+
+    drive = DatasetResult("drive", Path(), [run("lc_ekf", 1.0, 2.0), run("tc_ukf", 1.2, 1.5)], None)
+    car = DatasetResult(
+        "car",
+        Path(),
+        [
+            run("vehicle_kinematic", 3.0),
+            run("vehicle_dynamic", 0.2),
+            run("vehicle_imm", 0.1, status="diverged"),
+        ],
+        None,
+    )
+    cells = _cells([drive, car])
+    assert cells == {
+        ("car", "nominal"): {"vehicle_kinematic": 3.0, "vehicle_dynamic": 0.2},
+        ("drive", "nominal"): {"lc_ekf": 2.0, "tc_ukf": 1.5},
+    }
+    ranks = {r["filter"]: r["mean_rank"] for r in ranking(cells)}
+    assert ranks == {"vehicle_dynamic": 1.0, "tc_ukf": 1.0, "vehicle_kinematic": 2.0, "lc_ekf": 2.0}
