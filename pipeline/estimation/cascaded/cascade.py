@@ -34,6 +34,7 @@ allocates them):
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -68,6 +69,7 @@ from navreplay.pipeline.estimation.kernels.common import (
     keep_pd,
     record_event,
 )
+from navreplay.pipeline.estimation.kernels.records import RunLog
 from navreplay.pipeline.nav.earth import F64, I64
 
 # measurement streams (innovations.parquet ``stream``)
@@ -92,6 +94,34 @@ I_T_NAV, I_T_CTL, I_STARTED, I_REJ = 0, 1, 2, 3
 IMEM_DIM = I_REJ + N_STREAMS
 C_EST, C_GAMMA, C_TIMEOUT, C_NOISE_DT, C_MAX_STEP, C_GAP, C_MAX_POS_SIGMA = 0, 1, 2, 3, 4, 5, 6
 CFG_DIM = 7
+
+
+class CascadeRun(NamedTuple):
+    """The live state of a run (module docstring): both filters' states ``x`` (2 NX,) and
+    covariances ``P`` (2, NX, NX), the held inputs and discretization ``mem`` and the
+    integer memory ``imem`` (times, started flag, per-stream rejection clocks)."""
+
+    x: F64
+    P: F64
+    mem: F64
+    imem: I64
+
+
+class CascadeSettings(NamedTuple):
+    """A cascaded filter's settings (``engine.make_setup``): ``cfg`` (``C_*``), process
+    noise densities ``q`` (2, NX), measurement variances ``r`` (2, 3), the model
+    parameters ``par``, the unscented weights ``wm``, ``wc``, the chi-square ``gate`` by
+    dimension, and ``ekf_mean`` (the hybrid's states propagated through the mean)."""
+
+    cfg: F64
+    q: F64
+    r: F64
+    par: F64
+    wm: F64
+    wc: F64
+    gate: F64
+    ekf_mean: I64
+
 
 NAV_BLOCK_OF_ROW = np.array([0, 0, 1], np.int64)  # E and N one block, heading another
 NAV_STREAMS = np.array([S_GPS_POS, S_GPS_HEADING], np.int64)
@@ -185,10 +215,8 @@ def _update(
 
 @njit(cache=True, error_model="numpy")
 def cascade_sample(
-    t_ns: int, veh: F64, gps: F64, nav_only: bool, x: F64, P: F64, mem: F64, imem: I64,
-    cfg: F64, q: F64, r: F64, par: F64, wm: F64, wc: F64, gate: F64, ekf_mean: I64,
-    out_t: I64, out_x: F64, out_P: F64, inn_i: I64, inn_f: F64, ev_i: I64, ev_f: F64,
-    counts: I64,
+    t_ns: int, veh: F64, gps: F64, nav_only: bool, run: CascadeRun, cset: CascadeSettings,
+    log: RunLog,
 ) -> int:  # fmt: skip
     """Process one vehicle sample (and the GPS fix at the same time) through the cascade,
     or with ``nav_only`` a GPS fix alone (no output row).
@@ -197,11 +225,14 @@ def cascade_sample(
         t_ns: sample time; veh: (4,) radar speed, gyro rate, potentiometer, command (the
             command column is not read here; see the module docstring); gps: (3,) East,
             North (m, local frame), heading (rad), NaN where unavailable.
-        the rest: the run state and logs (module docstring).
+        run: the live state; cset: the settings; log: outputs, innovations, events.
 
     Returns:
         a ``kernels.common.STATUS_*`` code.
     """
+    x, P, mem, imem = run
+    cfg, q, r, par, wm, wc, gate, ekf_mean = cset
+    out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts = log
     x1, x2, P1, P2 = x[:NX], x[NX:], P[0], P[1]
     est = int(cfg[C_EST])
     upd = EST_UKF if est == EST_UKF else EST_EKF

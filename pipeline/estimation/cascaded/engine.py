@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from navreplay.pipeline.errors import DivergenceError
+from navreplay.pipeline.errors import DivergenceError, PipelineError
 from navreplay.pipeline.estimation.cascaded import cascade as cs
 from navreplay.pipeline.estimation.cascaded.filters import EST_EKF, EST_HYBRID, EST_UKF
 from navreplay.pipeline.estimation.cascaded.model import NX, ctl_discretize, model_params
@@ -34,6 +34,7 @@ from navreplay.pipeline.estimation.cascaded_config import (
 )
 from navreplay.pipeline.estimation.inputs import Event
 from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.estimation.kernels.records import RunLog
 from navreplay.pipeline.estimation.kernels.unscented import ukf_weights
 from navreplay.pipeline.nav.earth import F64, I64
 
@@ -170,21 +171,31 @@ class CascadeState:
             disc = self._discs[dt_ns] = ctl_discretize(self.setup.par, dt_ns * 1e-9)
         self.mem[cs.M_DISC :] = disc
 
-    def args(self) -> tuple[Any, ...]:
-        """The state and log arguments of ``cascade_sample`` after ``(t, veh, gps,
-        nav_only)``."""
+    def args(self) -> tuple[cs.CascadeRun, cs.CascadeSettings, RunLog]:
+        """The records ``cascade_sample`` takes after ``(t, veh, gps, nav_only)``: they hold
+        this state's arrays themselves (the kernel updates them in place)."""
         s = self.setup
         return (
-            self.x, self.P, self.mem, self.imem, s.cfg, s.q, s.r, s.par, s.wm, s.wc, s.gate,
-            s.ekf_mean, self.out_t, self.out_x, self.out_P, self.inn_i, self.inn_f, self.ev_i,
-            self.ev_f, self.counts,
+            cs.CascadeRun(self.x, self.P, self.mem, self.imem),
+            cs.CascadeSettings(s.cfg, s.q, s.r, s.par, s.wm, s.wc, s.gate, s.ekf_mean),
+            RunLog(self.out_t, self.out_x, self.out_P, self.inn_i, self.inn_f, self.ev_i,
+                   self.ev_f, self.counts),
         )  # fmt: skip
 
     def result(self, backend: str, status: int, runtime_s: float) -> CascadedResult:
-        """Collect the logs into a ``CascadedResult``."""
+        """Collect the logs into a ``CascadedResult``.
+
+        Raises:
+            PipelineError: the run wanted more rows than its logs hold (the capacity is sized
+                from the samples, so this is a bug, never a silent truncation).
+        """
         k_out, k_inn, k_ev = (int(self.counts[c]) for c in (cm.CNT_OUT, cm.CNT_INN, cm.CNT_EV))
-        k_out = min(k_out, self.out_t.size)
-        k_inn = min(k_inn, self.inn_i.shape[0])
+        have = (self.out_t.size, self.inn_i.shape[0], self.ev_i.shape[0])
+        if k_out > have[0] or k_inn > have[1] or k_ev > have[2]:
+            raise PipelineError(
+                f"cascaded run log overflow: {(k_out, k_inn, k_ev)} rows wanted, {have} held "
+                "(outputs, innovations, events)"
+            )
         events = [
             Event(
                 int(self.ev_i[j, 0]),
@@ -193,7 +204,7 @@ class CascadeState:
                 "",
                 float(self.ev_f[j]),
             )
-            for j in range(min(k_ev, self.ev_i.shape[0]))
+            for j in range(k_ev)
         ]
         t = self.out_t[:k_out].copy()
         failure = None
