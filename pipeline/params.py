@@ -17,7 +17,7 @@ import yaml
 from navreplay.ingest.typed import FieldError, load_dataclass, to_plain
 from navreplay.pipeline.errors import ParamsError
 from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS
-from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.config import FILTER_KINDS, FiltersParams
 from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS
 from navreplay.pipeline.experiments.tractor_cascaded.config import TractorExperimentParams
 from navreplay.pipeline.experiments.vehicle_bands_config import VehicleBandsParams
@@ -66,8 +66,8 @@ class IngestParams:
 
 @dataclass(frozen=True)
 class FamilyRun:
-    """One filter of the vehicle-model or cascaded family replayed over one dataset (their
-    filters run the nominal scenario; the scenario engine drives the INS filters)."""
+    """One filter replayed over one dataset outside the INS run matrix, nominal scenario: the
+    vehicle-model and cascaded filters on their datasets, fwekf on paper 004's."""
 
     dataset: str
     filter: str
@@ -79,9 +79,9 @@ class RunParams:
     ``scenarios``; the Monte Carlo and outage experiments cover the same datasets), the
     backend, and the processes one ``navreplay run`` spreads its scenarios over.
     ``datasets`` may hold built-in and recorded datasets; ``filters`` and ``scenarios`` are
-    also the defaults of ``navreplay analyze``. ``family_runs`` are the vehicle-model and
-    cascaded filters' runs (dataset, filter), each of the nominal scenario, so that every
-    family has runs in the reports and the summary's ranking."""
+    also the defaults of ``navreplay analyze``. ``family_runs`` are single runs (dataset,
+    filter) of the nominal scenario beside that matrix, so that every family (vehicle-model,
+    cascaded, fwekf) has runs in the reports and the summary's ranking."""
 
     backend: Literal["numba", "filterpy"]
     datasets: tuple[str, ...]
@@ -145,11 +145,11 @@ class Params:
                     f"run.family_runs[{i}].dataset",
                     f"{fr.dataset!r} is in neither datasets nor recorded",
                 )
-            if fr.filter not in VEHICLE_FILTERS and fr.filter not in CASCADED_KINDS:
+            known = (*FILTER_KINDS, *VEHICLE_FILTERS, *CASCADED_KINDS)
+            if fr.filter not in known:
                 raise FieldError(
                     f"run.family_runs[{i}].filter",
-                    f"{fr.filter!r} is not a vehicle-model or cascaded filter (the INS filters "
-                    "go in run.filters)",
+                    f"{fr.filter!r} is not a filter (known: {', '.join(known)})",
                 )
         for i, name in enumerate(self.run.scenarios):
             if name not in self.scenarios.named:

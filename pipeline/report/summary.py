@@ -231,7 +231,8 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
             )
             + h.para(
                 "A cell is one dataset under one scenario; ranks by 3-D RMS position error "
-                "among the filters that ran there (1 = best).",
+                "among the filters that ran there, or by horizontal RMS where one of them has "
+                "no 3-D error (the planar vehicle-model and cascaded filters) (1 = best).",
                 "note",
             )
             if rank

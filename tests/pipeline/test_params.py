@@ -160,7 +160,7 @@ def test_nested_mappings_and_fixed_tuples() -> None:
     ("run", "key", "expect"),
     [
         ({"dataset": "nowhere", "filter": "vehicle_imm"}, "dataset", "neither datasets"),
-        ({"dataset": "car_speed_ramp", "filter": "tc_ukf"}, "filter", "INS filters go in"),
+        ({"dataset": "car_speed_ramp", "filter": "vehicle_pf"}, "filter", "not a filter"),
     ],
 )
 def test_a_family_run_names_a_known_dataset_and_a_family_filter(
