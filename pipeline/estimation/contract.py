@@ -90,23 +90,45 @@ class RunOutput:
     """A finished run of any family.
 
     Attributes:
-        filter, backend, status: what ran, on which backend, and how it ended (``ok``,
-            ``diverged`` ...).
         tables: the run's tables, decoded from the kernel's output.
         metrics: ``metrics.json`` (accuracy, consistency, cost; family-specific keys beside
             the common ones).
         sources: the input files, for the provenance.
         result: the family's own result (``RunResult``, ``VehicleRunResult``,
-            ``CascadedResult``), for the experiments and scenario checks that read it.
+            ``CascadedResult``), for the experiments and scenario checks that read it; what
+            ran, on which backend, and how it ended are read from it.
     """
 
-    filter: str
-    backend: str
-    status: str
     tables: RunTables
     metrics: dict[str, Any]
     sources: tuple[Path, ...]
-    result: Any
+    result: ResultLike
+
+    @classmethod
+    def decode(
+        cls,
+        result: ResultLike,
+        estimate: pa.Table,
+        innovations: pa.Table,
+        metrics: dict[str, Any],
+        sources: tuple[Path, ...],
+    ) -> RunOutput:
+        """A family's run from its result, its estimate and innovation tables (the events
+        table is the same for every family) and its metrics."""
+        tables = RunTables(estimate, innovations, events_table(result.events))
+        return cls(tables, metrics, sources, result)
+
+    @property
+    def filter(self) -> str:
+        return self.result.filter
+
+    @property
+    def backend(self) -> str:
+        return self.result.backend
+
+    @property
+    def status(self) -> str:
+        return self.result.status
 
 
 class Family(Protocol):

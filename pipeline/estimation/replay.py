@@ -384,28 +384,29 @@ def _run_segment(
     n_inn = len(stops) * m_max
     n_ev = n_inn + 2 * len(stops) + 16
     sched = Schedule(int(al.t_ns), int(i0), u0, imu_t, imu_d, stops, obs_start, int(m_max))
-    compile_s = 0.0
-    log_ = RunLog.allocate(n_out, n_inn, n_ev, n, ins.FULL_DIM)
-    while True:  # a log too small for the run is grown and the run made again
-        out_alpha = np.ones(log_.capacity()[0])  # fwekf: the fading factor at each output row
+
+    def kernel_args(log_: RunLog) -> tuple[tuple[object, ...], F64]:
+        """The kernel's arguments writing into ``log_``, and fwekf's alpha per output row."""
+        out_alpha = np.ones(log_.capacity()[0])
         args: tuple[object, ...] = (al.x0, al.P0, sched, fix_arr, obs_arr, setup.settings)
         if setup.fuzzy is not None:
             from navreplay.pipeline.estimation.fuzzy import RULES
 
             args = (*args, Fading(setup.fuzzy, RULES, out_alpha))
-        args = (*args, log_)
-        if hasattr(kernel, "compile") and compile_s == 0.0:
-            # a numba dispatcher: compile or load it outside the timing
-            t0 = time.perf_counter()
-            with fewer_gc_passes():
-                kernel.compile(tuple(_typeof(a) for a in args))
-            compile_s = time.perf_counter() - t0
-        code = kernel(*args)
-        bigger = log_.grown()
-        if bigger is None:
-            break
-        log.info("run log full (%s wanted, %s held): growing it", log_.wanted(), log_.capacity())
-        log_ = bigger
+        return (*args, log_), out_alpha
+
+    def run(log_: RunLog) -> tuple[int, F64]:
+        args, out_alpha = kernel_args(log_)
+        return kernel(*args), out_alpha
+
+    first = RunLog.allocate(n_out, n_inn, n_ev, n, ins.FULL_DIM)
+    compile_s = 0.0
+    if hasattr(kernel, "compile"):  # a numba dispatcher: compile or load it outside the timing
+        t0 = time.perf_counter()
+        with fewer_gc_passes():
+            kernel.compile(tuple(_typeof(a) for a in kernel_args(first)[0]))
+        compile_s = time.perf_counter() - t0
+    (code, out_alpha), log_ = first.run_growing(run)
     out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts = log_
     k_out, k_inn, k_ev = log_.wanted()
     seg_events = [

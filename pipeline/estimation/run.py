@@ -17,8 +17,6 @@ from navreplay.pipeline.estimation.contract import (
     Backend,
     RunInputs,
     RunOutput,
-    RunTables,
-    events_table,
 )
 from navreplay.pipeline.estimation.metrics import compute_metrics
 from navreplay.pipeline.estimation.outputs import estimate_table, innovations_table
@@ -29,10 +27,9 @@ INPUTS = (TableName.IMU, TableName.GNSS, TableName.GNSS_OBS, TableName.TRUTH)
 
 def decode(result: RunResult, metrics: dict[str, Any], sources: tuple[Path, ...]) -> RunOutput:
     """The contract's record of an INS run."""
-    tables = RunTables(
-        estimate_table(result), innovations_table(result), events_table(result.events)
+    return RunOutput.decode(
+        result, estimate_table(result), innovations_table(result), metrics, sources
     )
-    return RunOutput(result.filter, result.backend, result.status, tables, metrics, sources, result)
 
 
 class InsFamily:

@@ -329,15 +329,14 @@ def run_vehicle_filter(
     n_ev = n_inn + 2 * len(stops) + 16
     sched = kv.VehicleSchedule(int(t0), data.veh[i0].copy(), stops, data.veh, data.fix)
     vs = make_settings(name, params)
-    log_ = RunLog.allocate(n_out, n_inn, n_ev, vm.NX, vm.NX)
-    while True:  # a log too small for the run is grown and the run made again
+    kernel = _kernel(backend)
+
+    def run(log_: RunLog) -> tuple[int, F64]:
         out_aux = np.zeros(log_.capacity()[0])
-        code = _kernel(backend)(x0, P0, sched, vs, log_, out_aux)
-        bigger = log_.grown()
-        if bigger is None:
-            break
-        log.info("run log full (%s wanted, %s held): growing it", log_.wanted(), log_.capacity())
-        log_ = bigger
+        return kernel(x0, P0, sched, vs, log_, out_aux), out_aux
+
+    first = RunLog.allocate(n_out, n_inn, n_ev, vm.NX, vm.NX)
+    (code, out_aux), log_ = first.run_growing(run)
     out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts = log_
     k_out, k_inn, k_ev = log_.wanted()
     events = list(data.events) + [

@@ -24,8 +24,6 @@ from navreplay.pipeline.estimation.contract import (
     Backend,
     RunInputs,
     RunOutput,
-    RunTables,
-    events_table,
 )
 from navreplay.pipeline.estimation.kernels import vehicle as kv
 from navreplay.pipeline.estimation.models import vehicle as vm
@@ -112,13 +110,9 @@ class VehicleFamily:
         result = run_vehicle_filter(inputs.tables, name, section, backend=backend)
         metrics = compute_metrics(result, inputs.tables.get("truth"))
         metrics["dataset"] = inputs.dataset
-        tables = RunTables(
-            from_columns("estimator", estimate_columns(result)),
-            innovations_table(result),
-            events_table(result.events),
-        )
-        return RunOutput(
-            result.filter, result.backend, result.status, tables, metrics, inputs.sources, result
+        estimate = from_columns("estimator", estimate_columns(result))
+        return RunOutput.decode(
+            result, estimate, innovations_table(result), metrics, inputs.sources
         )
 
 

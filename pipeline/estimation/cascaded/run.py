@@ -22,8 +22,6 @@ from navreplay.pipeline.estimation.contract import (
     Backend,
     RunInputs,
     RunOutput,
-    RunTables,
-    events_table,
 )
 
 log = logging.getLogger(__name__)
@@ -54,14 +52,8 @@ class CascadedFamily:
         metrics = compute_metrics(result, truth_x, section.convergence_band)
         metrics["dataset"] = inputs.dataset
         metrics["frame_origin"] = to_plain(inp.frame)
-        tables = RunTables(
-            estimate_table(result, inp.frame),
-            innovations_table(result),
-            events_table(result.events),
-        )
-        return RunOutput(
-            result.filter, result.backend, result.status, tables, metrics, inputs.sources, result
-        )
+        estimate, innovations = estimate_table(result, inp.frame), innovations_table(result)
+        return RunOutput.decode(result, estimate, innovations, metrics, inputs.sources)
 
 
 CASCADED = CascadedFamily()

@@ -12,11 +12,16 @@ driver re-runs with, so that a run is complete or raises, never silently truncat
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import logging
+from collections.abc import Callable
+from typing import NamedTuple, TypeVar
 
 import numpy as np
 
 from navreplay.pipeline.nav.earth import F64, I64
+
+log = logging.getLogger(__name__)
+_T = TypeVar("_T")
 
 CNT_OUT, CNT_INN, CNT_EV, CNT_STOP, CNT_T_FAIL = 0, 1, 2, 3, 4
 CNT_DIM = 5
@@ -140,6 +145,19 @@ class RunLog(NamedTuple):
         n_out, n_inn, n_ev = (max(w, h) for w, h in zip(want, have, strict=True))
         n, full_dim = self.out_P.shape[1], self.out_x.shape[1]
         return RunLog.allocate(n_out, n_inn, n_ev, n, full_dim)
+
+    def run_growing(self, run: Callable[[RunLog], _T]) -> tuple[_T, RunLog]:
+        """``run(log)`` starting with this log, made again with a grown log until everything
+        it wanted fitted; returns its last value and that log."""
+        current = self
+        while True:
+            value = run(current)
+            bigger = current.grown()
+            if bigger is None:
+                return value, current
+            log.info("run log full (%s wanted, %s held): growing it", current.wanted(),
+                     current.capacity())  # fmt: skip
+            current = bigger
 
 
 class EpochBuffers(NamedTuple):
