@@ -4,8 +4,10 @@ A *family* (the INS/GNSS filters, the vehicle-model filters, the cascaded filter
 dataset's tables into a run in three steps: prepare its inputs from the tables, run its kernel
 (numba, or filterpy driving the same model: ``Backend``), and decode the kernel's output into
 a ``RunOutput``: the three run tables, the metrics and the family's own result. ``Family`` is
-that protocol; ``pipeline.estimation.families`` lists the families. Everything after the
-decode is shared: ``write_run`` writes every family's run directory the same way.
+that protocol, with ``track``: the run's position errors, on which the scenario driver
+(``pipeline.outages.runs``) measures the outage windows of every family.
+``pipeline.estimation.families`` lists the families. Everything after the decode is shared:
+``write_run`` writes every family's run directory the same way.
 
 A run directory holds ``estimate.parquet`` (a canonical ``estimator`` table with a sigma
 column per estimated column), ``innovations.parquet`` (one row per gated measurement block),
@@ -31,6 +33,7 @@ from navreplay.ingest.meta import META_NAME, SensorMeta, read_meta
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.tables import Provenance, read_table, write_table
 from navreplay.ingest.typed import to_plain
+from navreplay.pipeline.estimation.windows import ErrorTrack
 
 log = logging.getLogger(__name__)
 
@@ -160,6 +163,12 @@ class Family(Protocol):
             PipelineError: the tables cannot drive the filter (``ReplayInputError``), or it
                 diverged and its params say ``raise`` (``DivergenceError``).
         """
+        ...
+
+    def track(self, run: RunOutput, inputs: RunInputs) -> ErrorTrack | None:
+        """The run's position errors against the truth of ``inputs``, else against its GNSS
+        fixes (``inputs`` as recorded: a scenario's withheld fixes included); None without
+        either. The outage-window metrics of every scenario are measured on it."""
         ...
 
 

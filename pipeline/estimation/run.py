@@ -19,8 +19,10 @@ from navreplay.pipeline.estimation.contract import (
     RunOutput,
 )
 from navreplay.pipeline.estimation.metrics import compute_metrics
+from navreplay.pipeline.estimation.outage_metrics import ins_track
 from navreplay.pipeline.estimation.outputs import estimate_table, innovations_table
 from navreplay.pipeline.estimation.replay import RunResult, run_filter
+from navreplay.pipeline.estimation.windows import ErrorTrack
 
 INPUTS = (TableName.IMU, TableName.GNSS, TableName.GNSS_OBS, TableName.TRUTH)
 
@@ -49,6 +51,12 @@ class InsFamily:
         metrics = compute_metrics(result, inputs.tables.get("truth"))
         metrics["dataset"] = inputs.dataset
         return decode(result, metrics, inputs.sources)
+
+    def track(self, run: RunOutput, inputs: RunInputs) -> ErrorTrack | None:
+        result = run.result
+        assert isinstance(result, RunResult)
+        tables = inputs.tables
+        return ins_track(result, tables.get("truth"), tables.get("gnss"), inputs.lever_b)
 
 
 INS = InsFamily()

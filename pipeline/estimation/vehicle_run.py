@@ -30,6 +30,7 @@ from navreplay.pipeline.estimation.models import vehicle as vm
 from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS, VehicleFilterParams
 from navreplay.pipeline.estimation.vehicle_metrics import compute_metrics
 from navreplay.pipeline.estimation.vehicle_replay import VehicleRunResult, run_vehicle_filter
+from navreplay.pipeline.estimation.windows import ErrorTrack, table_track
 
 log = logging.getLogger(__name__)
 
@@ -114,6 +115,11 @@ class VehicleFamily:
         return RunOutput.decode(
             result, estimate, innovations_table(result), metrics, inputs.sources
         )
+
+    def track(self, run: RunOutput, inputs: RunInputs) -> ErrorTrack | None:
+        """Planar errors read from ``estimate.parquet`` (``windows.table_track``)."""
+        tables = inputs.tables
+        return table_track(run.tables.estimate, tables.get("truth"), tables.get("gnss"))
 
 
 VEHICLE = VehicleFamily()

@@ -33,13 +33,16 @@ from navreplay.pipeline.estimation.alignment import Alignment
 from navreplay.pipeline.estimation.config import InsFilterParams
 from navreplay.pipeline.estimation.contract import Backend
 from navreplay.pipeline.estimation.outage_metrics import (
-    ErrorTrack,
     fixes_track,
     truth_track,
-    window_metrics,
 )
 from navreplay.pipeline.estimation.replay import RunResult, run_filter
-from navreplay.pipeline.estimation.windows import NS, WindowMetricsParams
+from navreplay.pipeline.estimation.windows import (
+    NS,
+    ErrorTrack,
+    WindowMetricsParams,
+    window_metrics,
+)
 from navreplay.pipeline.nav.earth import I64
 from navreplay.pipeline.scenarios.apply import apply_scenario, log_span
 from navreplay.pipeline.scenarios.config import Policy, SatellitesSpec, ScenarioSpec, WindowsSpec

@@ -1,11 +1,14 @@
-"""One filter replayed under named scenarios: the pure core of ``navreplay run --scenario``.
+"""One filter of any family replayed under named scenarios: the core of ``navreplay run
+--scenario``.
 
-The tables are read once; each scenario is applied to them (``scenarios.apply``), replayed
-(``estimation.replay.run_filter``) and measured (``estimation.metrics.compute_metrics`` with
-the scenario's outage windows, against the truth or the withheld fixes). A fault scenario is
-also checked against the catalogue's pass criteria (``scenarios.criteria``), which compares
-it with the nominal run of the same filter. The scenario (definition, windows, satellites
-chosen, faults injected) goes into ``metrics.json`` and the Parquet provenance.
+The tables are read once; each scenario is applied to them (``scenarios.apply``: outage
+windows, satellites kept, faults), the filter's family runs on the result
+(``estimation.contract.Family.run``) and the outage windows are measured on the run's error
+track (``Family.track``, ``estimation.windows.window_metrics``) against the truth or the
+withheld fixes. A fault scenario of an INS filter is also checked against the catalogue's
+pass criteria (``scenarios.criteria``), which compares it with the nominal run of the same
+filter. The scenario (definition, windows, satellites chosen, faults injected) goes into
+``metrics.json`` and the Parquet provenance.
 """
 
 from __future__ import annotations
@@ -14,38 +17,39 @@ import logging
 import multiprocessing
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
-from navreplay.pipeline.estimation.config import InsFilterParams
-from navreplay.pipeline.estimation.contract import Backend, RunInputs, RunOutput
-from navreplay.pipeline.estimation.metrics import compute_metrics
-from navreplay.pipeline.estimation.replay import RunResult, run_filter
-from navreplay.pipeline.estimation.run import decode
+from navreplay.pipeline.estimation.contract import Backend, Family, RunInputs, RunOutput
+from navreplay.pipeline.estimation.families import family_of
+from navreplay.pipeline.estimation.replay import RunResult
+from navreplay.pipeline.estimation.windows import window_metrics
 from navreplay.pipeline.scenarios.apply import AppliedScenario, apply_scenario
 from navreplay.pipeline.scenarios.config import ScenariosParams, ScenarioSpec
 from navreplay.pipeline.scenarios.criteria import check_fault
+from navreplay.pipeline.scenarios.faults import ScenarioError
 
 log = logging.getLogger(__name__)
 
 
 def scenario_metrics(
     inputs: RunInputs,
+    family: Family,
     applied: AppliedScenario,
-    result: RunResult,
+    run: RunOutput,
     scenarios: ScenariosParams,
 ) -> dict[str, Any]:
-    """``metrics.json`` of a scenario run: the core metrics plus the outage windows."""
-    m = compute_metrics(
-        result,
-        inputs.tables.get("truth"),
-        windows=applied.outage_windows,
-        t0_ns=applied.t0_ns,
-        window_params=scenarios.metrics,
-        fixes=inputs.tables.get("gnss"),
-        lever_b=inputs.lever_b,
-    )
-    m["dataset"] = inputs.dataset
+    """``metrics.json`` of a scenario run: the family's metrics plus the outage windows,
+    measured against the unmodified ``inputs`` (the withheld fixes are the reference where
+    there is no truth)."""
+    m = dict(run.metrics)
+    if applied.outage_windows:
+        track = family.track(run, inputs)
+        m["outage_windows"] = (
+            []
+            if track is None
+            else window_metrics(track, applied.outage_windows, applied.t0_ns, scenarios.metrics)
+        )
     meta = applied.metadata()
     m["scenario_detail"] = meta
     m["windows"] = meta["windows"]
@@ -55,13 +59,14 @@ def scenario_metrics(
 def run_scenarios(
     inputs: RunInputs,
     name: str,
-    params: InsFilterParams,
+    params: Any,
     scenarios: ScenariosParams,
     names: Sequence[str],
     backend: Backend,
     workers: int = 1,
 ) -> Iterator[tuple[str, RunOutput, AppliedScenario]]:
-    """Replay filter ``name`` under each scenario of ``names``; yields them in order.
+    """Replay filter ``name`` (of any family; ``params`` its section) under each scenario of
+    ``names``; yields them in order.
 
     Scenarios that transform the tables alike (``sats_0`` and a complete outage of the same
     windows) are replayed once. The replays run on ``workers`` processes (forked, so they
@@ -70,16 +75,24 @@ def run_scenarios(
 
     Raises:
         KeyError: a name is not in ``scenarios.named``.
-        ScenarioError: a scenario needs data the dataset lacks.
+        ScenarioError: a scenario needs data the dataset lacks, or has faults and the
+            filter is not an INS filter (the pass criteria read the INS state).
         DivergenceError: a run diverged and the filter's params say ``raise``.
     """
+    family = family_of(name)
     specs = {s: scenarios.get(s) for s in names}
+    faulty = [s for s, spec in specs.items() if spec.faults]
+    if faulty and family.name != "ins":
+        raise ScenarioError(
+            f"{name}: fault scenarios ({', '.join(faulty)}) are checked against pass criteria "
+            f"on the INS state; {family.name} filters run the outage and satellite scenarios"
+        )
     if any(spec.faults for spec in specs.values()) and "nominal" not in specs:
         specs = {"nominal": scenarios.get("nominal"), **specs}
     first: dict[tuple[Any, ...], str] = {}
     for sname, spec in specs.items():
         first.setdefault(_transform_key(spec), sname)
-    job = _Job(inputs, name, params, scenarios, backend)
+    job = _Job(inputs, family, name, params, scenarios, backend)
     replays = list(first.values())
     if workers > 1 and len(replays) > 1 and "fork" in multiprocessing.get_all_start_methods():
         ctx = multiprocessing.get_context("fork")
@@ -92,17 +105,19 @@ def run_scenarios(
     nominal = by_key.get(_transform_key(specs["nominal"])) if "nominal" in specs else None
     for sname in names:
         applied = job.apply(sname)
-        result = by_key[_transform_key(specs[sname])]
-        metrics = scenario_metrics(inputs, applied, result, scenarios)
+        run = by_key[_transform_key(specs[sname])]
+        metrics = scenario_metrics(inputs, family, applied, run, scenarios)
         if applied.injected:
             assert nominal is not None
-            checks = check_fault(
-                applied, result, nominal, inputs.tables.get("truth"), params.gating.timeout_s
-            )
+            result, reference = run.result, nominal.result
+            assert isinstance(result, RunResult)
+            assert isinstance(reference, RunResult)
+            truth = inputs.tables.get("truth")
+            checks = check_fault(applied, result, reference, truth, params.gating.timeout_s)
             metrics["fault_checks"] = [c.to_json() for c in checks]
             metrics["fault_checks_passed"] = all(c.passed for c in checks)
-        log.info("%s under %s: %s", name, sname, result.status)
-        yield sname, decode(result, metrics, inputs.sources), applied
+        log.info("%s under %s: %s", name, sname, run.status)
+        yield sname, replace(run, metrics=metrics), applied
 
 
 @dataclass(frozen=True)
@@ -110,8 +125,9 @@ class _Job:
     """One filter over one dataset's tables: applies a scenario and replays it."""
 
     inputs: RunInputs
+    family: Family
     name: str
-    params: InsFilterParams
+    params: Any
     scenarios: ScenariosParams
     backend: Backend
 
@@ -120,10 +136,9 @@ class _Job:
         mask = self.scenarios.selection_mask_deg
         return apply_scenario(self.inputs.tables, scenario, spec, mask_deg=mask)
 
-    def replay(self, scenario: str) -> RunResult:
-        applied = self.apply(scenario)
-        p, i = self.params, self.inputs
-        return run_filter(applied.tables, i.sensors, self.name, p, backend=self.backend)
+    def replay(self, scenario: str) -> RunOutput:
+        inputs = replace(self.inputs, tables=dict(self.apply(scenario).tables))
+        return self.family.run(inputs, self.name, self.params, self.backend)
 
 
 def _transform_key(spec: ScenarioSpec) -> tuple[Any, ...]:
@@ -143,6 +158,6 @@ def _init(job: _Job) -> None:
     _JOB = job
 
 
-def _replay(scenario: str) -> RunResult:
+def _replay(scenario: str) -> RunOutput:
     assert _JOB is not None
     return _JOB.replay(scenario)

@@ -1,8 +1,10 @@
 """Replay one filter over a dataset's canonical tables under one or more scenarios.
 
-Reads TABLES_DIR/{imu,gnss,gnss_obs,truth}.parquet and meta.json (IMU noise, lever arm),
-applies each scenario of params.yaml `scenarios.named` to the tables (outage windows, k
-satellites kept, faults) and replays the filter. Writes a run directory atomically:
+Reads the tables the filter's family needs from TABLES_DIR (imu, gnss, gnss_obs, truth for
+the INS/GNSS filters; vehicle, gnss, truth for the vehicle-model and cascaded filters) and
+meta.json (IMU noise, lever arm), applies each scenario of params.yaml `scenarios.named` to
+the tables (outage windows, k satellites kept, faults; fault scenarios for INS filters only)
+and replays the filter. Writes a run directory atomically:
 estimate.parquet (the navigation solution under the truth table's column names, with a sigma
 column for each), innovations.parquet (NIS per update), events.parquet (gate rejections,
 resets, skipped inputs) and metrics.json (accuracy, consistency, cost; per outage window the
@@ -30,7 +32,7 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from navreplay.pipeline.errors import NotBuiltError, ParamsError
+from navreplay.pipeline.errors import ParamsError
 
 if TYPE_CHECKING:
     from navreplay.pipeline.estimation.contract import Backend
@@ -120,18 +122,7 @@ def _run(
     single = len(asked) == 1 and asked != ["all"]
     section = family.section(params.filters, args.filter)
     inputs = RunInputs.read(args.tables, family.inputs)
-    if family is not INS:
-        # the vehicle-model and cascaded filters replay the tables as they are
-        if names != ["nominal"]:
-            raise NotBuiltError(
-                f"scenario {names!r} for {args.filter}: the scenario engine drives the "
-                f"INS/GNSS filters; {family.name} filters run the nominal scenario only"
-            )
-        out = family.run(inputs, args.filter, section, backend)
-        write_run(args.out, out, section, "nominal")
-        _summary(args.filter, backend, "nominal", out.metrics, args.out)
-        return 0
-    if args.skip_unfit:
+    if args.skip_unfit and family is INS:
         _, unfit = plan(args.tables, [args.filter])
         if unfit:
             reason = unfit[0].reason

@@ -23,6 +23,7 @@ from navreplay.pipeline.estimation.contract import (
     RunInputs,
     RunOutput,
 )
+from navreplay.pipeline.estimation.windows import ErrorTrack, table_track
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +55,11 @@ class CascadedFamily:
         metrics["frame_origin"] = to_plain(inp.frame)
         estimate, innovations = estimate_table(result, inp.frame), innovations_table(result)
         return RunOutput.decode(result, estimate, innovations, metrics, inputs.sources)
+
+    def track(self, run: RunOutput, inputs: RunInputs) -> ErrorTrack | None:
+        """Planar errors read from ``estimate.parquet`` (``windows.table_track``)."""
+        tables = inputs.tables
+        return table_track(run.tables.estimate, tables.get("truth"), tables.get("gnss"))
 
 
 CASCADED = CascadedFamily()

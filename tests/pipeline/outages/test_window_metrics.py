@@ -9,14 +9,20 @@ import pytest
 
 from navreplay.pipeline.estimation.metrics import compute_metrics
 from navreplay.pipeline.estimation.outage_metrics import (
-    ErrorTrack,
     fixes_track,
-    reconverge_s,
     truth_track,
+)
+from navreplay.pipeline.estimation.outputs import estimate_table
+from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.windows import (
+    NS,
+    ErrorTrack,
+    Window,
+    WindowMetricsParams,
+    reconverge_s,
+    table_track,
     window_metrics,
 )
-from navreplay.pipeline.estimation.replay import run_filter
-from navreplay.pipeline.estimation.windows import NS, Window, WindowMetricsParams
 from navreplay.pipeline.scenarios.apply import apply_scenario
 from navreplay.pipeline.scenarios.config import ScenarioSpec, WindowsSpec
 from tests.pipeline.scenarios.drives import drive, params
@@ -119,3 +125,42 @@ def test_run_metrics_without_truth_use_the_withheld_fixes() -> None:
     assert b["samples"] == 20
     assert abs(a["err_end_m"] - b["err_end_m"]) < 3 * 2.5  # within the fixes' noise
     assert without["truth"] is False
+
+
+def test_the_estimate_table_gives_the_errors_the_full_state_gives() -> None:
+    """``table_track`` (any family, from estimate.parquet) agrees with the INS error states:
+    the same errors within a millimetre, the same sigmas, against the truth and the fixes."""
+    tables, sensors = drive(90.0)
+    r = run_filter(tables, sensors, "lc_ekf", params().filters.lc_ekf)
+    est = estimate_table(r)
+    full = truth_track(r, tables["truth"])
+    from_table = table_track(est, tables["truth"], tables["gnss"])
+    assert from_table is not None
+    assert from_table.axes == 3
+    assert from_table.reference == "truth"
+    np.testing.assert_array_equal(from_table.t_ns, full.t_ns)
+    np.testing.assert_allclose(from_table.err_ned_m, full.err_ned_m, atol=1e-3)
+    np.testing.assert_allclose(from_table.sigma_ned_m, full.sigma_ned_m, rtol=1e-6)
+    by_fixes = table_track(est, None, tables["gnss"])
+    unlevered = fixes_track(r, tables["gnss"], (0.0, 0.0, 0.0))
+    assert by_fixes is not None
+    assert by_fixes.reference == "withheld_fixes"
+    np.testing.assert_allclose(by_fixes.err_ned_m, unlevered.err_ned_m, atol=1e-3)
+    assert table_track(est, None, None) is None
+
+
+def test_a_planar_track_measures_horizontal_errors_only() -> None:
+    """Without a height estimate the window's errors, 3-sigma test and sigma are horizontal."""
+    track = known_track()
+    err = track.err_ned_m.copy()
+    err[:, 2] = 50.0  # a height error the planar model does not estimate
+    sig = track.sigma_ned_m.copy()
+    sig[:, 2] = np.nan
+    planar = ErrorTrack(track.t_ns, err, sig, track.ref_ned_m, "truth", axes=2)
+    w = [Window(20 * NS, 50 * NS, "outage", 0, "")]
+    (a,) = window_metrics(track, w, 0, WindowMetricsParams())
+    (b,) = window_metrics(planar, w, 0, WindowMetricsParams())
+    assert b["err_end_m"] == pytest.approx(a["err_end_m"])
+    assert b["err_end_down_m"] is None
+    assert b["inside_3sigma_frac"] == a["inside_3sigma_frac"]
+    assert b["sigma_end_m"] == pytest.approx(100.0 * math.sqrt(2.0))
