@@ -66,11 +66,13 @@ class IngestParams:
 
 @dataclass(frozen=True)
 class FamilyRun:
-    """One filter replayed over one dataset outside the INS run matrix, nominal scenario: the
-    vehicle-model and cascaded filters on their datasets, fwekf on paper 004's."""
+    """One filter replayed over one dataset under one scenario outside the INS run matrix:
+    the vehicle-model and cascaded filters on their datasets, fwekf on paper 004's. DVC reads
+    the entries as written, so ``params.yaml`` names the scenario of every entry."""
 
     dataset: str
     filter: str
+    scenario: str = "nominal"
 
 
 @dataclass(frozen=True)
@@ -80,8 +82,8 @@ class RunParams:
     backend, and the processes one ``navreplay run`` spreads its scenarios over.
     ``datasets`` may hold built-in and recorded datasets; ``filters`` and ``scenarios`` are
     also the defaults of ``navreplay analyze``. ``family_runs`` are single runs (dataset,
-    filter) of the nominal scenario beside that matrix, so that every family (vehicle-model,
-    cascaded, fwekf) has runs in the reports and the summary's ranking."""
+    filter, scenario) beside that matrix, so that every family (vehicle-model, cascaded,
+    fwekf) has runs in the reports and the summary's ranking."""
 
     backend: Literal["numba", "filterpy"]
     datasets: tuple[str, ...]
@@ -150,6 +152,10 @@ class Params:
                 raise FieldError(
                     f"run.family_runs[{i}].filter",
                     f"{fr.filter!r} is not a filter (known: {', '.join(known)})",
+                )
+            if fr.scenario not in self.scenarios.named:
+                raise FieldError(
+                    f"run.family_runs[{i}].scenario", f"{fr.scenario!r} is not in scenarios.named"
                 )
         for i, name in enumerate(self.run.scenarios):
             if name not in self.scenarios.named:

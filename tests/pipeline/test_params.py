@@ -161,9 +161,14 @@ def test_nested_mappings_and_fixed_tuples() -> None:
     [
         ({"dataset": "nowhere", "filter": "vehicle_imm"}, "dataset", "neither datasets"),
         ({"dataset": "car_speed_ramp", "filter": "vehicle_pf"}, "filter", "not a filter"),
+        (
+            {"dataset": "car_speed_ramp", "filter": "vehicle_imm", "scenario": "outage_6s"},
+            "scenario",
+            "not in scenarios.named",
+        ),
     ],
 )
-def test_a_family_run_names_a_known_dataset_and_a_family_filter(
+def test_a_family_run_names_a_known_dataset_filter_and_scenario(
     raw: dict[str, Any], run: dict[str, str], key: str, expect: str
 ) -> None:
     raw["run"]["family_runs"] = [{"dataset": "car_speed_ramp", "filter": "vehicle_imm"}, run]
