@@ -141,6 +141,23 @@ class Params:
                 raise FieldError(
                     f"run.datasets[{i}]", f"{ds!r} is in neither datasets nor recorded"
                 )
+        self._check_family_runs()
+        for i, name in enumerate(self.run.scenarios):
+            if name not in self.scenarios.named:
+                raise FieldError(f"run.scenarios[{i}]", f"{name!r} is not in scenarios.named")
+        for i, ds in enumerate(self.datasets):
+            if not _ID_RE.match(ds):
+                raise FieldError(
+                    f"datasets[{i}]", f"{ds!r} is not a dataset id (lowercase, digits, underscores)"
+                )
+        if len(set(self.datasets)) != len(self.datasets):
+            raise FieldError("datasets", "lists a dataset twice")
+        for i, ds in enumerate(self.recorded):
+            if not _ID_RE.match(ds) or ds in self.datasets:
+                raise FieldError(f"recorded[{i}]", f"{ds!r}: a new dataset id (lowercase)")
+
+    def _check_family_runs(self) -> None:
+        """Each of run.family_runs names a dataset, a filter and a scenario that exist."""
         for i, fr in enumerate(self.run.family_runs):
             if fr.dataset not in self.datasets and fr.dataset not in self.recorded:
                 raise FieldError(
@@ -157,19 +174,6 @@ class Params:
                 raise FieldError(
                     f"run.family_runs[{i}].scenario", f"{fr.scenario!r} is not in scenarios.named"
                 )
-        for i, name in enumerate(self.run.scenarios):
-            if name not in self.scenarios.named:
-                raise FieldError(f"run.scenarios[{i}]", f"{name!r} is not in scenarios.named")
-        for i, ds in enumerate(self.datasets):
-            if not _ID_RE.match(ds):
-                raise FieldError(
-                    f"datasets[{i}]", f"{ds!r} is not a dataset id (lowercase, digits, underscores)"
-                )
-        if len(set(self.datasets)) != len(self.datasets):
-            raise FieldError("datasets", "lists a dataset twice")
-        for i, ds in enumerate(self.recorded):
-            if not _ID_RE.match(ds) or ds in self.datasets:
-                raise FieldError(f"recorded[{i}]", f"{ds!r}: a new dataset id (lowercase)")
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
