@@ -104,7 +104,7 @@ def warm_here(names: Sequence[str], params: Params) -> None:
         PipelineError: a filter could not run on its warm-up drive (the message names it).
     """
     from navreplay.pipeline.errors import DivergenceError
-    from navreplay.pipeline.estimation.families import family_of, run_tables
+    from navreplay.pipeline.estimation.families import run_tables
 
     with tempfile.TemporaryDirectory(prefix="navreplay-warm-") as tmp:
         drives: dict[str, Path] = {}
@@ -113,7 +113,7 @@ def warm_here(names: Sequence[str], params: Params) -> None:
             if family not in drives:
                 drives[family] = _drive(family, params, Path(tmp) / family)
             try:
-                section = family_of(name).section(params.filters, name)
+                section = params.filters.section(name)
                 run_tables(drives[family], name, section, "numba")
             except DivergenceError:
                 pass  # the kernel compiled and ran; a short drive may end off its limits

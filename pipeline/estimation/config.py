@@ -379,6 +379,14 @@ class FiltersParams:
             if kind.fading != (section.fuzzy is not None):
                 raise FieldError(f"{name}.fuzzy", "fwekf needs a fuzzy section; no other filter")
 
+    def section(self, name: str) -> InsFilterParams | VehicleFilterParams | CascadedFilterParams:
+        """The section of any filter ``name`` (its family's run takes it)."""
+        if name not in self.__dataclass_fields__:
+            known = ", ".join(self.__dataclass_fields__)
+            raise KeyError(f"unknown filter {name!r} (known: {known})")
+        section: InsFilterParams | VehicleFilterParams | CascadedFilterParams = getattr(self, name)
+        return section
+
     def get(self, name: str) -> InsFilterParams:
         """The section of filter ``name`` (a key of ``FILTER_KINDS``)."""
         if name not in FILTER_KINDS:

@@ -152,12 +152,9 @@ class Family(Protocol):
         """The canonical tables its filters can read."""
         ...
 
-    def section(self, filters: Any, name: str) -> Any:
-        """Filter ``name``'s parameter section of ``params.yaml``'s ``filters``."""
-        ...
-
     def run(self, inputs: RunInputs, name: str, section: Any, backend: Backend) -> RunOutput:
-        """Prepare the inputs, run the kernel, decode its output.
+        """Prepare the inputs, run the kernel, decode its output; ``section`` is the filter's
+        section of ``params.yaml`` ``filters`` (``FiltersParams.section(name)``).
 
         Raises:
             PipelineError: the tables cannot drive the filter (``ReplayInputError``), or it

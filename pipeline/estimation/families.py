@@ -36,6 +36,6 @@ def family_of(name: str) -> Family:
 
 def run_tables(tables_dir: Path, name: str, section: Any, backend: Backend) -> RunOutput:
     """Replay filter ``name`` with its parameter ``section`` over the tables in
-    ``tables_dir`` (``family_of(name).section(params.filters, name)``)."""
+    ``tables_dir`` (``params.filters.section(name)``)."""
     family = family_of(name)
     return family.run(RunInputs.read(tables_dir, family.inputs), name, section, backend)

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from navreplay.ingest.schema import TableName
-from navreplay.pipeline.estimation.config import FILTER_KINDS, FiltersParams, InsFilterParams
+from navreplay.pipeline.estimation.config import FILTER_KINDS, InsFilterParams
 from navreplay.pipeline.estimation.contract import (
     Backend,
     RunInputs,
@@ -40,9 +40,6 @@ class InsFamily:
     name = "ins"
     filters = tuple(FILTER_KINDS)
     inputs = INPUTS
-
-    def section(self, filters: FiltersParams, name: str) -> InsFilterParams:
-        return filters.get(name)
 
     def run(
         self, inputs: RunInputs, name: str, section: InsFilterParams, backend: Backend

@@ -19,7 +19,6 @@ import numpy as np
 import pyarrow as pa
 
 from navreplay.ingest.schema import TableName, from_columns
-from navreplay.pipeline.estimation.config import FiltersParams
 from navreplay.pipeline.estimation.contract import (
     Backend,
     RunInputs,
@@ -97,9 +96,6 @@ class VehicleFamily:
     name = "vehicle"
     filters = VEHICLE_FILTERS
     inputs = INPUTS
-
-    def section(self, filters: FiltersParams, name: str) -> VehicleFilterParams:
-        return filters.vehicle(name)
 
     def run(
         self, inputs: RunInputs, name: str, section: VehicleFilterParams, backend: Backend

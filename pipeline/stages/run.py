@@ -120,7 +120,7 @@ def _run(
                 source=str(args.params),
             )
     single = len(asked) == 1 and asked != ["all"]
-    section = family.section(params.filters, args.filter)
+    section = params.filters.section(args.filter)
     inputs = RunInputs.read(args.tables, family.inputs)
     if args.skip_unfit and family is INS:
         _, unfit = plan(args.tables, [args.filter])

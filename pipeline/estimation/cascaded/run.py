@@ -17,7 +17,6 @@ from navreplay.pipeline.estimation.cascaded.inputs import prepare_inputs
 from navreplay.pipeline.estimation.cascaded.metrics import compute_metrics, truth_from_table
 from navreplay.pipeline.estimation.cascaded.outputs import estimate_table, innovations_table
 from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams
-from navreplay.pipeline.estimation.config import FiltersParams
 from navreplay.pipeline.estimation.contract import (
     Backend,
     RunInputs,
@@ -36,9 +35,6 @@ class CascadedFamily:
     name = "cascaded"
     filters = tuple(CASCADED_KINDS)
     inputs = INPUTS
-
-    def section(self, filters: FiltersParams, name: str) -> CascadedFilterParams:
-        return filters.cascaded(name)
 
     def run(
         self, inputs: RunInputs, name: str, section: CascadedFilterParams, backend: Backend
