@@ -170,7 +170,7 @@ class Family(Protocol):
 
 
 class ResultLike(Protocol):
-    """What every family's result holds that ``run_metrics`` reads."""
+    """What every family's result holds that ``RunMetrics.of`` reads."""
 
     @property
     def filter(self) -> str: ...
@@ -190,28 +190,73 @@ class ResultLike(Protocol):
     def events(self) -> Sequence[EventLike]: ...
 
 
-def run_metrics(result: ResultLike, nis: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """The ``metrics.json`` keys every family shares: what ran and how it ended, its cost,
-    NIS per stream (``nis``: the family's per-stream summary), gate decisions and events."""
-    kinds: dict[str, int] = {}
-    for e in result.events:
-        kinds[e.kind] = kinds.get(e.kind, 0) + 1
-    return {
-        "filter": result.filter,
-        "backend": result.backend,
-        "status": result.status,
-        "failure": result.failure,
-        "runtime_s": result.runtime_s,
-        "duration_s": result.duration_s,
-        "realtime_factor": result.duration_s / result.runtime_s if result.runtime_s else None,
-        "epochs": int(result.t_ns.size),
-        "nis": nis,
-        "nis_mean": {k: v["nis_mean"] for k, v in nis.items()},
-        "gate_rejections": int(sum(v["rejected"] for v in nis.values())),
-        "gate_resets": kinds.get("gate_reset", 0),
-        "cov_repairs": kinds.get("cov_repair", 0),
-        "events": kinds,
-    }
+@dataclass(frozen=True)
+class RunMetrics:
+    """What every family's run reports, the shared keys of ``metrics.json``; each family adds
+    its accuracy and consistency keys beside them (``to_json``).
+
+    Attributes:
+        filter, backend, status, failure: what ran, on which backend, and how it ended (the
+            failure text when it did not end ``ok``).
+        runtime_s, duration_s, epochs: its cost, the span of log replayed and the estimates.
+        nis: the family's per-stream NIS summary (``nis_mean``, ``rejected`` and more).
+        events: the run's events counted by kind (``gate_reset``, ``cov_repair`` ...).
+    """
+
+    filter: str
+    backend: str
+    status: str
+    failure: str | None
+    runtime_s: float
+    duration_s: float
+    epochs: int
+    nis: dict[str, dict[str, Any]]
+    events: dict[str, int]
+
+    @classmethod
+    def of(cls, result: ResultLike, nis: dict[str, dict[str, Any]]) -> RunMetrics:
+        """A finished run's record; ``nis`` is the family's per-stream summary."""
+        kinds: dict[str, int] = {}
+        for e in result.events:
+            kinds[e.kind] = kinds.get(e.kind, 0) + 1
+        return cls(
+            result.filter,
+            result.backend,
+            result.status,
+            result.failure,
+            result.runtime_s,
+            result.duration_s,
+            int(result.t_ns.size),
+            nis,
+            kinds,
+        )
+
+    @property
+    def realtime_factor(self) -> float | None:
+        return self.duration_s / self.runtime_s if self.runtime_s else None
+
+    @property
+    def gate_rejections(self) -> int:
+        return int(sum(v["rejected"] for v in self.nis.values()))
+
+    def to_json(self) -> dict[str, Any]:
+        """The shared keys of ``metrics.json``, in their order."""
+        return {
+            "filter": self.filter,
+            "backend": self.backend,
+            "status": self.status,
+            "failure": self.failure,
+            "runtime_s": self.runtime_s,
+            "duration_s": self.duration_s,
+            "realtime_factor": self.realtime_factor,
+            "epochs": self.epochs,
+            "nis": self.nis,
+            "nis_mean": {k: v["nis_mean"] for k, v in self.nis.items()},
+            "gate_rejections": self.gate_rejections,
+            "gate_resets": self.events.get("gate_reset", 0),
+            "cov_repairs": self.events.get("cov_repair", 0),
+            "events": self.events,
+        }
 
 
 class EventLike(Protocol):

@@ -24,7 +24,7 @@ import numpy.typing as npt
 import pyarrow as pa
 from scipy.stats import chi2
 
-from navreplay.pipeline.estimation.contract import run_metrics
+from navreplay.pipeline.estimation.contract import RunMetrics
 from navreplay.pipeline.estimation.models import measurement as me
 from navreplay.pipeline.estimation.outage_metrics import outage_windows
 from navreplay.pipeline.estimation.replay import RunResult
@@ -92,7 +92,7 @@ def compute_metrics(
     ``windows`` (from ``t0_ns``) add ``outage_windows``; ``fixes`` (the unmodified GNSS fixes)
     are their reference when there is no truth, with the antenna ``lever_b``.
     """
-    m = run_metrics(result, nis_summary(result))
+    m = RunMetrics.of(result, nis_summary(result)).to_json()
     m.update(
         {
             "compile_s": result.compile_s,

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from navreplay.pipeline.estimation.contract import run_metrics
+from navreplay.pipeline.estimation.contract import RunMetrics
 from navreplay.pipeline.estimation.kernels import vehicle as kv
 from navreplay.pipeline.estimation.metrics import nis_by_stream
 from navreplay.pipeline.estimation.models import vehicle as vm
@@ -95,7 +95,7 @@ def nis_summary(result: VehicleRunResult) -> dict[str, dict[str, Any]]:
 
 def compute_metrics(result: VehicleRunResult, truth: pa.Table | None) -> dict[str, Any]:
     """``metrics.json`` of a vehicle-filter run."""
-    m = run_metrics(result, nis_summary(result))
+    m = RunMetrics.of(result, nis_summary(result)).to_json()
     m["steer_source"] = result.steer_source
     m["init"] = result.init
     m["dynamic_share"] = float(np.mean(result.aux)) if result.aux.size else None

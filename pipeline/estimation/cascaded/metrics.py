@@ -27,7 +27,7 @@ from navreplay.pipeline.estimation.cascaded.engine import CascadedResult
 from navreplay.pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, NX
 from navreplay.pipeline.estimation.cascaded.outputs import STATE_COLUMNS
 from navreplay.pipeline.estimation.cascaded_config import ConvergenceBand
-from navreplay.pipeline.estimation.contract import run_metrics
+from navreplay.pipeline.estimation.contract import RunMetrics
 from navreplay.pipeline.estimation.metrics import nis_by_stream
 from navreplay.pipeline.nav.earth import F64
 from navreplay.pipeline.nav.local import LocalFrame
@@ -117,7 +117,7 @@ def compute_metrics(
     result: CascadedResult, truth_x: F64 | None, band: ConvergenceBand
 ) -> dict[str, Any]:
     """The metrics of one run (module docstring); accuracy needs ``truth_x`` (K, 12)."""
-    m = run_metrics(result, nis_summary(result))
+    m = RunMetrics.of(result, nis_summary(result)).to_json()
     if truth_x is None or result.t_ns.size == 0:
         m["truth"] = False
         return m
