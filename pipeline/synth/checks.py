@@ -24,7 +24,9 @@ def require_non_negative(
     params: Any, names: Iterable[str] | None = None, *, message: str = "must be >= 0"
 ) -> None:
     """Raise ``FieldError(name, message)`` for the first of ``names`` (default: every field of
-    the dataclass ``params``) whose value is < 0."""
+    the dataclass ``params``) whose value is a number < 0 (fields of other types are not
+    checked)."""
     for name in _names(params, names):
-        if getattr(params, name) < 0:
+        value = getattr(params, name)
+        if isinstance(value, int | float) and not isinstance(value, bool) and value < 0:
             raise FieldError(name, message)
