@@ -66,24 +66,41 @@ class YawSteerModel:
             raise FieldError("zeta", "must be >= 0")
 
 
+def yaw_steer_model(model: YawSteerModel) -> tuple[F64, F64]:
+    """Continuous yaw and steering dynamics (eq. 3-4) on ``[psi, psi_dot, psi_ddot, delta,
+    delta_dot]``: ``A`` of shape (5, 5) and ``B`` of shape (5, 1), input ``u`` of eq. 4.
+
+    The lateral control model (``lateral_model``) and the tractor simulator
+    (``pipeline.synth.tractor``) both build on it.
+    """
+    wn = model.omega_n_radps
+    a = np.zeros((5, 5))
+    a[0, 1] = 1.0
+    a[1, 2] = 1.0
+    a[2, 1] = -(wn**2)
+    a[2, 2] = -2.0 * model.zeta * wn
+    a[2, 3] = model.k_r * wn**2
+    a[3, 4] = 1.0
+    a[4, 4] = -1.0 / model.tau_v_s
+    b = np.zeros((5, 1))
+    b[4, 0] = model.k_v / model.tau_v_s
+    return a, b
+
+
 def lateral_model(speed_mps: float, model: YawSteerModel) -> tuple[F64, F64]:
     """Continuous lateral control model ``(A_c, B_c)`` of eq. 11 at the desired speed.
+
+    The lateral error ``y_err`` in front of ``yaw_steer_model`` (its heading is ``psi_err``).
 
     Returns:
         ``A_c`` of shape (6, 6) and ``B_c`` of shape (6, 1).
     """
-    wn = model.omega_n_radps
+    a5, b5 = yaw_steer_model(model)
     a = np.zeros((6, 6))
     a[0, 1] = speed_mps  # eq. 10: y_err_dot = V_x psi_err
-    a[1, 2] = 1.0
-    a[2, 3] = 1.0
-    a[3, 2] = -(wn**2)
-    a[3, 3] = -2.0 * model.zeta * wn
-    a[3, 4] = model.k_r * wn**2
-    a[4, 5] = 1.0
-    a[5, 5] = -1.0 / model.tau_v_s
+    a[1:, 1:] = a5
     b = np.zeros((6, 1))
-    b[5, 0] = model.k_v / model.tau_v_s
+    b[1:] = b5
     return a, b
 
 

@@ -126,17 +126,7 @@ def _rates(
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _derivative_into(
-    x: F64,
-    fx: float,
-    fy: float,
-    fz: float,
-    wx: float,
-    wy: float,
-    wz: float,
-    out: F64,
-    lat_ref: float,
-    sin_ref: float,
-    cos_ref: float,
+    x: F64, f_b: F64, w_ib_b: F64, out: F64, lat_ref: float, sin_ref: float, cos_ref: float
 ) -> None:
     """Allocation-free core of ``nav_derivative``; writes dx/dt into ``out``.
 
@@ -150,7 +140,8 @@ def _derivative_into(
     else:
         sl, cl = math.sin(lat), math.cos(lat)
     r = _rates(x[I_H], x[I_VN], x[I_VE], x[I_VD], x[I_QW], x[I_QW + 1], x[I_QW + 2],
-               x[I_QW + 3], sl, cl, fx, fy, fz, wx, wy, wz)  # fmt: skip
+               x[I_QW + 3], sl, cl, f_b[0], f_b[1], f_b[2],
+               w_ib_b[0], w_ib_b[1], w_ib_b[2])  # fmt: skip
     for j in range(NAV_DIM):
         out[j] = r[j]
 
@@ -169,10 +160,7 @@ def nav_derivative(x: F64, f_b: F64, w_ib_b: F64) -> F64:
     """
     out = np.empty(NAV_DIM)
     lat = x[I_LAT]
-    _derivative_into(
-        x, f_b[0], f_b[1], f_b[2], w_ib_b[0], w_ib_b[1], w_ib_b[2], out,
-        lat, math.sin(lat), math.cos(lat),
-    )  # fmt: skip
+    _derivative_into(x, f_b, w_ib_b, out, lat, math.sin(lat), math.cos(lat))
     return out
 
 

@@ -13,6 +13,7 @@ Time axes are seconds from the dataset's first sample (``DatasetInputs.t0_ns``).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2
@@ -65,6 +66,15 @@ def _origin(data: DatasetInputs) -> tuple[float, float] | None:
     return None
 
 
+def _stacked(plt: Any, rows: int, height_in: float) -> tuple[Any, Any]:
+    """A figure of ``rows`` full-width panels, one above the other, over a shared time axis:
+    the figure and its panels, top to bottom."""
+    fig, axes = plt.subplots(
+        rows, 1, figsize=(9.0, height_in), sharex=True, squeeze=False, layout="constrained"
+    )
+    return fig, axes[:, 0]
+
+
 def track(data: DatasetInputs, key: str) -> str | None:
     """East/north track of the reference and each filter's nominal run, metres."""
     origin = _origin(data)
@@ -109,15 +119,8 @@ def errors(
     t0 = data.t0_ns()
     filters = data.filters()
     with style() as plt:
-        fig, axes = plt.subplots(
-            len(runs),
-            1,
-            figsize=(9.0, 1.2 + 1.5 * len(runs)),
-            sharex=True,
-            squeeze=False,
-            layout="constrained",
-        )
-        for ax, r in zip(axes[:, 0], runs, strict=True):
+        fig, panels = _stacked(plt, len(runs), 1.2 + 1.5 * len(runs))
+        for ax, r in zip(panels, runs, strict=True):
             s = series[(r.filter, scenario)]
             t = s.t_s(t0)
             c = colour(filters.index(r.filter))
@@ -134,7 +137,7 @@ def errors(
             ax.legend(loc="upper right", ncols=3)
             ref = "truth" if s.reference == "truth" else "GNSS fixes"
             ax.set_title(f"{r.filter}: error against {ref}", loc="left")
-        axes[-1, 0].set_xlabel("time since start, s")
+        panels[-1].set_xlabel("time since start, s")
         fig.suptitle(f"{data.dataset}: position error, scenario {scenario}")
         return figure_svg(fig, key)
 
@@ -161,15 +164,8 @@ def nis(data: DatasetInputs, run: Run, key: str) -> str | None:
     dims = column(inn, "dim")
     arr = np.asarray(streams, dtype=object)
     with style() as plt:
-        fig, axes = plt.subplots(
-            len(names),
-            1,
-            figsize=(9.0, 0.8 + 1.7 * len(names)),
-            sharex=True,
-            squeeze=False,
-            layout="constrained",
-        )
-        for ax, name in zip(axes[:, 0], names, strict=True):
+        fig, panels = _stacked(plt, len(names), 0.8 + 1.7 * len(names))
+        for ax, name in zip(panels, names, strict=True):
             sel = arr == name
             ts, vs = t[sel], values[sel]
             dof = int(np.median(dims[sel])) if sel.any() else 1
@@ -190,7 +186,7 @@ def nis(data: DatasetInputs, run: Run, key: str) -> str | None:
             ax.set_ylabel("NIS")
             ax.set_title(f"stream {name}", loc="left")
             ax.legend(loc="upper right", ncols=4)
-        axes[-1, 0].set_xlabel("time since start, s")
+        panels[-1].set_xlabel("time since start, s")
         fig.suptitle(f"{data.dataset}: NIS of {run.filter}, scenario {run.scenario}")
         return figure_svg(fig, key)
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 import shutil
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -37,6 +37,7 @@ from navreplay.pipeline.report.experiments import (
     find_outage_results,
 )
 from navreplay.pipeline.report.inputs import DatasetInputs
+from navreplay.pipeline.report.series import ErrorSeries
 
 log = logging.getLogger(__name__)
 
@@ -92,24 +93,32 @@ def render_dataset(
         figures.track(data, "track"),
         "Track: reference and each filter's nominal run (east/north from the first sample).",
     )
-    err_parts = []
-    for i, sc in enumerate(data.scenarios()):
-        err_parts.append(
-            fig(
-                figures.errors(data, sc, series, f"err{i}"),
-                f"{sc}: horizontal position error (line) and the filter's 3σ (band); "
-                "outage windows shaded.",
-            )
-        )
-    outage_parts = []
-    for i, sc in enumerate(data.scenarios()):
-        outage_parts.append(
-            fig(
-                figures_outage.windows_detail(data, sc, series, f"win{i}"),
-                f"{sc}: 3-D error from {figures_outage.PRE_S:g} s before to "
-                f"{figures_outage.POST_S:g} s after each outage window.",
-            )
-        )
+
+    def per_scenario(
+        plot: Callable[[DatasetInputs, str, dict[tuple[str, str], ErrorSeries], str], str | None],
+        key: str,
+        caption: Callable[[str], str],
+    ) -> list[str]:
+        """One figure per scenario, keys ``<key>0``, ``<key>1`` ..."""
+        scenarios = enumerate(data.scenarios())
+        return [fig(plot(data, sc, series, f"{key}{i}"), caption(sc)) for i, sc in scenarios]
+
+    err_parts = per_scenario(
+        figures.errors,
+        "err",
+        lambda sc: (
+            f"{sc}: horizontal position error (line) and the filter's 3σ (band); "
+            "outage windows shaded."
+        ),
+    )
+    outage_parts = per_scenario(
+        figures_outage.windows_detail,
+        "win",
+        lambda sc: (
+            f"{sc}: 3-D error from {figures_outage.PRE_S:g} s before to "
+            f"{figures_outage.POST_S:g} s after each outage window."
+        ),
+    )
     drift_fig = fig(
         figures_outage.drift_by_length(drift_rows, filters, "drift"),
         "Mean 3-D error at the end of complete outages, by outage length.",

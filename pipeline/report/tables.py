@@ -31,6 +31,22 @@ from navreplay.pipeline.report.series import ErrorSeries, error_series, local_en
 Row = dict[str, Any]
 PAPER_REDUCTION_PCT = {0: 54.4, 1: 53.2, 2: 52.6, 3: 52.4, 4: 22.6}  # paper 001, Table 1
 PAPER_PAIR = ("tc_ukf", "tc_ukf_nhc")  # its baseline -> candidate
+# the numbers of a run's metrics.json in its row of ``metrics_rows``, in column order
+RUN_METRICS = (
+    "pos_err_h_rms_m",
+    "pos_err_3d_rms_m",
+    "pos_err_3d_max_m",
+    "vel_err_3d_rms_mps",
+    "nees_mean",
+    "nees_dof",
+    "gate_rejections",
+    "gate_resets",
+    "epochs",
+    "duration_s",
+    "runtime_s",
+    "compile_s",
+    "realtime_factor",
+)
 
 
 def _num(v: Any) -> float | int | None:
@@ -55,19 +71,7 @@ def metrics_rows(data: DatasetInputs, series: dict[tuple[str, str], ErrorSeries]
             "scenario": r.scenario,
             "status": r.status,
             "reference": None,
-            "pos_err_h_rms_m": _num(m.get("pos_err_h_rms_m")),
-            "pos_err_3d_rms_m": _num(m.get("pos_err_3d_rms_m")),
-            "pos_err_3d_max_m": _num(m.get("pos_err_3d_max_m")),
-            "vel_err_3d_rms_mps": _num(m.get("vel_err_3d_rms_mps")),
-            "nees_mean": _num(m.get("nees_mean")),
-            "nees_dof": _num(m.get("nees_dof")),
-            "gate_rejections": _num(m.get("gate_rejections")),
-            "gate_resets": _num(m.get("gate_resets")),
-            "epochs": _num(m.get("epochs")),
-            "duration_s": _num(m.get("duration_s")),
-            "runtime_s": _num(m.get("runtime_s")),
-            "compile_s": _num(m.get("compile_s")),
-            "realtime_factor": _num(m.get("realtime_factor")),
+            **{key: _num(m.get(key)) for key in RUN_METRICS},
             "reason": m.get("reason") or m.get("failure"),
         }
         if m.get("truth"):

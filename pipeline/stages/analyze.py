@@ -17,18 +17,14 @@ import argparse
 import sys
 from pathlib import Path
 
+from navreplay.pipeline.stages.options import add_out, add_params
+
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "logs", nargs="+", type=Path, metavar="LOG", help="log file(s) of one drive or flight"
     )
-    parser.add_argument(
-        "--out",
-        type=Path,
-        required=True,
-        metavar="DIR",
-        help="output directory (tables, runs and the report)",
-    )
+    add_out(parser, "output directory (tables, runs and the report)")
     parser.add_argument(
         "--filters",
         metavar="A,B",
@@ -45,12 +41,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         metavar="YAML",
         help="dataset descriptor for the log (see `navreplay ingest --help`)",
     )
-    parser.add_argument(
-        "--params",
-        type=Path,
-        default=Path("params.yaml"),
-        help="parameter file (default: params.yaml)",
-    )
+    add_params(parser)
 
 
 def _split(text: str | None) -> list[str] | None:

@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from navreplay.pipeline.errors import ParamsError
+from navreplay.pipeline.stages.options import add_dir, add_out, add_params
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -61,17 +62,10 @@ NO_TABLES = ("tractor_cascaded", "vehicle_switch_speed")
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("name", choices=EXPERIMENTS, help="experiment")
-    parser.add_argument(
-        "--tables", type=Path, metavar="DIR", help="tables dir (all but tractor_cascaded)"
-    )
-    parser.add_argument(
-        "--tables-noise-free",
-        type=Path,
-        metavar="DIR",
-        help="fwekf_convergence: tables of the noise-free dataset",
-    )
-    parser.add_argument("--params", type=Path, default=Path("params.yaml"), help="parameters")
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output dir")
+    add_dir(parser, "--tables", "tables dir (all but tractor_cascaded)")
+    add_dir(parser, "--tables-noise-free", "fwekf_convergence: tables of the noise-free dataset")
+    add_params(parser, "parameters")
+    add_out(parser, "output dir")
 
 
 def _read(tables_dir: Path) -> tuple[dict[str, pa.Table], SensorMeta]:

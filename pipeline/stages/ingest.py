@@ -20,6 +20,7 @@ from pathlib import Path
 
 from navreplay.ingest.detect import Format
 from navreplay.pipeline.errors import ParamsError
+from navreplay.pipeline.stages.options import add_out, add_params
 
 FORMATS = ("auto", *(f.value for f in Format))
 
@@ -32,12 +33,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         metavar="LOG",
         help="log file(s) or rosbag2 directory of one drive (default: the descriptor's logs)",
     )
-    parser.add_argument(
-        "--out",
-        type=Path,
-        metavar="DIR",
-        help="output directory for the tables (required unless --list)",
-    )
+    add_out(parser, "output directory for the tables (required unless --list)", required=False)
     parser.add_argument(
         "--format",
         choices=FORMATS,
@@ -62,11 +58,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="fail on any recoverable defect (truncation, corrupt chunk, "
         "reordered or dropped samples) instead of salvaging",
     )
-    parser.add_argument(
-        "--params",
-        type=Path,
+    add_params(
+        parser,
+        "parameter file (default: params.yaml if present, else built-in defaults)",
         default=None,
-        help="parameter file (default: params.yaml if present, else built-in defaults)",
     )
 
 

@@ -23,6 +23,7 @@ import logging
 from pathlib import Path
 
 from navreplay.pipeline.errors import ParamsError
+from navreplay.pipeline.stages.options import add_out, add_params
 
 log = logging.getLogger(__name__)
 
@@ -30,7 +31,7 @@ log = logging.getLogger(__name__)
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("tables", type=Path, metavar="TABLES_DIR", help="canonical tables")
     parser.add_argument("--filter", required=True, metavar="NAME", help="INS/GNSS filter")
-    parser.add_argument("--params", type=Path, default=Path("params.yaml"), help="parameters")
+    add_params(parser, "parameters")
     parser.add_argument(
         "--backend", choices=("numba", "filterpy"), help="override run.backend from the params"
     )
@@ -41,7 +42,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="if the tables cannot drive this filter (a tightly coupled one without raw "
         "observables), write DIR/skipped.json with the reason and exit 0 instead of failing",
     )
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output dir")
+    add_out(parser, "output dir")
 
 
 def run(args: argparse.Namespace) -> int:

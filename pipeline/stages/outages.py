@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from navreplay.pipeline.errors import PipelineError
+from navreplay.pipeline.stages.options import add_dir, add_out, add_params
 
 log = logging.getLogger(__name__)
 
@@ -40,11 +41,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "montecarlo", type=Path, metavar="MONTECARLO_DIR", help="one folder per filter"
     )
-    parser.add_argument(
-        "--tables", type=Path, metavar="DIR", help="the dataset's tables (truth, meta.json)"
-    )
-    parser.add_argument("--params", type=Path, default=Path("params.yaml"), help="parameters")
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output dir")
+    add_dir(parser, "--tables", "the dataset's tables (truth, meta.json)")
+    add_params(parser, "parameters")
+    add_out(parser, "output dir")
 
 
 def run(args: argparse.Namespace) -> int:

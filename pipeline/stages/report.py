@@ -13,43 +13,30 @@ examples:
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+
+from navreplay.pipeline.stages.options import add_dir, add_out, add_params
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("dataset", metavar="DATASET", help="dataset id")
-    parser.add_argument(
+    add_dir(
+        parser,
         "--tables",
-        type=Path,
+        "the dataset's canonical tables (for the audit and truth)",
         required=True,
-        metavar="DIR",
-        help="the dataset's canonical tables (for the audit and truth)",
     )
-    parser.add_argument(
+    add_dir(
+        parser,
         "--runs",
-        type=Path,
-        metavar="DIR",
-        help="directory holding the dataset's run directories (default: TABLES/../runs)",
+        "directory holding the dataset's run directories (default: TABLES/../runs)",
     )
-    parser.add_argument(
+    add_dir(
+        parser,
         "--experiments",
-        type=Path,
-        metavar="DIR",
-        help="directory of the dataset's experiments (default: TABLES/../experiments)",
+        "directory of the dataset's experiments (default: TABLES/../experiments)",
     )
-    parser.add_argument(
-        "--out",
-        type=Path,
-        required=True,
-        metavar="DIR",
-        help="report directory (index.html, tables/, metrics.json)",
-    )
-    parser.add_argument(
-        "--params",
-        type=Path,
-        default=Path("params.yaml"),
-        help="parameter file (default: params.yaml)",
-    )
+    add_out(parser, "report directory (index.html, tables/, metrics.json)")
+    add_params(parser)
 
 
 def run(args: argparse.Namespace) -> int:

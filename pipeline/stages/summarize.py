@@ -12,12 +12,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from navreplay.pipeline.stages.options import add_out
+
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "reports", nargs="+", type=Path, metavar="REPORT_DIR", help="per-dataset report directories"
     )
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="summary directory")
+    add_out(parser, "summary directory")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -17,25 +17,15 @@ import time
 from pathlib import Path
 
 from navreplay.pipeline.errors import NotBuiltError, PipelineError
+from navreplay.pipeline.stages.options import add_out, add_params
 
 log = logging.getLogger(__name__)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("name", metavar="NAME", help="synthesized dataset id")
-    parser.add_argument(
-        "--out",
-        type=Path,
-        required=True,
-        metavar="DIR",
-        help="output directory for the log files and truth",
-    )
-    parser.add_argument(
-        "--params",
-        type=Path,
-        default=Path("params.yaml"),
-        help="parameter file (default: params.yaml)",
-    )
+    add_out(parser, "output directory for the log files and truth")
+    add_params(parser)
 
 
 def run(args: argparse.Namespace) -> int:

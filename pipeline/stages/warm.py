@@ -20,6 +20,7 @@ import os
 from pathlib import Path
 
 from navreplay.pipeline.errors import ParamsError, PipelineError
+from navreplay.pipeline.stages.options import add_params
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -29,11 +30,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help="warm only this filter; repeat for several (default: every filter)",
     )
-    parser.add_argument(
-        "--params",
-        type=Path,
-        default=Path("params.yaml"),
-        help="parameter file: the filters' settings and the warm-up drives' synthesizers "
+    add_params(
+        parser,
+        "parameter file: the filters' settings and the warm-up drives' synthesizers "
         "(default: params.yaml)",
     )
     parser.add_argument(

@@ -10,13 +10,17 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
     import pyarrow as pa
 
     from navreplay.ingest.gnss import Ephemeris
     from navreplay.ingest.meta import SensorMeta
+    from navreplay.pipeline.synth.car import CarSpeedRampParams
+    from navreplay.pipeline.synth.fwekf import FwekfReferenceParams
+    from navreplay.pipeline.synth.seoul_params import SeoulCampusParams
+    from navreplay.pipeline.synth.tractor import TractorStraightParams
 
 # dataset id -> module with write_dataset(name, synth_params, out_dir)
 DATASETS: dict[str, str] = {
@@ -46,3 +50,23 @@ class SynthResult:
     sensors: SensorMeta
     ephemeris: Ephemeris | None = None
     time_base: str = "gps"
+
+
+class SynthSection(Protocol):
+    """What the synthesizers' ``write_dataset`` read of ``params.synth``
+    (``pipeline.params.SynthParams``): the seed and each dataset's section."""
+
+    @property
+    def seed(self) -> int: ...
+
+    @property
+    def seoul_campus(self) -> SeoulCampusParams: ...
+
+    @property
+    def tractor_straight(self) -> TractorStraightParams: ...
+
+    @property
+    def fwekf_reference(self) -> FwekfReferenceParams: ...
+
+    @property
+    def car_speed_ramp(self) -> CarSpeedRampParams: ...

@@ -29,9 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.typed import FieldError
 from navreplay.pipeline._jit import njit
 from navreplay.pipeline.nav.earth import radii
+from navreplay.pipeline.synth.checks import require_positive
 
 F64 = npt.NDArray[np.float64]
 
@@ -69,9 +69,7 @@ class VehicleParams:
     cornering_stiffness_rear_npr: float = 100_000.0
 
     def __post_init__(self) -> None:
-        for name in self.__dataclass_fields__:
-            if getattr(self, name) <= 0:
-                raise FieldError(name, "must be > 0")
+        require_positive(self)
 
     @property
     def wheelbase_m(self) -> float:

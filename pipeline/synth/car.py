@@ -33,21 +33,28 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.ingest.schema import FixType, from_columns
-from navreplay.ingest.typed import FieldError, to_plain
-from navreplay.ingest.writers.csv import CsvColumn, quantize, write_csv
+from navreplay.ingest.schema import FixType
+from navreplay.ingest.typed import FieldError
+from navreplay.ingest.writers.csv import CsvColumn
 from navreplay.pipeline.nav.earth import OMEGA_IE, radii
 from navreplay.pipeline.nav.local import LocalFrame
-from navreplay.pipeline.synth import SynthResult
+from navreplay.pipeline.synth import SynthResult, SynthSection
 from navreplay.pipeline.synth.bicycle import COLUMNS, VehicleParams, simulate
-from navreplay.pipeline.synth.output import dataset_rng, write_dataset_dir
+from navreplay.pipeline.synth.checks import require_non_negative
+from navreplay.pipeline.synth.output import (
+    check_dataset,
+    csv_tables,
+    dataset_rng,
+    level_truth_columns,
+    synth_params,
+    write_csv_dataset,
+)
 
 F64 = npt.NDArray[np.float64]
 
@@ -75,9 +82,7 @@ class CarSensors:
             raise FieldError("vehicle_rate_hz", "must be > 0 and divide 1e6 us evenly")
         if self.gnss_rate_hz <= 0 or self.vehicle_rate_hz % self.gnss_rate_hz:
             raise FieldError("gnss_rate_hz", "must be > 0 and divide vehicle_rate_hz")
-        for name in self.__dataclass_fields__:
-            if "noise" in name and getattr(self, name) < 0:
-                raise FieldError(name, "must be >= 0")
+        require_non_negative(self, [n for n in self.__dataclass_fields__ if "noise" in n])
 
 
 @dataclass(frozen=True)
@@ -201,7 +206,6 @@ def _csv_columns(params: CarSpeedRampParams, seed: int) -> dict[str, list[CsvCol
     gn = rng.standard_normal((m, 6))
     const = np.ones(n)
     ones_g = np.ones(m)
-    yaw = (tr["psi_rad"] + math.pi) % (2 * math.pi) - math.pi
     f_t = "%.10f"
     return {
         "vehicle": [
@@ -251,16 +255,16 @@ def _csv_columns(params: CarSpeedRampParams, seed: int) -> dict[str, list[CsvCol
             CsvColumn("fix_type", FixType.FIX_3D * ones_g, "%d"),
         ],
         "truth": [
-            CsvColumn("time_us", t_us, "%d"),
-            CsvColumn("lat_deg", np.degrees(lat), f_t),
-            CsvColumn("lon_deg", np.degrees(tr["lon_rad"]), f_t),
-            CsvColumn("alt_m", h * const, f_t),
-            CsvColumn("vel_n_mps", vn, f_t),
-            CsvColumn("vel_e_mps", ve, f_t),
-            CsvColumn("vel_d_mps", 0.0 * const, f_t),
-            CsvColumn("roll_rad", 0.0 * const, f_t),
-            CsvColumn("pitch_rad", 0.0 * const, f_t),
-            CsvColumn("yaw_rad", yaw, f_t),
+            *level_truth_columns(
+                t_us,
+                np.degrees(lat),
+                np.degrees(tr["lon_rad"]),
+                h * const,
+                vn,
+                ve,
+                tr["psi_rad"],
+                f_t,
+            ),
             CsvColumn("slip_angle_rad", np.arctan2(tr["v_y_mps"], tr["u_mps"]), f_t),
             CsvColumn("yaw_rate_radps", tr["r_radps"], f_t),
             CsvColumn("speed_mps", np.hypot(tr["u_mps"], tr["v_y_mps"]), f_t),
@@ -277,50 +281,20 @@ def _csv_columns(params: CarSpeedRampParams, seed: int) -> dict[str, list[CsvCol
 
 def _tables(cols: dict[str, list[CsvColumn]]) -> dict[str, pa.Table]:
     """Canonical tables: measurements as the CSV holds them, truth at full precision."""
-    by = {name: {c.name: c for c in columns} for name, columns in cols.items()}
-
-    def logged(table: str, col: str) -> F64:
-        c = by[table][col]
-        return quantize(c.values, c.fmt)
-
-    def t_ns(table: str) -> npt.NDArray[np.int64]:
-        out: npt.NDArray[np.int64] = by[table]["time_us"].values.astype(np.int64) * 1000
-        return out
-
-    vehicle = from_columns(
-        "vehicle",
+    # the GNSS log names its columns as the canonical table does, but for the height
+    same: tuple[str, ...] = ("lat_deg", "lon_deg", "vel_n_mps", "vel_e_mps", "vel_d_mps")
+    same += ("h_acc_m", "v_acc_m", "speed_acc_mps", "fix_type")
+    return csv_tables(
+        cols,
         {
-            "t_ns": t_ns("vehicle"),
-            "speed_mps": logged("vehicle", "wheel_speed_mps"),
-            "steer_rad": logged("vehicle", "steer_angle_rad"),
-            "yaw_rate_radps": logged("vehicle", "yaw_rate_radps"),
+            "vehicle": {
+                "speed_mps": "wheel_speed_mps",
+                "steer_rad": "steer_angle_rad",
+                "yaw_rate_radps": "yaw_rate_radps",
+            },
+            "gnss": {"alt_m": "height_m", **{name: name for name in same}},
         },
     )
-    g = {
-        canon: logged("gnss", src)
-        for canon, src in (
-            ("lat_deg", "lat_deg"),
-            ("lon_deg", "lon_deg"),
-            ("alt_m", "height_m"),
-            ("vel_n_mps", "vel_n_mps"),
-            ("vel_e_mps", "vel_e_mps"),
-            ("vel_d_mps", "vel_d_mps"),
-            ("h_acc_m", "h_acc_m"),
-            ("v_acc_m", "v_acc_m"),
-            ("speed_acc_mps", "speed_acc_mps"),
-        )
-    }
-    gnss = from_columns(
-        "gnss",
-        {
-            "t_ns": t_ns("gnss"),
-            **g,
-            "fix_type": by["gnss"]["fix_type"].values.astype(np.int8),
-        },
-    )
-    truth_cols: dict[str, object] = {"t_ns": t_ns("truth")}
-    truth_cols.update({k: c.values for k, c in by["truth"].items() if k != "time_us"})
-    return {"vehicle": vehicle, "gnss": gnss, "truth": from_columns("truth", truth_cols)}
 
 
 def _sensor_meta(params: CarSpeedRampParams) -> SensorMeta:
@@ -336,33 +310,12 @@ def write(params: CarSpeedRampParams, seed: int, out_dir: str | Path) -> list[Pa
     """Write the CSV logs and ``reference/`` as the folder ``out_dir``; returns the files."""
     cols = _csv_columns(params, seed)
     comment = f"navreplay synthesized {DATASET} (paper 003): linear-tire bicycle model, seed {seed}"
-
-    def write_logs(folder: Path) -> list[tuple[Path, str]]:
-        logs = []
-        for name, columns in cols.items():
-            path = folder / f"{DATASET}_{name}.csv"
-            write_csv(path, columns, comment=comment)
-            logs.append((path, "csv"))
-        return logs
-
     result = SynthResult(_tables(cols), _sensor_meta(params), time_base="utc")
-    plain = {"seed": seed, DATASET: to_plain(params)}
-    return write_dataset_dir(out_dir, DATASET, result, write_logs, params=plain)
-
-
-class SynthSection(Protocol):
-    """What ``write_dataset`` reads of ``params.synth`` (``pipeline.params.SynthParams``): the
-    seed and this dataset's section."""
-
-    @property
-    def seed(self) -> int: ...
-
-    @property
-    def car_speed_ramp(self) -> CarSpeedRampParams: ...
+    plain = synth_params(seed, DATASET, params)
+    return write_csv_dataset(out_dir, DATASET, result, cols, comment=comment, params=plain)
 
 
 def write_dataset(name: str, synth: SynthSection, out_dir: Path) -> list[Path]:
     """The synth registry's entry point: ``car_speed_ramp`` from ``params.synth``."""
-    if name != DATASET:
-        raise ValueError(f"{__name__} makes {DATASET!r}, not {name!r}")
+    check_dataset(__name__, name, DATASET)
     return write(synth.car_speed_ramp, synth.seed, out_dir)

@@ -36,7 +36,6 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -45,7 +44,7 @@ import pyarrow as pa
 from navreplay.ingest.config import ImuNoise
 from navreplay.ingest.meta import SensorMeta
 from navreplay.ingest.schema import FixType, from_columns
-from navreplay.ingest.typed import FieldError, to_plain
+from navreplay.ingest.typed import FieldError
 from navreplay.ingest.writers.mavlink import (
     MAV_TYPE_FIXED_WING,
     as_logged_gnss,
@@ -56,8 +55,15 @@ from navreplay.pipeline.nav.earth import radii
 from navreplay.pipeline.nav.local import LocalFrame
 from navreplay.pipeline.nav.mechanization import NAV_DIM, imu_from_motion
 from navreplay.pipeline.nav.rotations import euler_to_quat
-from navreplay.pipeline.synth import SynthResult
-from navreplay.pipeline.synth.output import dataset_rng, write_dataset_dir
+from navreplay.pipeline.synth import SynthResult, SynthSection
+from navreplay.pipeline.synth.checks import require_non_negative
+from navreplay.pipeline.synth.columns import NED, axis_columns, imu_table
+from navreplay.pipeline.synth.output import (
+    check_dataset,
+    dataset_rng,
+    synth_params,
+    write_dataset_dir,
+)
 
 F64 = npt.NDArray[np.float64]
 
@@ -75,9 +81,7 @@ class FwekfNoise:
     vel_mps: float = 0.2
 
     def __post_init__(self) -> None:
-        for name in self.__dataclass_fields__:
-            if getattr(self, name) < 0:
-                raise FieldError(name, "must be >= 0")
+        require_non_negative(self)
 
 
 NO_NOISE = FwekfNoise(0.0, 0.0, 0.0, 0.0)
@@ -216,14 +220,6 @@ def _t_ns(params: FwekfReferenceParams, t_s: F64) -> npt.NDArray[np.int64]:
     return out
 
 
-def _imu_table(t_ns: npt.NDArray[np.int64], acc: F64, gyro: F64) -> pa.Table:
-    cols: dict[str, object] = {"t_ns": t_ns}
-    for j, axis in enumerate("xyz"):
-        cols[f"acc_{axis}_mps2"] = acc[:, j]
-        cols[f"gyro_{axis}_radps"] = gyro[:, j]
-    return from_columns("imu", cols)
-
-
 def raw_tables(
     params: FwekfReferenceParams, seed: int, *, noise_free: bool = False
 ) -> dict[str, pa.Table]:
@@ -271,9 +267,7 @@ def raw_tables(
             "lat_deg": np.degrees(tr["lat_rad"]),
             "lon_deg": np.degrees(tr["lon_rad"]),
             "alt_m": tr["alt_m"],
-            "vel_n_mps": vel[:, 0],
-            "vel_e_mps": vel[:, 1],
-            "vel_d_mps": vel[:, 2],
+            **axis_columns("vel_{}_mps", vel, NED),
             "roll_rad": np.zeros(n),
             "pitch_rad": np.zeros(n),
             "yaw_rad": tr["yaw_rad"],
@@ -281,10 +275,10 @@ def raw_tables(
         },
     )
     return {
-        "imu": _imu_table(t_ns, acc, gyro),
+        "imu": imu_table(t_ns, acc, gyro),
         "gnss": gnss,
         "truth": truth,
-        "truth_imu": _imu_table(t_ns, tr["acc_mps2"], tr["gyro_radps"]),
+        "truth_imu": imu_table(t_ns, tr["acc_mps2"], tr["gyro_radps"]),
     }
 
 
@@ -307,6 +301,13 @@ def synthesize(params: FwekfReferenceParams, seed: int, *, noise_free: bool = Fa
     """One noise case of ``fwekf_reference`` in memory: imu and gnss as the tlog holds them,
     truth at full precision."""
     raw = raw_tables(params, seed, noise_free=noise_free)
+    return _result(params, raw, noise_free=noise_free)
+
+
+def _result(
+    params: FwekfReferenceParams, raw: dict[str, pa.Table], *, noise_free: bool
+) -> SynthResult:
+    """imu and gnss of ``raw_tables`` as the tlog holds them, truth at full precision."""
     tables = {
         "imu": as_logged_imu(raw["imu"]),
         "gnss": as_logged_gnss(raw["gnss"]),
@@ -334,31 +335,13 @@ def write(
         )
         return [(tlog, "mavlink_tlog")]
 
-    tables = {
-        "imu": as_logged_imu(raw["imu"]),
-        "gnss": as_logged_gnss(raw["gnss"]),
-        "truth": raw["truth"],
-    }
-    result = SynthResult(tables, sensor_meta(params, noise_free=noise_free), time_base="utc")
-    plain = to_plain(params if not noise_free else dataclasses.replace(params, noise=NO_NOISE))
-    return write_dataset_dir(
-        out_dir, dataset, result, write_logs, params={"seed": seed, DATASET: plain}
-    )
-
-
-class SynthSection(Protocol):
-    """What ``write_dataset`` reads of ``params.synth`` (``pipeline.params.SynthParams``): the
-    seed and this dataset's section."""
-
-    @property
-    def seed(self) -> int: ...
-
-    @property
-    def fwekf_reference(self) -> FwekfReferenceParams: ...
+    result = _result(params, raw, noise_free=noise_free)
+    noise_case = params if not noise_free else dataclasses.replace(params, noise=NO_NOISE)
+    plain = synth_params(seed, DATASET, noise_case)
+    return write_dataset_dir(out_dir, dataset, result, write_logs, params=plain)
 
 
 def write_dataset(name: str, synth: SynthSection, out_dir: Path) -> list[Path]:
     """The synth registry's entry point: either noise case from ``params.synth``."""
-    if name not in (DATASET, NOISE_FREE_DATASET):
-        raise ValueError(f"{__name__} makes {DATASET!r} and {NOISE_FREE_DATASET!r}, not {name!r}")
+    check_dataset(__name__, name, DATASET, NOISE_FREE_DATASET)
     return write(synth.fwekf_reference, synth.seed, out_dir, noise_free=name == NOISE_FREE_DATASET)

@@ -44,6 +44,7 @@ from navreplay.ingest.schema import FixType
 from navreplay.pipeline.nav import earth, spp
 from navreplay.pipeline.nav.earth import F64, I64
 from navreplay.pipeline.nav.rotations import quat_to_dcm
+from navreplay.pipeline.synth.columns import axis_columns
 from navreplay.pipeline.synth.seoul_params import ReceiverParams
 from navreplay.pipeline.synth.trajectory import Motion
 
@@ -162,12 +163,8 @@ def observables(
         "pseudorange_m": _fixed3(pr),
         "pseudorange_rate_mps": -doppler_hz * LAMBDA_L1_M,
         "cn0_dbhz": _fixed3(cn0_true + on * params.cn0_sigma_db * draws[2]),
-        "sat_x_m": sat.pos_m[:, 0],
-        "sat_y_m": sat.pos_m[:, 1],
-        "sat_z_m": sat.pos_m[:, 2],
-        "sat_vx_mps": sat.vel_mps[:, 0],
-        "sat_vy_mps": sat.vel_mps[:, 1],
-        "sat_vz_mps": sat.vel_mps[:, 2],
+        **axis_columns("sat_{}_m", sat.pos_m),
+        **axis_columns("sat_v{}_mps", sat.vel_mps),
         "sat_clock_m": sat_clock_m,
         "sat_clock_drift_mps": sat_drift_mps,
         "elevation_deg": np.degrees(el[keep]),

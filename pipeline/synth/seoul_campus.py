@@ -16,14 +16,22 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Literal, Protocol
+from typing import Literal
 
 import numpy as np
 
 from navreplay.ingest.gpstime import NS_PER_S, gps_from_calendar
 from navreplay.ingest.meta import SensorMeta
 from navreplay.ingest.schema import from_columns
-from navreplay.pipeline.synth import SynthResult, constellation, gnss, imu, trajectory
+from navreplay.pipeline.synth import (
+    SynthResult,
+    SynthSection,
+    constellation,
+    gnss,
+    imu,
+    trajectory,
+)
+from navreplay.pipeline.synth.columns import NED, RPY, axis_columns, imu_table
 from navreplay.pipeline.synth.seoul_params import NO_IMU_ERRORS, SeoulCampusParams
 from navreplay.pipeline.synth.trajectory import Leg
 
@@ -123,41 +131,21 @@ def simulate(params: SeoulCampusParams, *, seed: int, variant: Variant) -> Synth
         "lat_deg": np.degrees(motion.lat_rad),
         "lon_deg": np.degrees(motion.lon_rad),
         "alt_m": motion.h_m,
-        "vel_n_mps": motion.vel_ned_mps[:, 0],
-        "vel_e_mps": motion.vel_ned_mps[:, 1],
-        "vel_d_mps": motion.vel_ned_mps[:, 2],
-        "roll_rad": motion.rpy_rad[:, 0],
-        "pitch_rad": motion.rpy_rad[:, 1],
-        "yaw_rad": motion.rpy_rad[:, 2],
+        **axis_columns("vel_{}_mps", motion.vel_ned_mps, NED),
+        **axis_columns("{}_rad", motion.rpy_rad, RPY),
         "clock_bias_m": clock_b,
         "clock_drift_mps": clock_d,
+        **axis_columns("acc_bias_{}_mps2", acc_b),
+        **axis_columns("gyro_bias_{}_radps", gyro_b),
     }
-    for k, axis in enumerate("xyz"):
-        truth[f"acc_bias_{axis}_mps2"] = acc_b[:, k]
-        truth[f"gyro_bias_{axis}_radps"] = gyro_b[:, k]
-    imu_cols: dict[str, np.ndarray] = {"t_ns": t_ns}
-    for k, axis in enumerate("xyz"):
-        imu_cols[f"acc_{axis}_mps2"] = acc_m[:, k]
-        imu_cols[f"gyro_{axis}_radps"] = gyro_m[:, k]
     tables = {
-        "imu": from_columns("imu", imu_cols),
+        "imu": imu_table(t_ns, acc_m, gyro_m),
         "gnss": from_columns("gnss", fix),
         "gnss_obs": from_columns("gnss_obs", obs),
         "truth": from_columns("truth", truth),
     }
     sensors = SensorMeta(imu_noise=imu_errors.noise_model(), lever_arm_m=params.lever_arm_m)
     return SynthResult(tables=tables, sensors=sensors, ephemeris=eph, time_base="gps")
-
-
-class SynthSection(Protocol):
-    """What ``write_dataset`` reads of ``params.synth`` (``pipeline.params.SynthParams``): the
-    seed and this dataset's section."""
-
-    @property
-    def seed(self) -> int: ...
-
-    @property
-    def seoul_campus(self) -> SeoulCampusParams: ...
 
 
 def write_dataset(name: str, synth: SynthSection, out_dir: Path) -> list[Path]:

@@ -10,22 +10,16 @@ accuracies the receiver reports (``pseudorange_std_m``, ``h_acc_m`` ...).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.synth.checks import require_non_negative, require_positive
 
 if TYPE_CHECKING:
     from navreplay.ingest.config import ImuNoise
-
-
-def _non_negative(obj: object) -> None:
-    for f in fields(obj):  # type: ignore[arg-type]
-        value = getattr(obj, f.name)
-        if isinstance(value, int | float) and not isinstance(value, bool) and value < 0:
-            raise FieldError(f.name, "must be >= 0")
 
 
 @dataclass(frozen=True)
@@ -53,7 +47,7 @@ class ImuErrors:
     gyro_scale_sigma_ppm: float
 
     def __post_init__(self) -> None:
-        _non_negative(self)
+        require_non_negative(self)
 
     def noise_model(self) -> ImuNoise:
         """The matching filter noise model (``ingest.config.ImuNoise``; no scale factors)."""
@@ -107,17 +101,18 @@ class ReceiverParams:
     fix_vel_sigma_mps: float
 
     def __post_init__(self) -> None:
-        for name in (
-            "cn0_sigma_db",
-            "pr_sigma_m",
-            "prr_sigma_mps",
-            "clock_bias_rw_m_rths",
-            "clock_drift_rw_mps_rths",
-            "fix_uere_m",
-            "fix_vel_sigma_mps",
-        ):
-            if getattr(self, name) < 0:
-                raise FieldError(name, "must be >= 0")
+        require_non_negative(
+            self,
+            (
+                "cn0_sigma_db",
+                "pr_sigma_m",
+                "prr_sigma_mps",
+                "clock_bias_rw_m_rths",
+                "clock_drift_rw_mps_rths",
+                "fix_uere_m",
+                "fix_vel_sigma_mps",
+            ),
+        )
         if not 0.0 <= self.elevation_mask_deg < 90.0:
             raise FieldError("elevation_mask_deg", "must be within [0, 90)")
         if self.fix_tau_s <= 0:
@@ -145,7 +140,7 @@ class ConstellationParams:
     tgd_sigma_s: float
 
     def __post_init__(self) -> None:
-        _non_negative(self)
+        require_non_negative(self)
         if self.eccentricity >= 0.05:
             raise FieldError("eccentricity", "must be within [0, 0.05)")
         if not 16 <= self.upload_interval_s <= 14_400:
@@ -207,9 +202,7 @@ class SeoulCampusParams:
             raise FieldError("imu_rate_hz", "rates must be positive")
         if self.imu_rate_hz % self.gnss_rate_hz or 1_000_000_000 % self.imu_rate_hz:
             raise FieldError("imu_rate_hz", "must be a multiple of gnss_rate_hz dividing 1 GHz")
-        for name in ("max_accel_mps2", "max_yaw_accel_radps2", "max_grade_rate_ps"):
-            if getattr(self, name) <= 0:
-                raise FieldError(name, "must be > 0")
+        require_positive(self, ("max_accel_mps2", "max_yaw_accel_radps2", "max_grade_rate_ps"))
 
 
 NO_IMU_ERRORS = ImuErrors(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)

@@ -39,8 +39,14 @@ import numpy as np
 import numpy.typing as npt
 
 from navreplay.ingest.typed import FieldError
-from navreplay.pipeline.control.lqr import StraightLine, YawSteerModel, discretize
+from navreplay.pipeline.control.lqr import (
+    StraightLine,
+    YawSteerModel,
+    discretize,
+    yaw_steer_model,
+)
 from navreplay.pipeline.nav.local import LocalFrame
+from navreplay.pipeline.synth.checks import require_non_negative
 
 F64 = npt.NDArray[np.float64]
 
@@ -71,9 +77,7 @@ class TractorNoiseVariances:
     speed_m2ps2: float = 1.4e-2
 
     def __post_init__(self) -> None:
-        for name in self.__dataclass_fields__:
-            if getattr(self, name) < 0:
-                raise FieldError(name, "a variance must be >= 0")
+        require_non_negative(self, message="a variance must be >= 0")
 
     def sigmas(self) -> F64:
         """Standard deviations in draw order: E, N, heading, yaw rate, steer, speed."""
@@ -316,15 +320,4 @@ class TractorSim:
 def _yaw_steer_discrete(model: YawSteerModel, dt_s: float) -> tuple[F64, F64]:
     """Exact ZOH discretization of the yaw/steer part ``[psi, psi_dot, psi_ddot, delta,
     delta_dot]`` of eq. 3-4 over ``dt_s``."""
-    wn = model.omega_n_radps
-    a = np.zeros((5, 5))
-    a[0, 1] = 1.0
-    a[1, 2] = 1.0
-    a[2, 1] = -(wn**2)
-    a[2, 2] = -2.0 * model.zeta * wn
-    a[2, 3] = model.k_r * wn**2
-    a[3, 4] = 1.0
-    a[4, 4] = -1.0 / model.tau_v_s
-    b = np.zeros((5, 1))
-    b[4, 0] = model.k_v / model.tau_v_s
-    return discretize(a, b, dt_s)
+    return discretize(*yaw_steer_model(model), dt_s)

@@ -21,19 +21,24 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.ingest.schema import FixType, from_columns
-from navreplay.ingest.typed import to_plain
-from navreplay.ingest.writers.csv import CsvColumn, quantize, write_csv
+from navreplay.ingest.schema import FixType
+from navreplay.ingest.writers.csv import CsvColumn
 from navreplay.pipeline.control.lqr import lqr_command, tractor_lqr_gain
-from navreplay.pipeline.synth import SynthResult
-from navreplay.pipeline.synth.output import dataset_seed, write_dataset_dir
+from navreplay.pipeline.synth import SynthResult, SynthSection
+from navreplay.pipeline.synth.output import (
+    check_dataset,
+    csv_tables,
+    dataset_seed,
+    level_truth_columns,
+    synth_params,
+    write_csv_dataset,
+)
 from navreplay.pipeline.synth.tractor import (
     TractorMeasurement,
     TractorSim,
@@ -127,16 +132,9 @@ def _csv_columns(params: TractorStraightParams, rec: dict[str, F64]) -> dict[str
             CsvColumn("fix_type", FixType.RTK_FIXED * const, "%d"),
         ],
         "truth": [
-            CsvColumn("time_us", t_us, "%d"),
-            CsvColumn("lat_deg", tlat, _FMT_TRUTH),
-            CsvColumn("lon_deg", tlon, _FMT_TRUTH),
-            CsvColumn("alt_m", talt, _FMT_TRUTH),
-            CsvColumn("vel_n_mps", v * np.cos(psi), _FMT_TRUTH),
-            CsvColumn("vel_e_mps", v * np.sin(psi), _FMT_TRUTH),
-            CsvColumn("vel_d_mps", 0.0 * const, _FMT_TRUTH),
-            CsvColumn("roll_rad", 0.0 * const, _FMT_TRUTH),
-            CsvColumn("pitch_rad", 0.0 * const, _FMT_TRUTH),
-            CsvColumn("yaw_rad", (psi + math.pi) % (2 * math.pi) - math.pi, _FMT_TRUTH),
+            *level_truth_columns(
+                t_us, tlat, tlon, talt, v * np.cos(psi), v * np.sin(psi), psi, _FMT_TRUTH
+            ),
             CsvColumn("speed_mps", v, _FMT_TRUTH),
             CsvColumn("yaw_rate_radps", rec["yaw_rate_radps"], _FMT_TRUTH),
             CsvColumn("yaw_accel_radps2", rec["yaw_accel_radps2"], _FMT_TRUTH),
@@ -152,40 +150,26 @@ def _csv_columns(params: TractorStraightParams, rec: dict[str, F64]) -> dict[str
 
 def _tables(cols: dict[str, list[CsvColumn]]) -> dict[str, pa.Table]:
     """Canonical tables: measurements as the CSV holds them, truth at full precision."""
-
-    def logged(c: CsvColumn) -> F64:
-        return quantize(c.values, c.fmt)
-
-    veh = {c.name: c for c in cols["vehicle"]}
-    gn = {c.name: c for c in cols["gnss"]}
-    tr = {c.name: c for c in cols["truth"]}
-    t_ns = cols["vehicle"][0].values.astype(np.int64) * 1000
-    vehicle = from_columns(
-        "vehicle",
+    return csv_tables(
+        cols,
         {
-            "t_ns": t_ns,
-            "speed_mps": logged(veh["radar_speed_mps"]),
-            "steer_rad": logged(veh["steer_pot_rad"]),
-            "yaw_rate_radps": logged(veh["fog_yaw_rate_radps"]),
-            "steer_rate_cmd_radps": logged(veh["steer_cmd_radps"]),
+            "vehicle": {
+                "speed_mps": "radar_speed_mps",
+                "steer_rad": "steer_pot_rad",
+                "yaw_rate_radps": "fog_yaw_rate_radps",
+                "steer_rate_cmd_radps": "steer_cmd_radps",
+            },
+            "gnss": {
+                "lat_deg": "lat_deg",
+                "lon_deg": "lon_deg",
+                "alt_m": "height_m",
+                "h_acc_m": "h_acc_m",
+                "fix_type": "fix_type",
+                "heading_rad": "heading_deg",
+            },
         },
+        scale={"heading_rad": DEG},
     )
-    gnss = from_columns(
-        "gnss",
-        {
-            "t_ns": t_ns,
-            "lat_deg": logged(gn["lat_deg"]),
-            "lon_deg": logged(gn["lon_deg"]),
-            "alt_m": logged(gn["height_m"]),
-            "h_acc_m": logged(gn["h_acc_m"]),
-            "fix_type": gn["fix_type"].values.astype(np.int8),
-            "heading_rad": logged(gn["heading_deg"]) * DEG,
-        },
-    )
-    truth_cols: dict[str, object] = {"t_ns": t_ns}
-    truth_cols.update({name: c.values for name, c in tr.items() if name != "time_us"})
-    truth = from_columns("truth", truth_cols)
-    return {"vehicle": vehicle, "gnss": gnss, "truth": truth}
 
 
 def synthesize(params: TractorStraightParams, seed: int) -> SynthResult:
@@ -206,33 +190,12 @@ def write(params: TractorStraightParams, seed: int, out_dir: str | Path) -> list
         f"navreplay synthesized {DATASET} (paper 000): John Deere 8400 model, "
         f"{params.rate_hz:g} Hz, seed {seed}"
     )
-
-    def write_logs(folder: Path) -> list[tuple[Path, str]]:
-        logs = []
-        for name, columns in cols.items():
-            path = folder / f"{DATASET}_{name}.csv"
-            write_csv(path, columns, comment=comment)
-            logs.append((path, "csv"))
-        return logs
-
     result = SynthResult(_tables(cols), SensorMeta(), time_base="utc")
-    plain = {"seed": seed, DATASET: to_plain(params)}
-    return write_dataset_dir(out_dir, DATASET, result, write_logs, params=plain)
-
-
-class SynthSection(Protocol):
-    """What ``write_dataset`` reads of ``params.synth`` (``pipeline.params.SynthParams``): the
-    seed and this dataset's section."""
-
-    @property
-    def seed(self) -> int: ...
-
-    @property
-    def tractor_straight(self) -> TractorStraightParams: ...
+    plain = synth_params(seed, DATASET, params)
+    return write_csv_dataset(out_dir, DATASET, result, cols, comment=comment, params=plain)
 
 
 def write_dataset(name: str, synth: SynthSection, out_dir: Path) -> list[Path]:
     """The synth registry's entry point: ``tractor_straight`` from ``params.synth``."""
-    if name != DATASET:
-        raise ValueError(f"{__name__} makes {DATASET!r}, not {name!r}")
+    check_dataset(__name__, name, DATASET)
     return write(synth.tractor_straight, synth.seed, out_dir)

@@ -20,10 +20,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from navreplay.pipeline.estimation.windows import NS
-from navreplay.pipeline.outages.montecarlo import Case, Start, run_montecarlo
+from navreplay.pipeline.outages.montecarlo import Case
 from navreplay.pipeline.scenarios.config import Policy
-from tests.pipeline.scenarios.drives import drive, params
+from tests.pipeline.scenarios.drives import montecarlo_rows
 
 STARTS_S = (60.0, 130.0, 200.0)
 LENGTH_S = 60.0
@@ -33,21 +32,8 @@ Rows = dict[int, list[dict[str, Any]]]
 
 def windows(name: str, sats: tuple[int, ...], policy: Policy = "highest_elevation") -> Rows:
     """sats -> the window metrics of the three windows, for filter ``name``."""
-    tables, sensors = drive(300.0)
-    t0 = int(tables["imu"].column("t_ns")[0].as_py())
-    rows, _ = run_montecarlo(
-        tables,
-        sensors,
-        sensors.lever_arm_m,
-        name,
-        params().filters.get(name),
-        [Start(1, i, t0 + round(s * NS)) for i, s in enumerate(STARTS_S)],
-        [Case(LENGTH_S, k) for k in sats],
-        policy=policy,
-        tail_s=20.0,
-        mask_deg=params().scenarios.selection_mask_deg,
-        metrics=params().scenarios.metrics,
-    )
+    cases = [Case(LENGTH_S, k) for k in sats]
+    rows = montecarlo_rows(name, 300.0, STARTS_S, cases, tail_s=20.0, policy=policy)
     assert all(r["status"] == "ok" for r in rows)
     return {k: [r for r in rows if r["sats"] == k] for k in sats}
 

@@ -13,14 +13,12 @@ from navreplay.pipeline.estimation.replay import run_filter
 from navreplay.pipeline.estimation.windows import NS
 from navreplay.pipeline.outages.montecarlo import (
     Case,
-    Start,
     cases_for,
     draw_starts,
-    run_montecarlo,
 )
 from navreplay.pipeline.scenarios.apply import apply_scenario
 from navreplay.pipeline.scenarios.config import SatellitesSpec, ScenarioSpec, WindowsSpec
-from tests.pipeline.scenarios.drives import drive, params
+from tests.pipeline.scenarios.drives import drive, montecarlo_rows, params
 
 DURATION_S, START_S, LENGTH_S = 150.0, 60.5, 30.0
 
@@ -46,25 +44,14 @@ def full_replay(name: str, sats: int) -> dict[str, Any]:
 
 
 def montecarlo(name: str, cases: list[Case], workers: int = 1) -> list[dict[str, Any]]:
-    tables, sensors = drive(DURATION_S)
+    tables, _ = drive(DURATION_S)
     t0 = int(tables["imu"].column("t_ns")[0].as_py())
     t_end = int(tables["imu"].column("t_ns")[-1].as_py())
     tail_s = (t_end - t0) / NS - START_S - LENGTH_S  # to the end of the log, as a full run
-    rows, _ = run_montecarlo(
-        tables,
-        sensors,
-        sensors.lever_arm_m,
-        name,
-        params().filters.get(name),
-        [Start(1, 0, t0 + round(START_S * NS)), Start(1, 1, t0 + 90 * NS)],
-        cases,
-        policy="highest_elevation",
-        tail_s=tail_s,
-        mask_deg=10.0,
-        metrics=params().scenarios.metrics,
-        workers=workers,
+    starts_s = (START_S, 90.0)
+    return montecarlo_rows(
+        name, DURATION_S, starts_s, cases, tail_s=tail_s, mask_deg=10.0, workers=workers
     )
-    return rows
 
 
 @pytest.mark.parametrize(("name", "sats"), [("lc_ekf", 0), ("tc_ukf", 0), ("tc_ukf", 3)])

@@ -11,6 +11,7 @@ records it).
 from __future__ import annotations
 
 import json
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -100,4 +101,12 @@ def dataset_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     metrics = json.loads((run_dir / "metrics.json").read_text())
     metrics["outage_windows"] = [{"start_ns": a, "end_ns": b, "sats": 0}]
     (run_dir / "metrics.json").write_text(json.dumps(metrics))
+    return root
+
+
+@pytest.fixture
+def dataset_copy(dataset_dir: Path, tmp_path: Path) -> Path:
+    """A copy of ``dataset_dir`` (at ``tmp_path/ds``) that a test may add to or change."""
+    root = tmp_path / "ds"
+    shutil.copytree(dataset_dir, root)
     return root

@@ -5,7 +5,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -52,10 +51,9 @@ Our drive is **shorter** than the paper's; <script>alert(1)</script> stays text.
 
 
 def test_outage_results_are_shown_beside_the_paper_and_copied(
-    dataset_dir: Path, tmp_path: Path
+    dataset_copy: Path, tmp_path: Path
 ) -> None:
-    root = tmp_path / "ds"
-    shutil.copytree(dataset_dir, root)
+    root = dataset_copy
     exp = root / "experiments"
     exp.mkdir()
     (exp / "sat_reduction.csv").write_text(_REDUCTION)
@@ -120,9 +118,8 @@ def _experiment(root: Path, spec: dict[str, object]) -> Path:
     return d
 
 
-def test_experiment_sections_render_from_their_contract(dataset_dir: Path, tmp_path: Path) -> None:
-    root = tmp_path / "ds"
-    shutil.copytree(dataset_dir, root)
+def test_experiment_sections_render_from_their_contract(dataset_copy: Path, tmp_path: Path) -> None:
+    root = dataset_copy
     _experiment(
         root,
         {
@@ -179,10 +176,9 @@ def test_summary_ranks_filters_across_reports(dataset_dir: Path, tmp_path: Path)
 
 
 def test_experiment_files_without_a_section_render_generically(
-    dataset_dir: Path, tmp_path: Path
+    dataset_copy: Path, tmp_path: Path
 ) -> None:
-    root = tmp_path / "ds"
-    shutil.copytree(dataset_dir, root)
+    root = dataset_copy
     exp = root / "experiments"
     (exp / "figures").mkdir(parents=True)
     rows = "\n".join(f"cascaded_ekf,{i},{0.1 * i}" for i in range(100))
@@ -203,10 +199,9 @@ def test_experiment_files_without_a_section_render_generically(
 
 
 def test_window_metrics_the_run_wrote_are_taken_as_they_are(
-    dataset_dir: Path, tmp_path: Path
+    dataset_copy: Path, tmp_path: Path
 ) -> None:
-    root = tmp_path / "ds"
-    shutil.copytree(dataset_dir, root)
+    root = dataset_copy
     mpath = root / "runs" / "lc_ekf" / "outage_15s" / "metrics.json"
     metrics = json.loads(mpath.read_text())
     (w,) = metrics["outage_windows"]

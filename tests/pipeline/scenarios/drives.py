@@ -7,14 +7,19 @@ the elevation and azimuth the selection policies need.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import pyarrow as pa
 
 from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.outages.montecarlo import Case, Start, run_montecarlo
 from navreplay.pipeline.params import Params, load_params
+from navreplay.pipeline.scenarios.config import Policy
 from navreplay.pipeline.synth.seoul_campus import simulate
 
 REPO = Path(__file__).resolve().parents[3]
@@ -33,3 +38,36 @@ def drive(duration_s: float = 60.0, seed: int = 7) -> tuple[Tables, SensorMeta]:
     sp = replace(params().synth.seoul_campus, duration_s=duration_s, stationary_s=10.0)
     result = simulate(sp, seed=seed, variant="cw")
     return dict(result.tables), result.sensors
+
+
+def montecarlo_rows(
+    name: str,
+    duration_s: float,
+    starts_s: Sequence[float],
+    cases: Sequence[Case],
+    *,
+    tail_s: float,
+    policy: Policy = "highest_elevation",
+    mask_deg: float | None = None,
+    workers: int = 1,
+) -> list[dict[str, Any]]:
+    """The Monte Carlo rows of filter ``name`` on ``drive(duration_s)``: windows (seed 1,
+    numbered in order) at ``starts_s`` seconds after the first IMU sample, each under every
+    case; ``mask_deg`` defaults to params.yaml's selection mask."""
+    tables, sensors = drive(duration_s)
+    t0 = int(tables["imu"].column("t_ns")[0].as_py())
+    rows, _ = run_montecarlo(
+        tables,
+        sensors,
+        sensors.lever_arm_m,
+        name,
+        params().filters.get(name),
+        [Start(1, i, t0 + round(s * NS)) for i, s in enumerate(starts_s)],
+        list(cases),
+        policy=policy,
+        tail_s=tail_s,
+        mask_deg=params().scenarios.selection_mask_deg if mask_deg is None else mask_deg,
+        metrics=params().scenarios.metrics,
+        workers=workers,
+    )
+    return rows
