@@ -26,7 +26,14 @@ from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, Unscen
 
 from navreplay.pipeline.estimation.kernels import common as cm
 from navreplay.pipeline.estimation.kernels.ekf import ekf_prepare
-from navreplay.pipeline.estimation.kernels.records import RunLog, Schedule, Settings
+from navreplay.pipeline.estimation.kernels.records import (
+    Epoch,
+    GatedBlocks,
+    RowPrediction,
+    RunLog,
+    Schedule,
+    Settings,
+)
 from navreplay.pipeline.estimation.kernels.unscented import sigma_h
 from navreplay.pipeline.estimation.models import ins, ins_errors
 from navreplay.pipeline.estimation.models import measurement as me
@@ -48,27 +55,29 @@ class _Run:
         self.t_cur = int(self.sched.t0)
         self.i = int(self.sched.i0)
         self.u = self.sched.u0.copy()
-        self.u_end = np.empty(6)
-        self.work = np.zeros((9, 10))
-        self.acc = np.zeros(ins.ACC_DIM)
+        self.step = ins.Stepping(self.cfg.substeps, self.cfg.max_step_s, self.cfg.gap_s)
+        self.out = ins.span_work()
         self.L = np.empty((n, n))
         self.buf = cm.epoch_buffers(m_max, n)
 
     def span(self, X: F64, t: int, accumulate: bool) -> int:
         """Propagate ``X`` to ``t`` from the cursor (the cursor does not move)."""
-        cfg, sched = self.cfg, self.sched
-        return int(
-            ins.propagate_span(
-                X, sched.imu_t, sched.imu, self.i, self.t_cur, self.u, t,
-                cfg.substeps, cfg.max_step_s, cfg.gap_s,
-                self.u_end, self.work, self.acc, accumulate,
-            )
-        )  # fmt: skip
+        span = ins.ImuSpan(self.sched.imu_t, self.sched.imu, self.i, self.t_cur, self.u, t)
+        return int(ins.propagate_span(X, span, self.step, self.out, accumulate))
+
+    @property
+    def acc(self) -> F64:
+        """The span accumulator of the last ``span(..., accumulate=True)``."""
+        return self.out.acc
 
     def advance(self, i_next: int, t: int) -> None:
         self.i = i_next
-        self.u[:] = self.u_end
+        self.u[:] = self.out.u_end
         self.t_cur = t
+
+    def epoch(self, t: int, m: int, nb_: int) -> Epoch:
+        """The epoch at ``t`` of ``m`` rows in ``nb_`` blocks (after ``advance`` to ``t``)."""
+        return Epoch(t, m, nb_, self.u[3:6].copy())
 
     def layout(self, stop: I64) -> tuple[int, int]:
         m, nb_ = me.epoch_layout(
@@ -114,7 +123,7 @@ def run_ekf_filterpy(
         m, nb_ = run.layout(stop)
         if m > 0:
             P = np.ascontiguousarray(ekf.P)
-            ma = int(ekf_prepare(t, X, P, m, nb_, fix, obs, run.u[3:6].copy(), cfg, buf, log))
+            ma = int(ekf_prepare(run.epoch(t, m, nb_), X, P, fix, obs, cfg, buf, log))
             ekf.P = P
             if ma > 0:
                 a = buf.acc_rows[:ma]
@@ -197,8 +206,8 @@ def run_ukf_filterpy(
 
 def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb_: int) -> None:
     """Gate with the shared code, then let filterpy update with the accepted rows."""
-    cfg, (_, _, _, inn_i, inn_f, ev_i, ev_f, counts) = run.cfg, run.log
-    n, rows, blocks, wm, wc = cfg.n, run.buf.rows, run.buf.blocks, cfg.wm, cfg.wc
+    cfg, buf = run.cfg, run.buf
+    n, rows, blocks, wm, wc = cfg.n, buf.rows, buf.blocks, cfg.wm, cfg.wc
     Xm = np.empty(ins.FULL_DIM)
     ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, Xm)
     ref = Xm[:3].copy()
@@ -208,38 +217,30 @@ def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb
     me.epoch_z(rows, m, run.fix, run.obs, ref, cfg.nhc_sigma, z, r)
     dr = np.empty(m)
     me.gate_shift(rows, m, run.fix, r, dr)
-    w_ib = run.u[3:6].copy()
+    ep = run.epoch(t, m, nb_)
+    pred = RowPrediction(rows, m, ref, ep.w_ib_b, cfg.lever_b)
     h_ref = np.empty(m)  # as the kernel: rows relative to the mean's prediction
-    me.epoch_h(Xm, rows, m, run.obs, ref, w_ib, cfg.lever_b, h_ref)
+    me.epoch_h(Xm, rows, m, run.obs, ref, ep.w_ib_b, cfg.lever_b, h_ref)
     z -= h_ref
     nis, accepted = np.empty(nb_), np.empty(nb_, np.int64)
     Z = np.empty((2 * n + 1, m))
     for attempt in range(2):
         sig = points.sigma_points(ukf.x, ukf.P)
-        sigma_h(sig, q_ref, n, rows, m, run.obs, ref, w_ib, cfg.lever_b, h_ref,
-                np.empty(ins.FULL_DIM), Z)  # fmt: skip
+        sigma_h(sig, q_ref, pred, run.obs, h_ref, np.empty(ins.FULL_DIM), Z)
         zp = wm @ Z
         dz = Z - zp
         S = np.ascontiguousarray(dz.T @ (wc[:, None] * dz) + np.diag(r))
         nu = z - zp
-        Sg = cm.gating_cov(S, dr, m)
-        cm.gate_blocks(nu, Sg, blocks, nb_, cfg.gate, nis, accepted, np.empty((3, 6)))
+        g = GatedBlocks(nu, cm.gating_cov(S, dr, m), blocks, nb_, nis, accepted)
+        cm.gate_blocks(nu, g.S, blocks, nb_, cfg.gate, nis, accepted, np.empty((3, 6)))
         if attempt == 1:
             break
-        reset = cm.streams_to_reset(t, blocks, nb_, accepted, run.buf.reject_since, cfg.timeout_s)
-        if reset.sum() == 0:
-            break
         P = np.ascontiguousarray(ukf.P)
-        for st in np.flatnonzero(reset):
-            big = cm.inflate_for_stream(P, int(st), nu, blocks, nb_, sc, cfg)
-            cm.record_event(ev_i, ev_f, counts, t, cm.EV_RESET, int(st), -1, big)
+        reset = cm.reset_timed_out(t, P, g, buf.reject_since, sc, cfg, run.log)
         ukf.P = P
-    cm.record_innovations(
-        t, nu, Sg, blocks, nb_, nis, accepted, cfg.gate, inn_i, inn_f, counts, ev_i, ev_f
-    )
-    cm.update_reject_since(t, blocks, nb_, accepted, run.buf.reject_since)
-    a = np.empty(m, np.int64)
-    a = a[: cm.accepted_rows(blocks, nb_, accepted, a)]
+        if not reset:
+            break
+    a = buf.acc_rows[: cm.close_gating(t, g, cfg.gate, buf, run.log)].copy()
     if a.size == 0:
         return
     ukf.sigmas_f = sig
@@ -248,7 +249,7 @@ def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb
         Xs = np.empty(ins.FULL_DIM)
         ins.to_full(np.asarray(s, dtype=float), q_ref, n, Xs)
         out = np.empty(m)
-        me.epoch_h(Xs, rows, m, run.obs, ref, w_ib, cfg.lever_b, out)
+        me.epoch_h(Xs, rows, m, run.obs, ref, ep.w_ib_b, cfg.lever_b, out)
         return (out - h_ref)[a]
 
     ukf.update(z[a], R=np.diag(r[a]), hx=hx)

@@ -64,7 +64,7 @@ def run_fwekf_filterpy(
         m, nb_ = run.layout(stop)
         if m > 0:
             P = np.ascontiguousarray(kf.P)
-            ma = int(ekf_prepare(t, X, P, m, nb_, fix, obs, run.u[3:6].copy(), cfg, buf, log))
+            ma = int(ekf_prepare(run.epoch(t, m, nb_), X, P, fix, obs, cfg, buf, log))
             kf.P = P
             if ma > 0:
                 a = buf.acc_rows[:ma]
