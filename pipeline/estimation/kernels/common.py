@@ -157,14 +157,21 @@ def ensure_pd(P: F64, n: int, L: F64) -> tuple[bool, bool, float]:
 
 
 @njit(cache=True, error_model="numpy")
+def mat_mul_into(A: F64, B: F64, rows: int, inner: int, cols: int, out: F64) -> None:
+    """``out[:rows, :cols] = A[:rows, :inner] B[:inner, :cols]``, each entry summed in the
+    order of ``inner``."""
+    for i in range(rows):
+        for j in range(cols):
+            a = 0.0
+            for k in range(inner):
+                a += A[i, k] * B[k, j]
+            out[i, j] = a
+
+
+@njit(cache=True, error_model="numpy")
 def propagate_cov(P: F64, Phi: F64, Qd: F64, n: int, tmp: F64) -> None:
     """``P <- Phi P Phi^T + Qd`` in place (``tmp``: scratch (n, n))."""
-    for r in range(n):
-        for c in range(n):
-            a = 0.0
-            for k in range(n):
-                a += Phi[r, k] * P[k, c]
-            tmp[r, c] = a
+    mat_mul_into(Phi, P, n, n, n, tmp)
     for r in range(n):
         for c in range(r, n):
             a = Qd[r, c]
@@ -177,12 +184,7 @@ def propagate_cov(P: F64, Phi: F64, Qd: F64, n: int, tmp: F64) -> None:
 @njit(cache=True, error_model="numpy")
 def innovation_cov(H: F64, P: F64, r: F64, m: int, n: int, PHt: F64, S: F64) -> None:
     """``PHt = P H^T`` (n, m) and ``S = H P H^T + diag(r)`` (m, m) for the first ``m`` rows."""
-    for i in range(n):
-        for k in range(m):
-            a = 0.0
-            for j in range(n):
-                a += P[i, j] * H[k, j]
-            PHt[i, k] = a
+    mat_mul_into(P, H.T, n, n, m, PHt)
     for k in range(m):
         for q in range(k, m):
             a = 0.0

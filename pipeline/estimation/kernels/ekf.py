@@ -33,6 +33,7 @@ from navreplay.pipeline.estimation.kernels.common import (
     gating_cov,
     innovation_cov,
     keep_pd,
+    mat_mul_into,
     propagate_cov,
     record_output,
     reset_timed_out,
@@ -134,12 +135,7 @@ def joseph_update(
     if not cholesky(Sa, ma, L):
         return dx, False
     Kt = np.empty((ma, n))  # (P H^T)^T, then S^-1 (P H^T)^T = K^T
-    for i in range(ma):
-        for j in range(n):
-            a = 0.0
-            for k in range(n):
-                a += Ha[i, k] * P[k, j]
-            Kt[i, j] = a
+    mat_mul_into(Ha, P, ma, n, n, Kt)
     cho_solve(L, ma, Kt, n)
     for j in range(n):
         a = 0.0
@@ -154,12 +150,7 @@ def joseph_update(
                 a -= Kt[k, i] * Ha[k, j]
             A[i, j] = a
     AP = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            a = 0.0
-            for k in range(n):
-                a += A[i, k] * P[k, j]
-            AP[i, j] = a
+    mat_mul_into(A, P, n, n, n, AP)
     for i in range(n):
         for j in range(i, n):
             a = 0.0

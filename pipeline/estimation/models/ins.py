@@ -54,6 +54,7 @@ from navreplay.pipeline.nav.mechanization import (
     NAV_DIM,
     propagate_into,
     propagate_lanes_into,
+    quat_dcm,
 )
 
 FULL_DIM = 18
@@ -161,16 +162,10 @@ def _log_div(q: F64, r: F64) -> tuple[float, float, float]:
 @njit(cache=True, error_model="numpy")
 def dcm_into(q: F64, C: F64) -> None:
     """C_b^n of the unit quaternion ``q`` (as ``rotations.quat_to_dcm``) into ``C`` (3, 3)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    C[0, 0] = w * w + x * x - y * y - z * z
-    C[0, 1] = 2.0 * (x * y - w * z)
-    C[0, 2] = 2.0 * (x * z + w * y)
-    C[1, 0] = 2.0 * (x * y + w * z)
-    C[1, 1] = w * w - x * x + y * y - z * z
-    C[1, 2] = 2.0 * (y * z - w * x)
-    C[2, 0] = 2.0 * (x * z - w * y)
-    C[2, 1] = 2.0 * (y * z + w * x)
-    C[2, 2] = w * w - x * x - y * y + z * z
+    c = quat_dcm(q[0], q[1], q[2], q[3])
+    C[0, 0], C[0, 1], C[0, 2] = c[0], c[1], c[2]
+    C[1, 0], C[1, 1], C[1, 2] = c[3], c[4], c[5]
+    C[2, 0], C[2, 1], C[2, 2] = c[6], c[7], c[8]
 
 
 @njit(cache=True, error_model="numpy")
@@ -280,13 +275,26 @@ def coords_scale(X: F64, n: int, out: F64) -> None:
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _span_start(span: ImuSpan, out: SpanWork, accumulate: bool) -> tuple[int, int, int]:
+    """Start a span: the input ``out.u_end`` at its start, the accumulator zeroed if
+    ``accumulate``; returns (next sample, start time, end time)."""
+    if accumulate:
+        for j in range(ACC_DIM):
+            out.acc[j] = 0.0
+    for j in range(6):
+        out.u_end[j] = span.u_start[j]
+    return span.i, span.t_start, span.t_end
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _next_interval(
-    span: ImuSpan, i: int, t_cur: int, step: Stepping
+    span: ImuSpan, i: int, t_cur: int, step: Stepping, u_cur: F64, f1: F64, w1: F64
 ) -> tuple[bool, int, float, int, bool]:
-    """The interval of ``span`` from ``t_cur`` (``i``: the next sample): (ends at sample
-    ``i``, its end time, its length in s, RK4 steps: ``substeps``, more if a step would exceed
-    ``max_step_s``, it lies in an IMU gap: samples ``i - 1`` and ``i`` further apart than
-    ``gap_s``, however the stops cut that gap)."""
+    """The interval of ``span`` from ``t_cur`` (``i``: the next sample, ``u_cur``: the input
+    at ``t_cur``): (ends at sample ``i``, its end time, its length in s, RK4 steps:
+    ``substeps``, more if a step would exceed ``max_step_s``, it lies in an IMU gap: samples
+    ``i - 1`` and ``i`` further apart than ``gap_s``, however the stops cut that gap); the
+    raw input at its end into ``f1``, ``w1`` (``_target_input``)."""
     imu_t, substeps, max_step_s = span.imu_t, step.substeps, step.max_step_s
     advance = i < imu_t.shape[0] and imu_t[i] <= span.t_end
     t_next = imu_t[i] if advance else span.t_end
@@ -295,6 +303,7 @@ def _next_interval(
     if dt > max_step_s * substeps:
         ns = math.ceil(dt / max_step_s)
     in_gap = 0 < i < imu_t.shape[0] and (imu_t[i] - imu_t[i - 1]) * 1e-9 > step.gap_s
+    _target_input(span, i, t_cur, advance, u_cur, f1, w1)
     return advance, t_next, dt, ns, in_gap
 
 
@@ -324,16 +333,7 @@ def _target_input(
 @njit(cache=True, inline="always", error_model="numpy")
 def _accumulate(nav: F64, f0: F64, f1: F64, dt: float, acc: F64) -> None:
     """acc += (C_b^n mean(f0, f1) dt, C_b^n dt) with C_b^n at the interval start."""
-    qw, qx, qy, qz = nav[6], nav[7], nav[8], nav[9]
-    c00 = qw * qw + qx * qx - qy * qy - qz * qz
-    c01 = 2.0 * (qx * qy - qw * qz)
-    c02 = 2.0 * (qx * qz + qw * qy)
-    c10 = 2.0 * (qx * qy + qw * qz)
-    c11 = qw * qw - qx * qx + qy * qy - qz * qz
-    c12 = 2.0 * (qy * qz - qw * qx)
-    c20 = 2.0 * (qx * qz - qw * qy)
-    c21 = 2.0 * (qy * qz + qw * qx)
-    c22 = qw * qw - qx * qx - qy * qy + qz * qz
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = quat_dcm(nav[6], nav[7], nav[8], nav[9])
     fx, fy, fz = 0.5 * (f0[0] + f1[0]), 0.5 * (f0[1] + f1[1]), 0.5 * (f0[2] + f1[2])
     acc[ACC_FN] += dt * (c00 * fx + c01 * fy + c02 * fz)
     acc[ACC_FN + 1] += dt * (c10 * fx + c11 * fy + c12 * fz)
@@ -386,15 +386,9 @@ def propagate_span(X: F64, span: ImuSpan, step: Stepping, out: SpanWork, accumul
     nav = X[:NAV_DIM]
     u_end, work, acc = out.u_end, out.work, out.acc
     f0, w0, f1, w1 = work[5, :3], work[6, :3], work[7, :3], work[8, :3]
-    if accumulate:
-        for j in range(ACC_DIM):
-            acc[j] = 0.0
-    for j in range(6):
-        u_end[j] = span.u_start[j]
-    i, t_cur, t_end = span.i, span.t_start, span.t_end
+    i, t_cur, t_end = _span_start(span, out, accumulate)
     while t_cur < t_end:
-        advance, t_next, dt, ns, in_gap = _next_interval(span, i, t_cur, step)
-        _target_input(span, i, t_cur, advance, u_end, f1, w1)
+        advance, t_next, dt, ns, in_gap = _next_interval(span, i, t_cur, step, u_end, f1, w1)
         for j in range(3):
             f0[j] = u_end[j] - X[X_BA + j]
             w0[j] = u_end[3 + j] - X[X_BG + j]
@@ -465,7 +459,7 @@ def propagate_sigmas(
         The index of the first sample later than ``t_end``.
     """
     L = LANES
-    u_end, acc = out.u_end, out.acc
+    u_end = out.u_end
     f1, w1 = out.work[7, :3], out.work[8, :3]
     if not 0 < m <= L:
         raise ValueError("propagate_sigmas: needs 1 to mechanization.LANES states")
@@ -473,14 +467,9 @@ def propagate_sigmas(
         for d in range(NAV_DIM):
             Y[d * L + b] = X[lanes[b], d]
             Y[(LN_K + d) * L + b] = 0.0
-    for j in range(ACC_DIM):
-        acc[j] = 0.0
-    for j in range(6):
-        u_end[j] = span.u_start[j]
-    i, t_cur, t_end = span.i, span.t_start, span.t_end
+    i, t_cur, t_end = _span_start(span, out, True)
     while t_cur < t_end:
-        advance, t_next, dt, ns, in_gap = _next_interval(span, i, t_cur, step)
-        _target_input(span, i, t_cur, advance, u_end, f1, w1)
+        advance, t_next, dt, ns, in_gap = _next_interval(span, i, t_cur, step, u_end, f1, w1)
         _lane_inputs(X, lanes, m, u_end, f1, w1, Y)
         _accumulate_lane0(X[lanes[0]], Y, u_end, f1, dt, in_gap, out)
         for j in range(3):
