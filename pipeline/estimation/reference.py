@@ -79,6 +79,40 @@ class _Run:
         """The epoch at ``t`` of ``m`` rows in ``nb_`` blocks (after ``advance`` to ``t``)."""
         return Epoch(t, m, nb_, self.u[3:6].copy())
 
+    def predict_nominal(self, X: F64, t: int, Phi: F64, Qd: F64) -> None:
+        """Propagate the nominal state ``X`` to ``t`` (the cursor moves with it), and the
+        span's transition and process noise into ``Phi``, ``Qd`` (error-state filters)."""
+        self.advance(self.span(X, t, True), t)
+        ins_errors.transition(X, self.acc, self.cfg.noise, self.cfg.n, Phi, Qd)
+
+    def prepare(self, kf: Any, t: int, stop: I64, X: F64) -> tuple[int, int]:
+        """``ekf_prepare`` of the epoch at ``stop`` on the covariance of the error-state
+        filter ``kf``; returns (rows, accepted rows) (``buf.acc_rows``)."""
+        m, nb_ = self.layout(stop)
+        if m == 0:
+            return 0, 0
+        P = np.ascontiguousarray(kf.P)
+        ep = self.epoch(t, m, nb_)
+        ma = int(ekf_prepare(ep, X, P, self.fix, self.obs, self.cfg, self.buf, self.log))
+        kf.P = P
+        return m, ma
+
+    def inject(self, kf: Any, X: F64) -> None:
+        """Move the error estimate of ``kf`` into the nominal state ``X`` (error reset)."""
+        n = self.cfg.n
+        ins.inject(X, np.asarray(kf.x, dtype=float).reshape(n), n)
+        kf.x = np.zeros(n)
+
+    def finish_kf(self, kf: Any, k: int, stop: I64, X: F64) -> int:
+        """``finish`` of stop ``k`` for the error-state filter ``kf``, counted as done if
+        it passed."""
+        P = np.ascontiguousarray(kf.P)
+        status = self.finish(int(stop[me.ST_T]), stop, X, P, P, np.ones(self.cfg.n))
+        kf.P = P
+        if status == cm.STATUS_OK:
+            self.log.counts[cm.CNT_STOP] = k + 1
+        return status
+
     def layout(self, stop: I64) -> tuple[int, int]:
         m, nb_ = me.epoch_layout(
             stop, self.fix, self.obs, self.sched.obs_start, self.cfg.nhc_on, self.buf.rows,
@@ -109,37 +143,26 @@ def run_ekf_filterpy(
     ekf.P = np.array(P0, dtype=float)
     X = x0.copy()
     Phi, Qd = np.empty((n, n)), np.empty((n, n))
-    ones = np.ones(n)
     cm.record_output(sched.t0, X, ekf.P, log)
     stops = sched.stops
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = int(stop[me.ST_T])
-        run.advance(run.span(X, t, True), t)
-        ins_errors.transition(X, run.acc, cfg.noise, n, Phi, Qd)
+        run.predict_nominal(X, t, Phi, Qd)
         ekf.F, ekf.Q = Phi, Qd
         ekf.x = np.zeros(n)
         ekf.predict()
-        m, nb_ = run.layout(stop)
-        if m > 0:
-            P = np.ascontiguousarray(ekf.P)
-            ma = int(ekf_prepare(run.epoch(t, m, nb_), X, P, fix, obs, cfg, buf, log))
-            ekf.P = P
-            if ma > 0:
-                a = buf.acc_rows[:ma]
-                Ha, hx = buf.H[a, :n].copy(), buf.z[a] - buf.nu[a]
-                ekf.update(
-                    buf.z[a], HJacobian=lambda _x, h=Ha: h, Hx=lambda _x, v=hx: v,
-                    R=np.diag(buf.r[a]),
-                )  # fmt: skip
-                ins.inject(X, np.asarray(ekf.x, dtype=float), n)
-                ekf.x = np.zeros(n)
-        P = np.ascontiguousarray(ekf.P)
-        status = run.finish(t, stop, X, P, P, ones)
-        ekf.P = P
+        _, ma = run.prepare(ekf, t, stop, X)
+        if ma > 0:
+            a = buf.acc_rows[:ma]
+            Ha, hx = buf.H[a, :n].copy(), buf.z[a] - buf.nu[a]
+            ekf.update(
+                buf.z[a], HJacobian=lambda _x, h=Ha: h, Hx=lambda _x, v=hx: v, R=np.diag(buf.r[a])
+            )
+            run.inject(ekf, X)
+        status = run.finish_kf(ekf, k, stop, X)
         if status != cm.STATUS_OK:
             return status
-        log.counts[cm.CNT_STOP] = k + 1
     return cm.STATUS_OK
 
 

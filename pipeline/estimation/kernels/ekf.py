@@ -48,6 +48,7 @@ from navreplay.pipeline.estimation.kernels.records import (
 )
 from navreplay.pipeline.estimation.models.ins import (
     ImuSpan,
+    SpanWork,
     Stepping,
     inject,
     propagate_span,
@@ -163,6 +164,40 @@ def joseph_update(
     return dx, True
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def ekf_propagate(
+    X: F64, span: ImuSpan, step: Stepping, sw: SpanWork, cfg: Settings, Phi: F64, Qd: F64
+) -> int:
+    """The nominal state ``X`` over ``span`` (``ins.propagate_span``, ``sw``: its work), and
+    the span's transition and process noise into ``Phi``, ``Qd``; returns the next IMU
+    index."""
+    i = propagate_span(X, span, step, sw, True)
+    transition(X, sw.acc, cfg.noise, cfg.n, Phi, Qd)
+    return i
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def end_stop(
+    k: int, stop: I64, X: F64, P: F64, L: F64, ones: F64, cfg: Settings, log: RunLog
+) -> int:
+    """The end of stop ``k`` of an error-state kernel: ``P`` kept positive definite (``L``:
+    its Cholesky factor), the NaN barrier and divergence limits (``ones``: the unit scale of
+    error coordinates), the output row if ``stop`` is an output stop, the stop counted.
+
+    Returns:
+        ``STATUS_OK``, or the code of the failure (recorded with its time).
+    """
+    t = stop[ST_T]
+    ok = keep_pd(P, cfg.n, L, t, log.ev_i, log.ev_f, log.counts)
+    status = check_state(X, P, ones, cfg) if ok else STATUS_INDEFINITE
+    if status != STATUS_OK:
+        return fail(t, status, log.ev_i, log.ev_f, log.counts)
+    if stop[ST_OUT] > 0:
+        record_output(t, X, P, log)
+    log.counts[CNT_STOP] = k + 1
+    return STATUS_OK
+
+
 @njit(cache=True, error_model="numpy")
 def run_ekf(
     x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
@@ -198,11 +233,11 @@ def run_ekf(
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
-        i = propagate_span(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), step, sw, True)
+        span = ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t)
+        i = ekf_propagate(X, span, step, sw, cfg, Phi, Qd)
         for j in range(6):
             u[j] = sw.u_end[j]
         t_cur = t
-        transition(X, sw.acc, cfg.noise, n, Phi, Qd)
         propagate_cov(P, Phi, Qd, n, tmp)
         m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
         if m > 0:
@@ -211,11 +246,7 @@ def run_ekf(
                 dx, ok = joseph_update(P, n, buf.H, buf.S, buf.r, buf.nu, buf.acc_rows, ma)
                 if ok:
                     inject(X, dx, n)
-        ok = keep_pd(P, n, L, t, log.ev_i, log.ev_f, log.counts)
-        status = check_state(X, P, ones, cfg) if ok else STATUS_INDEFINITE
+        status = end_stop(k, stop, X, P, L, ones, cfg, log)
         if status != STATUS_OK:
-            return fail(t, status, log.ev_i, log.ev_f, log.counts)
-        if stop[ST_OUT] > 0:
-            record_output(t, X, P, log)
-        log.counts[CNT_STOP] = k + 1
+            return status
     return STATUS_OK

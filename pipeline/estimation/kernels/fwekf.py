@@ -48,16 +48,16 @@ from navreplay.pipeline._jit import njit
 from navreplay.pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
 from navreplay.pipeline.estimation.kernels.common import (
     CNT_OUT,
-    CNT_STOP,
-    STATUS_INDEFINITE,
     STATUS_OK,
-    check_state,
     epoch_buffers,
-    fail,
-    keep_pd,
     record_output,
 )
-from navreplay.pipeline.estimation.kernels.ekf import ekf_prepare, joseph_update
+from navreplay.pipeline.estimation.kernels.ekf import (
+    ekf_prepare,
+    ekf_propagate,
+    end_stop,
+    joseph_update,
+)
 from navreplay.pipeline.estimation.kernels.records import (
     Epoch,
     EpochBuffers,
@@ -70,10 +70,8 @@ from navreplay.pipeline.estimation.models.ins import (
     ImuSpan,
     Stepping,
     inject,
-    propagate_span,
     span_work,
 )
-from navreplay.pipeline.estimation.models.ins_errors import transition
 from navreplay.pipeline.estimation.models.measurement import (
     K_PR,
     ST_FIX,
@@ -154,7 +152,7 @@ def run_fwekf(
     """
     n = cfg.n
     fz, rules, out_alpha = fading.fz, fading.rules, fading.out_alpha
-    ev_i, ev_f, counts = log.ev_i, log.ev_f, log.counts
+    counts = log.counts
     X = x0.copy()
     P = P0.copy()
     ones = np.ones(n)
@@ -176,10 +174,10 @@ def run_fwekf(
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
-        i = propagate_span(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), step, sw, True)
+        span = ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t)
+        i = ekf_propagate(X, span, step, sw, cfg, Phi, Qd)
         u[:] = sw.u_end
         t_cur = t
-        transition(X, sw.acc, cfg.noise, n, Phi, Qd)
         a_k = alpha if stop[ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
         fade_prior(P, Phi, Qd, a_k)
         m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
@@ -193,14 +191,10 @@ def run_fwekf(
                 n_ring = push_residuals(ring, n_ring, buf.rows, buf.nu, buf.S, m)
                 mean_in, cov_in = residual_inputs(ring, n_ring)
                 alpha = infer_alpha(mean_in, cov_in, fz, rules)
-        ok = keep_pd(P, n, L, t, ev_i, ev_f, counts)
-        status = check_state(X, P, ones, cfg) if ok else STATUS_INDEFINITE
+        j = counts[CNT_OUT]  # the row this stop outputs, if it passes and is an output stop
+        if stop[ST_OUT] > 0 and j < out_alpha.shape[0]:
+            out_alpha[j] = alpha
+        status = end_stop(k, stop, X, P, L, ones, cfg, log)
         if status != STATUS_OK:
-            return fail(t, status, ev_i, ev_f, counts)
-        if stop[ST_OUT] > 0:
-            j = counts[CNT_OUT]
-            if j < out_alpha.shape[0]:
-                out_alpha[j] = alpha
-            record_output(t, X, P, log)
-        counts[CNT_STOP] = k + 1
+            return status
     return STATUS_OK

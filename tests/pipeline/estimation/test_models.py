@@ -55,6 +55,24 @@ def propagate(X: np.ndarray, t: np.ndarray, imu: np.ndarray, t_end: int) -> np.n
     return Y
 
 
+def transition_fd(
+    X: np.ndarray, t: np.ndarray, imu: np.ndarray, t_end: int, eps: np.ndarray
+) -> np.ndarray:
+    """Central differences (error-state step ``eps[j]`` in column ``j``) of the span
+    propagation from ``X`` to ``t_end``."""
+    Y0 = propagate(X, t, imu, t_end)
+    Phi_fd = np.empty((N, N))
+    for j in range(N):
+        d = np.zeros(N)
+        d[j] = eps[j]
+        Xp, Xm = X.copy(), X.copy()
+        ins.inject(Xp, d, N)
+        ins.inject(Xm, -d, N)
+        Yp, Ym = propagate(Xp, t, imu, t_end), propagate(Xm, t, imu, t_end)
+        Phi_fd[:, j] = (ins.difference(Yp, Y0, N) - ins.difference(Ym, Y0, N)) / (2 * eps[j])
+    return Phi_fd
+
+
 def test_inject_and_difference_are_inverse() -> None:
     X = moving_state()
     dx = np.random.default_rng(1).normal(size=N) * EPS * 300
@@ -80,16 +98,7 @@ def test_error_dynamics_match_finite_differences_of_the_mechanization() -> None:
     X = moving_state()
     T = 0.002
     t, imu = imu_span(X, 3, 0.001)
-    Y0 = propagate(X, t, imu, round(T * 1e9))
-    Phi_fd = np.empty((N, N))
-    for j in range(N):
-        d = np.zeros(N)
-        d[j] = FD_EPS[j]
-        Xp, Xm = X.copy(), X.copy()
-        ins.inject(Xp, d, N)
-        ins.inject(Xm, -d, N)
-        Yp, Ym = propagate(Xp, t, imu, round(T * 1e9)), propagate(Xm, t, imu, round(T * 1e9))
-        Phi_fd[:, j] = (ins.difference(Yp, Y0, N) - ins.difference(Ym, Y0, N)) / (2 * FD_EPS[j])
+    Phi_fd = transition_fd(X, t, imu, round(T * 1e9), FD_EPS)
     F = np.empty((N, N))
     C = quat_to_dcm(X[ins.X_Q : ins.X_Q + 4])
     ins_errors.error_jacobian(X, C @ (imu[0, :3] - X[ins.X_BA : ins.X_BA + 3]), C, N, F)
@@ -110,15 +119,7 @@ def test_span_transition_matches_finite_differences_to_second_order() -> None:
     Phi, Qd = np.empty((N, N)), np.empty((N, N))
     noise = ins_errors.noise_vector(2e-3, 2e-4, 1e-4, 1e-5, 0.1, 0.01, 2.0, 0.2)
     ins_errors.transition(Y0, acc, noise, N, Phi, Qd)
-    Phi_fd = np.empty((N, N))
-    for j in range(N):
-        d = np.zeros(N)
-        d[j] = EPS[j]
-        Xp, Xm = X.copy(), X.copy()
-        ins.inject(Xp, d, N)
-        ins.inject(Xm, -d, N)
-        Yp, Ym = propagate(Xp, t, imu, 100_000_000), propagate(Xm, t, imu, 100_000_000)
-        Phi_fd[:, j] = (ins.difference(Yp, Y0, N) - ins.difference(Ym, Y0, N)) / (2 * EPS[j])
+    Phi_fd = transition_fd(X, t, imu, 100_000_000, EPS)
     # third-order terms over 0.1 s at 0.2 rad/s turn rate: ~1 % of the largest couplings
     np.testing.assert_allclose(Phi, Phi_fd, rtol=0.02, atol=2e-3)
     assert np.allclose(Qd, Qd.T)
