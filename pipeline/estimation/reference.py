@@ -18,6 +18,7 @@ sigma).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -58,7 +59,20 @@ class _Run:
         self.step = ins.Stepping(self.cfg.substeps, self.cfg.max_step_s, self.cfg.gap_s)
         self.out = ins.span_work()
         self.L = np.empty((n, n))
+        self.Phi, self.Qd = np.empty((n, n)), np.empty((n, n))
         self.buf = cm.epoch_buffers(m_max, n)
+
+    def stops(self) -> Iterator[tuple[int, I64, int]]:
+        """(index, row, time in ns) of every stop of the schedule, in order."""
+        for k, stop in enumerate(self.sched.stops):
+            yield k, stop, int(stop[me.ST_T])
+
+    def error_filter(self, kind: Any, P0: F64) -> Any:
+        """A filterpy filter of class ``kind`` on the error state: zero, covariance ``P0``."""
+        kf = kind(dim_x=self.cfg.n, dim_z=1)
+        kf.x = np.zeros(self.cfg.n)
+        kf.P = np.array(P0, dtype=float)
+        return kf
 
     def span(self, X: F64, t: int, accumulate: bool) -> int:
         """Propagate ``X`` to ``t`` from the cursor (the cursor does not move)."""
@@ -79,11 +93,11 @@ class _Run:
         """The epoch at ``t`` of ``m`` rows in ``nb_`` blocks (after ``advance`` to ``t``)."""
         return Epoch(t, m, nb_, self.u[3:6].copy())
 
-    def predict_nominal(self, X: F64, t: int, Phi: F64, Qd: F64) -> None:
+    def predict_nominal(self, X: F64, t: int) -> None:
         """Propagate the nominal state ``X`` to ``t`` (the cursor moves with it), and the
         span's transition and process noise into ``Phi``, ``Qd`` (error-state filters)."""
         self.advance(self.span(X, t, True), t)
-        ins_errors.transition(X, self.acc, self.cfg.noise, self.cfg.n, Phi, Qd)
+        ins_errors.transition(X, self.acc, self.cfg.noise, self.cfg.n, self.Phi, self.Qd)
 
     def prepare(self, kf: Any, t: int, stop: I64, X: F64) -> tuple[int, int]:
         """``ekf_prepare`` of the epoch at ``stop`` on the covariance of the error-state
@@ -138,18 +152,12 @@ def run_ekf_filterpy(
     """``kernels.ekf.run_ekf`` with filterpy's ``ExtendedKalmanFilter`` doing predict/update."""
     run = _Run(sched, fix, obs, cfg, log)
     n, buf = cfg.n, run.buf
-    ekf = ExtendedKalmanFilter(dim_x=n, dim_z=1)
-    ekf.x = np.zeros(n)
-    ekf.P = np.array(P0, dtype=float)
+    ekf = run.error_filter(ExtendedKalmanFilter, P0)
     X = x0.copy()
-    Phi, Qd = np.empty((n, n)), np.empty((n, n))
     cm.record_output(sched.t0, X, ekf.P, log)
-    stops = sched.stops
-    for k in range(stops.shape[0]):
-        stop = stops[k]
-        t = int(stop[me.ST_T])
-        run.predict_nominal(X, t, Phi, Qd)
-        ekf.F, ekf.Q = Phi, Qd
+    for k, stop, t in run.stops():
+        run.predict_nominal(X, t)
+        ekf.F, ekf.Q = run.Phi, run.Qd
         ekf.x = np.zeros(n)
         ekf.predict()
         _, ma = run.prepare(ekf, t, stop, X)
@@ -196,10 +204,7 @@ def run_ukf_filterpy(
         ins.from_full(Xs, q_new, n, out)
         return out
 
-    stops = sched.stops
-    for k in range(stops.shape[0]):
-        stop = stops[k]
-        t = int(stop[me.ST_T])
+    for k, stop, t in run.stops():
         # the central sigma point carries the process-noise accumulation and the new reference
         ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, X)
         i_next = run.span(X, t, True)

@@ -39,22 +39,16 @@ def run_fwekf_filterpy(
     run = _Run(sched, fix, obs, cfg, log)
     n, buf, counts = cfg.n, run.buf, log.counts
     fz, out_alpha = fading.fz, fading.out_alpha
-    kf = KalmanFilter(dim_x=n, dim_z=1)
-    kf.x = np.zeros(n)
-    kf.P = np.array(P0, dtype=float)
+    kf = run.error_filter(KalmanFilter, P0)
     X = x0.copy()
-    Phi, Qd = np.empty((n, n)), np.empty((n, n))
     ring = np.full((int(fz[FZ_WINDOW]), RING_COLS), np.nan)
     n_ring, alpha = 0, 1.0
     out_alpha[0] = alpha
     cm.record_output(sched.t0, X, kf.P, log)
-    stops = sched.stops
-    for k in range(stops.shape[0]):
-        stop = stops[k]
-        t = int(stop[me.ST_T])
-        run.predict_nominal(X, t, Phi, Qd)
+    for k, stop, t in run.stops():
+        run.predict_nominal(X, t)
         a_k = alpha if stop[me.ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
-        kf.F, kf.Q = a_k * Phi, Qd.copy()  # eq. 26: (a Phi) P (a Phi)^T + Q
+        kf.F, kf.Q = a_k * run.Phi, run.Qd.copy()  # eq. 26: (a Phi) P (a Phi)^T + Q
         kf.x = np.zeros(n)
         kf.predict()
         m, ma = run.prepare(kf, t, stop, X)

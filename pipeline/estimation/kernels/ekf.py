@@ -39,6 +39,7 @@ from navreplay.pipeline.estimation.kernels.common import (
     reset_timed_out,
 )
 from navreplay.pipeline.estimation.kernels.records import (
+    EkfWork,
     Epoch,
     EpochBuffers,
     GatedBlocks,
@@ -48,7 +49,6 @@ from navreplay.pipeline.estimation.kernels.records import (
 )
 from navreplay.pipeline.estimation.models.ins import (
     ImuSpan,
-    SpanWork,
     Stepping,
     inject,
     propagate_span,
@@ -164,32 +164,43 @@ def joseph_update(
     return dx, True
 
 
+@njit(cache=True, error_model="numpy")
+def ekf_work(cfg: Settings, m_max: int) -> EkfWork:
+    """The workspace of an error-state kernel (``records.EkfWork``)."""
+    n = cfg.n
+    return EkfWork(
+        np.empty((n, n)),
+        np.empty((n, n)),
+        np.empty((n, n)),
+        np.ones(n),
+        Stepping(cfg.substeps, cfg.max_step_s, cfg.gap_s),
+        span_work(),
+        epoch_buffers(m_max, n),
+    )
+
+
 @njit(cache=True, error_model="numpy", inline="always")
-def ekf_propagate(
-    X: F64, span: ImuSpan, step: Stepping, sw: SpanWork, cfg: Settings, Phi: F64, Qd: F64
-) -> int:
-    """The nominal state ``X`` over ``span`` (``ins.propagate_span``, ``sw``: its work), and
-    the span's transition and process noise into ``Phi``, ``Qd``; returns the next IMU
+def ekf_propagate(X: F64, span: ImuSpan, cfg: Settings, w: EkfWork) -> int:
+    """The nominal state ``X`` over ``span`` (``ins.propagate_span`` into ``w.prop``), and
+    the span's transition and process noise into ``w.Phi``, ``w.Qd``; returns the next IMU
     index."""
-    i = propagate_span(X, span, step, sw, True)
-    transition(X, sw.acc, cfg.noise, cfg.n, Phi, Qd)
+    i = propagate_span(X, span, w.step, w.prop, True)
+    transition(X, w.prop.acc, cfg.noise, cfg.n, w.Phi, w.Qd)
     return i
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def end_stop(
-    k: int, stop: I64, X: F64, P: F64, L: F64, ones: F64, cfg: Settings, log: RunLog
-) -> int:
-    """The end of stop ``k`` of an error-state kernel: ``P`` kept positive definite (``L``:
-    its Cholesky factor), the NaN barrier and divergence limits (``ones``: the unit scale of
-    error coordinates), the output row if ``stop`` is an output stop, the stop counted.
+def end_stop(k: int, stop: I64, X: F64, P: F64, cfg: Settings, w: EkfWork, log: RunLog) -> int:
+    """The end of stop ``k`` of an error-state kernel: ``P`` kept positive definite, the NaN
+    barrier and divergence limits, the output row if ``stop`` is an output stop, the stop
+    counted.
 
     Returns:
         ``STATUS_OK``, or the code of the failure (recorded with its time).
     """
     t = stop[ST_T]
-    ok = keep_pd(P, cfg.n, L, t, log.ev_i, log.ev_f, log.counts)
-    status = check_state(X, P, ones, cfg) if ok else STATUS_INDEFINITE
+    ok = keep_pd(P, cfg.n, w.L, t, log.ev_i, log.ev_f, log.counts)
+    status = check_state(X, P, w.ones, cfg) if ok else STATUS_INDEFINITE
     if status != STATUS_OK:
         return fail(t, status, log.ev_i, log.ev_f, log.counts)
     if stop[ST_OUT] > 0:
@@ -214,18 +225,13 @@ def run_ekf(
     Returns:
         a ``common.STATUS_*`` code (``log.counts[CNT_T_FAIL]`` holds the time of a failure).
     """
-    n, m_max = cfg.n, sched.m_max
+    n = cfg.n
     X = x0.copy()
     P = P0.copy()
-    ones = np.ones(n)
-    L = np.empty((n, n))
-    Phi = np.empty((n, n))
-    Qd = np.empty((n, n))
     tmp = np.empty((n, n))
-    step = Stepping(cfg.substeps, cfg.max_step_s, cfg.gap_s)
-    sw = span_work()
+    w = ekf_work(cfg, sched.m_max)
+    buf = w.buf
     u = sched.u0.copy()
-    buf = epoch_buffers(m_max, n)
     record_output(sched.t0, X, P, log)
     t_cur = sched.t0
     i = sched.i0
@@ -233,12 +239,11 @@ def run_ekf(
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
-        span = ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t)
-        i = ekf_propagate(X, span, step, sw, cfg, Phi, Qd)
+        i = ekf_propagate(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), cfg, w)
         for j in range(6):
-            u[j] = sw.u_end[j]
+            u[j] = w.prop.u_end[j]
         t_cur = t
-        propagate_cov(P, Phi, Qd, n, tmp)
+        propagate_cov(P, w.Phi, w.Qd, n, tmp)
         m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
         if m > 0:
             ma = ekf_prepare(Epoch(t, m, nb_, u[3:6]), X, P, fix, obs, cfg, buf, log)
@@ -246,7 +251,7 @@ def run_ekf(
                 dx, ok = joseph_update(P, n, buf.H, buf.S, buf.r, buf.nu, buf.acc_rows, ma)
                 if ok:
                     inject(X, dx, n)
-        status = end_stop(k, stop, X, P, L, ones, cfg, log)
+        status = end_stop(k, stop, X, P, cfg, w, log)
         if status != STATUS_OK:
             return status
     return STATUS_OK

@@ -49,12 +49,12 @@ from navreplay.pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual
 from navreplay.pipeline.estimation.kernels.common import (
     CNT_OUT,
     STATUS_OK,
-    epoch_buffers,
     record_output,
 )
 from navreplay.pipeline.estimation.kernels.ekf import (
     ekf_prepare,
     ekf_propagate,
+    ekf_work,
     end_stop,
     joseph_update,
 )
@@ -68,9 +68,7 @@ from navreplay.pipeline.estimation.kernels.records import (
 )
 from navreplay.pipeline.estimation.models.ins import (
     ImuSpan,
-    Stepping,
     inject,
-    span_work,
 )
 from navreplay.pipeline.estimation.models.measurement import (
     K_PR,
@@ -155,14 +153,9 @@ def run_fwekf(
     counts = log.counts
     X = x0.copy()
     P = P0.copy()
-    ones = np.ones(n)
-    L = np.empty((n, n))
-    Phi = np.empty((n, n))
-    Qd = np.empty((n, n))
-    step = Stepping(cfg.substeps, cfg.max_step_s, cfg.gap_s)
-    sw = span_work()
+    w = ekf_work(cfg, sched.m_max)
+    buf = w.buf
     u = sched.u0.copy()
-    buf = epoch_buffers(sched.m_max, n)
     ring = np.full((int(fz[FZ_WINDOW]), RING_COLS), math.nan)
     n_ring = 0
     alpha = 1.0
@@ -174,12 +167,11 @@ def run_fwekf(
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
-        span = ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t)
-        i = ekf_propagate(X, span, step, sw, cfg, Phi, Qd)
-        u[:] = sw.u_end
+        i = ekf_propagate(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), cfg, w)
+        u[:] = w.prop.u_end
         t_cur = t
         a_k = alpha if stop[ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
-        fade_prior(P, Phi, Qd, a_k)
+        fade_prior(P, w.Phi, w.Qd, a_k)
         m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
         if m > 0:
             ma = ekf_prepare(Epoch(t, m, nb_, u[3:6]), X, P, fix, obs, cfg, buf, log)
@@ -194,7 +186,7 @@ def run_fwekf(
         j = counts[CNT_OUT]  # the row this stop outputs, if it passes and is an output stop
         if stop[ST_OUT] > 0 and j < out_alpha.shape[0]:
             out_alpha[j] = alpha
-        status = end_stop(k, stop, X, P, L, ones, cfg, log)
+        status = end_stop(k, stop, X, P, cfg, w, log)
         if status != STATUS_OK:
             return status
     return STATUS_OK

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -55,22 +56,28 @@ def propagate(X: np.ndarray, t: np.ndarray, imu: np.ndarray, t_end: int) -> np.n
     return Y
 
 
-def transition_fd(
-    X: np.ndarray, t: np.ndarray, imu: np.ndarray, t_end: int, eps: np.ndarray
+def central_differences(
+    X: np.ndarray, eps: np.ndarray, f: Callable[[np.ndarray], np.ndarray]
 ) -> np.ndarray:
-    """Central differences (error-state step ``eps[j]`` in column ``j``) of the span
-    propagation from ``X`` to ``t_end``."""
-    Y0 = propagate(X, t, imu, t_end)
-    Phi_fd = np.empty((N, N))
+    """Column ``j``: ``(f(X [+] eps_j e_j) - f(X [+] -eps_j e_j)) / (2 eps_j)``, the error-state
+    step applied with ``ins.inject``."""
+    cols = []
     for j in range(N):
         d = np.zeros(N)
         d[j] = eps[j]
         Xp, Xm = X.copy(), X.copy()
         ins.inject(Xp, d, N)
         ins.inject(Xm, -d, N)
-        Yp, Ym = propagate(Xp, t, imu, t_end), propagate(Xm, t, imu, t_end)
-        Phi_fd[:, j] = (ins.difference(Yp, Y0, N) - ins.difference(Ym, Y0, N)) / (2 * eps[j])
-    return Phi_fd
+        cols.append((f(Xp) - f(Xm)) / (2 * eps[j]))
+    return np.stack(cols, axis=1)
+
+
+def transition_fd(
+    X: np.ndarray, t: np.ndarray, imu: np.ndarray, t_end: int, eps: np.ndarray
+) -> np.ndarray:
+    """Central differences of the span propagation from ``X`` to ``t_end``."""
+    Y0 = propagate(X, t, imu, t_end)
+    return central_differences(X, eps, lambda Z: ins.difference(propagate(Z, t, imu, t_end), Y0, N))
 
 
 def test_inject_and_difference_are_inverse() -> None:
@@ -251,17 +258,13 @@ def test_measurement_jacobians_match_finite_differences(kind: str, tol: float) -
     me.epoch_jac(X, rows, m, obs, w, lever, N, H)
     eps = EPS.copy()
     eps[ins.E_ATT : ins.E_ATT + 3] = 1e-4  # 2e7 m pseudoranges: keep rounding below 1e-5
-    H_fd = np.zeros((m, N))
-    for j in range(N):
-        d = np.zeros(N)
-        d[j] = eps[j]
-        Xp, Xm = X.copy(), X.copy()
-        ins.inject(Xp, d, N)
-        ins.inject(Xm, -d, N)
-        hp, hm = np.zeros(m), np.zeros(m)
-        me.epoch_h(Xp, rows, m, obs, ref, w, lever, hp)
-        me.epoch_h(Xm, rows, m, obs, ref, w, lever, hm)
-        H_fd[:, j] = (hp - hm) / (2 * eps[j])
+
+    def h(Z: np.ndarray) -> np.ndarray:
+        out = np.zeros(m)
+        me.epoch_h(Z, rows, m, obs, ref, w, lever, out)
+        return out
+
+    H_fd = central_differences(X, eps, h)
     kinds = {"pos": (0, 1, 2), "vel": (3, 4, 5), "pr": (6,), "prr": (7,), "nhc": (8, 9)}
     sel = np.isin(rows[:m, 0], kinds[kind])
     np.testing.assert_allclose(H[sel], H_fd[sel], rtol=1e-4, atol=tol)
