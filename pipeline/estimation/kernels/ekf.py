@@ -39,7 +39,6 @@ from navreplay.pipeline.estimation.kernels.common import (
     reset_timed_out,
 )
 from navreplay.pipeline.estimation.kernels.records import (
-    EkfWork,
     Epoch,
     EpochBuffers,
     GatedBlocks,
@@ -165,51 +164,6 @@ def joseph_update(
 
 
 @njit(cache=True, error_model="numpy")
-def ekf_work(cfg: Settings, m_max: int) -> EkfWork:
-    """The workspace of an error-state kernel (``records.EkfWork``)."""
-    n = cfg.n
-    return EkfWork(
-        np.empty((n, n)),
-        np.empty((n, n)),
-        np.empty((n, n)),
-        np.ones(n),
-        Stepping(cfg.substeps, cfg.max_step_s, cfg.gap_s),
-        span_work(),
-        epoch_buffers(m_max, n),
-    )
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def ekf_propagate(X: F64, span: ImuSpan, cfg: Settings, w: EkfWork) -> int:
-    """The nominal state ``X`` over ``span`` (``ins.propagate_span`` into ``w.prop``), and
-    the span's transition and process noise into ``w.Phi``, ``w.Qd``; returns the next IMU
-    index."""
-    i = propagate_span(X, span, w.step, w.prop, True)
-    transition(X, w.prop.acc, cfg.noise, cfg.n, w.Phi, w.Qd)
-    return i
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def end_stop(k: int, stop: I64, X: F64, P: F64, cfg: Settings, w: EkfWork, log: RunLog) -> int:
-    """The end of stop ``k`` of an error-state kernel: ``P`` kept positive definite, the NaN
-    barrier and divergence limits, the output row if ``stop`` is an output stop, the stop
-    counted.
-
-    Returns:
-        ``STATUS_OK``, or the code of the failure (recorded with its time).
-    """
-    t = stop[ST_T]
-    ok = keep_pd(P, cfg.n, w.L, t, log.ev_i, log.ev_f, log.counts)
-    status = check_state(X, P, w.ones, cfg) if ok else STATUS_INDEFINITE
-    if status != STATUS_OK:
-        return fail(t, status, log.ev_i, log.ev_f, log.counts)
-    if stop[ST_OUT] > 0:
-        record_output(t, X, P, log)
-    log.counts[CNT_STOP] = k + 1
-    return STATUS_OK
-
-
-@njit(cache=True, error_model="numpy")
 def run_ekf(
     x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
 ) -> int:
@@ -225,13 +179,18 @@ def run_ekf(
     Returns:
         a ``common.STATUS_*`` code (``log.counts[CNT_T_FAIL]`` holds the time of a failure).
     """
-    n = cfg.n
+    n, m_max = cfg.n, sched.m_max
     X = x0.copy()
     P = P0.copy()
+    ones = np.ones(n)
+    L = np.empty((n, n))
+    Phi = np.empty((n, n))
+    Qd = np.empty((n, n))
     tmp = np.empty((n, n))
-    w = ekf_work(cfg, sched.m_max)
-    buf = w.buf
+    step = Stepping(cfg.substeps, cfg.max_step_s, cfg.gap_s)
+    sw = span_work()
     u = sched.u0.copy()
+    buf = epoch_buffers(m_max, n)
     record_output(sched.t0, X, P, log)
     t_cur = sched.t0
     i = sched.i0
@@ -239,11 +198,12 @@ def run_ekf(
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
-        i = ekf_propagate(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), cfg, w)
+        i = propagate_span(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), step, sw, True)
         for j in range(6):
-            u[j] = w.prop.u_end[j]
+            u[j] = sw.u_end[j]
         t_cur = t
-        propagate_cov(P, w.Phi, w.Qd, n, tmp)
+        transition(X, sw.acc, cfg.noise, n, Phi, Qd)
+        propagate_cov(P, Phi, Qd, n, tmp)
         m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
         if m > 0:
             ma = ekf_prepare(Epoch(t, m, nb_, u[3:6]), X, P, fix, obs, cfg, buf, log)
@@ -251,7 +211,11 @@ def run_ekf(
                 dx, ok = joseph_update(P, n, buf.H, buf.S, buf.r, buf.nu, buf.acc_rows, ma)
                 if ok:
                     inject(X, dx, n)
-        status = end_stop(k, stop, X, P, cfg, w, log)
+        ok = keep_pd(P, n, L, t, log.ev_i, log.ev_f, log.counts)
+        status = check_state(X, P, ones, cfg) if ok else STATUS_INDEFINITE
         if status != STATUS_OK:
-            return status
+            return fail(t, status, log.ev_i, log.ev_f, log.counts)
+        if stop[ST_OUT] > 0:
+            record_output(t, X, P, log)
+        log.counts[CNT_STOP] = k + 1
     return STATUS_OK

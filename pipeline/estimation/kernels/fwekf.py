@@ -48,16 +48,16 @@ from navreplay.pipeline._jit import njit
 from navreplay.pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
 from navreplay.pipeline.estimation.kernels.common import (
     CNT_OUT,
+    CNT_STOP,
+    STATUS_INDEFINITE,
     STATUS_OK,
+    check_state,
+    epoch_buffers,
+    fail,
+    keep_pd,
     record_output,
 )
-from navreplay.pipeline.estimation.kernels.ekf import (
-    ekf_prepare,
-    ekf_propagate,
-    ekf_work,
-    end_stop,
-    joseph_update,
-)
+from navreplay.pipeline.estimation.kernels.ekf import ekf_prepare, joseph_update
 from navreplay.pipeline.estimation.kernels.records import (
     Epoch,
     EpochBuffers,
@@ -68,8 +68,12 @@ from navreplay.pipeline.estimation.kernels.records import (
 )
 from navreplay.pipeline.estimation.models.ins import (
     ImuSpan,
+    Stepping,
     inject,
+    propagate_span,
+    span_work,
 )
+from navreplay.pipeline.estimation.models.ins_errors import transition
 from navreplay.pipeline.estimation.models.measurement import (
     K_PR,
     ST_FIX,
@@ -150,12 +154,17 @@ def run_fwekf(
     """
     n = cfg.n
     fz, rules, out_alpha = fading.fz, fading.rules, fading.out_alpha
-    counts = log.counts
+    ev_i, ev_f, counts = log.ev_i, log.ev_f, log.counts
     X = x0.copy()
     P = P0.copy()
-    w = ekf_work(cfg, sched.m_max)
-    buf = w.buf
+    ones = np.ones(n)
+    L = np.empty((n, n))
+    Phi = np.empty((n, n))
+    Qd = np.empty((n, n))
+    step = Stepping(cfg.substeps, cfg.max_step_s, cfg.gap_s)
+    sw = span_work()
     u = sched.u0.copy()
+    buf = epoch_buffers(sched.m_max, n)
     ring = np.full((int(fz[FZ_WINDOW]), RING_COLS), math.nan)
     n_ring = 0
     alpha = 1.0
@@ -167,11 +176,12 @@ def run_fwekf(
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
-        i = ekf_propagate(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), cfg, w)
-        u[:] = w.prop.u_end
+        i = propagate_span(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), step, sw, True)
+        u[:] = sw.u_end
         t_cur = t
+        transition(X, sw.acc, cfg.noise, n, Phi, Qd)
         a_k = alpha if stop[ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
-        fade_prior(P, w.Phi, w.Qd, a_k)
+        fade_prior(P, Phi, Qd, a_k)
         m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
         if m > 0:
             ma = ekf_prepare(Epoch(t, m, nb_, u[3:6]), X, P, fix, obs, cfg, buf, log)
@@ -183,10 +193,14 @@ def run_fwekf(
                 n_ring = push_residuals(ring, n_ring, buf.rows, buf.nu, buf.S, m)
                 mean_in, cov_in = residual_inputs(ring, n_ring)
                 alpha = infer_alpha(mean_in, cov_in, fz, rules)
-        j = counts[CNT_OUT]  # the row this stop outputs, if it passes and is an output stop
-        if stop[ST_OUT] > 0 and j < out_alpha.shape[0]:
-            out_alpha[j] = alpha
-        status = end_stop(k, stop, X, P, cfg, w, log)
+        ok = keep_pd(P, n, L, t, ev_i, ev_f, counts)
+        status = check_state(X, P, ones, cfg) if ok else STATUS_INDEFINITE
         if status != STATUS_OK:
-            return status
+            return fail(t, status, ev_i, ev_f, counts)
+        if stop[ST_OUT] > 0:
+            j = counts[CNT_OUT]
+            if j < out_alpha.shape[0]:
+                out_alpha[j] = alpha
+            record_output(t, X, P, log)
+        counts[CNT_STOP] = k + 1
     return STATUS_OK

@@ -18,7 +18,7 @@ from typing import NamedTuple, TypeVar
 
 import numpy as np
 
-from navreplay.pipeline.estimation.models.ins import SpanWork, Stepping
+from navreplay.pipeline.estimation.models.ins import SpanWork
 from navreplay.pipeline.nav.earth import F64, I64
 
 log = logging.getLogger(__name__)
@@ -204,26 +204,6 @@ class SigmaWork(NamedTuple):
     sc: F64
     lanes: I64
     Y: F64
-
-
-class EkfWork(NamedTuple):
-    """An error-state kernel's workspace, allocated once per run (``kernels.ekf.ekf_work``).
-
-    Attributes:
-        Phi, Qd: the span's transition and process noise (n, n).
-        L: Cholesky factor of the covariance (n, n); ones: unit scale of error coordinates.
-        step: the RK4 stepping (``ins.Stepping``); prop: what propagating a span writes
-            (``ins.SpanWork``).
-        buf: the measurement epochs' scratch (``EpochBuffers``).
-    """
-
-    Phi: F64
-    Qd: F64
-    L: F64
-    ones: F64
-    step: Stepping
-    prop: SpanWork
-    buf: EpochBuffers
 
 
 class Fading(NamedTuple):
