@@ -18,6 +18,7 @@ sigma).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,7 +27,14 @@ from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, Unscen
 
 from navreplay.pipeline.estimation.kernels import common as cm
 from navreplay.pipeline.estimation.kernels.ekf import ekf_prepare
-from navreplay.pipeline.estimation.kernels.records import RunLog, Schedule, Settings
+from navreplay.pipeline.estimation.kernels.records import (
+    Epoch,
+    GatedBlocks,
+    RowPrediction,
+    RunLog,
+    Schedule,
+    Settings,
+)
 from navreplay.pipeline.estimation.kernels.unscented import sigma_h
 from navreplay.pipeline.estimation.models import ins, ins_errors
 from navreplay.pipeline.estimation.models import measurement as me
@@ -48,27 +56,76 @@ class _Run:
         self.t_cur = int(self.sched.t0)
         self.i = int(self.sched.i0)
         self.u = self.sched.u0.copy()
-        self.u_end = np.empty(6)
-        self.work = np.zeros((9, 10))
-        self.acc = np.zeros(ins.ACC_DIM)
+        self.step = ins.Stepping(self.cfg.substeps, self.cfg.max_step_s, self.cfg.gap_s)
+        self.out = ins.span_work()
         self.L = np.empty((n, n))
+        self.Phi, self.Qd = np.empty((n, n)), np.empty((n, n))
         self.buf = cm.epoch_buffers(m_max, n)
+
+    def stops(self) -> Iterator[tuple[int, I64, int]]:
+        """(index, row, time in ns) of every stop of the schedule, in order."""
+        for k, stop in enumerate(self.sched.stops):
+            yield k, stop, int(stop[me.ST_T])
+
+    def error_filter(self, kind: Any, P0: F64) -> Any:
+        """A filterpy filter of class ``kind`` on the error state: zero, covariance ``P0``."""
+        kf = kind(dim_x=self.cfg.n, dim_z=1)
+        kf.x = np.zeros(self.cfg.n)
+        kf.P = np.array(P0, dtype=float)
+        return kf
 
     def span(self, X: F64, t: int, accumulate: bool) -> int:
         """Propagate ``X`` to ``t`` from the cursor (the cursor does not move)."""
-        cfg, sched = self.cfg, self.sched
-        return int(
-            ins.propagate_span(
-                X, sched.imu_t, sched.imu, self.i, self.t_cur, self.u, t,
-                cfg.substeps, cfg.max_step_s, cfg.gap_s,
-                self.u_end, self.work, self.acc, accumulate,
-            )
-        )  # fmt: skip
+        span = ins.ImuSpan(self.sched.imu_t, self.sched.imu, self.i, self.t_cur, self.u, t)
+        return int(ins.propagate_span(X, span, self.step, self.out, accumulate))
+
+    @property
+    def acc(self) -> F64:
+        """The span accumulator of the last ``span(..., accumulate=True)``."""
+        return self.out.acc
 
     def advance(self, i_next: int, t: int) -> None:
         self.i = i_next
-        self.u[:] = self.u_end
+        self.u[:] = self.out.u_end
         self.t_cur = t
+
+    def epoch(self, t: int, m: int, nb_: int) -> Epoch:
+        """The epoch at ``t`` of ``m`` rows in ``nb_`` blocks (after ``advance`` to ``t``)."""
+        return Epoch(t, m, nb_, self.u[3:6].copy())
+
+    def predict_nominal(self, X: F64, t: int) -> None:
+        """Propagate the nominal state ``X`` to ``t`` (the cursor moves with it), and the
+        span's transition and process noise into ``Phi``, ``Qd`` (error-state filters)."""
+        self.advance(self.span(X, t, True), t)
+        ins_errors.transition(X, self.acc, self.cfg.noise, self.cfg.n, self.Phi, self.Qd)
+
+    def prepare(self, kf: Any, t: int, stop: I64, X: F64) -> tuple[int, int]:
+        """``ekf_prepare`` of the epoch at ``stop`` on the covariance of the error-state
+        filter ``kf``; returns (rows, accepted rows) (``buf.acc_rows``)."""
+        m, nb_ = self.layout(stop)
+        if m == 0:
+            return 0, 0
+        P = np.ascontiguousarray(kf.P)
+        ep = self.epoch(t, m, nb_)
+        ma = int(ekf_prepare(ep, X, P, self.fix, self.obs, self.cfg, self.buf, self.log))
+        kf.P = P
+        return m, ma
+
+    def inject(self, kf: Any, X: F64) -> None:
+        """Move the error estimate of ``kf`` into the nominal state ``X`` (error reset)."""
+        n = self.cfg.n
+        ins.inject(X, np.asarray(kf.x, dtype=float).reshape(n), n)
+        kf.x = np.zeros(n)
+
+    def finish_kf(self, kf: Any, k: int, stop: I64, X: F64) -> int:
+        """``finish`` of stop ``k`` for the error-state filter ``kf``, counted as done if
+        it passed."""
+        P = np.ascontiguousarray(kf.P)
+        status = self.finish(int(stop[me.ST_T]), stop, X, P, P, np.ones(self.cfg.n))
+        kf.P = P
+        if status == cm.STATUS_OK:
+            self.log.counts[cm.CNT_STOP] = k + 1
+        return status
 
     def layout(self, stop: I64) -> tuple[int, int]:
         m, nb_ = me.epoch_layout(
@@ -95,42 +152,25 @@ def run_ekf_filterpy(
     """``kernels.ekf.run_ekf`` with filterpy's ``ExtendedKalmanFilter`` doing predict/update."""
     run = _Run(sched, fix, obs, cfg, log)
     n, buf = cfg.n, run.buf
-    ekf = ExtendedKalmanFilter(dim_x=n, dim_z=1)
-    ekf.x = np.zeros(n)
-    ekf.P = np.array(P0, dtype=float)
+    ekf = run.error_filter(ExtendedKalmanFilter, P0)
     X = x0.copy()
-    Phi, Qd = np.empty((n, n)), np.empty((n, n))
-    ones = np.ones(n)
     cm.record_output(sched.t0, X, ekf.P, log)
-    stops = sched.stops
-    for k in range(stops.shape[0]):
-        stop = stops[k]
-        t = int(stop[me.ST_T])
-        run.advance(run.span(X, t, True), t)
-        ins_errors.transition(X, run.acc, cfg.noise, n, Phi, Qd)
-        ekf.F, ekf.Q = Phi, Qd
+    for k, stop, t in run.stops():
+        run.predict_nominal(X, t)
+        ekf.F, ekf.Q = run.Phi, run.Qd
         ekf.x = np.zeros(n)
         ekf.predict()
-        m, nb_ = run.layout(stop)
-        if m > 0:
-            P = np.ascontiguousarray(ekf.P)
-            ma = int(ekf_prepare(t, X, P, m, nb_, fix, obs, run.u[3:6].copy(), cfg, buf, log))
-            ekf.P = P
-            if ma > 0:
-                a = buf.acc_rows[:ma]
-                Ha, hx = buf.H[a, :n].copy(), buf.z[a] - buf.nu[a]
-                ekf.update(
-                    buf.z[a], HJacobian=lambda _x, h=Ha: h, Hx=lambda _x, v=hx: v,
-                    R=np.diag(buf.r[a]),
-                )  # fmt: skip
-                ins.inject(X, np.asarray(ekf.x, dtype=float), n)
-                ekf.x = np.zeros(n)
-        P = np.ascontiguousarray(ekf.P)
-        status = run.finish(t, stop, X, P, P, ones)
-        ekf.P = P
+        _, ma = run.prepare(ekf, t, stop, X)
+        if ma > 0:
+            a = buf.acc_rows[:ma]
+            Ha, hx = buf.H[a, :n].copy(), buf.z[a] - buf.nu[a]
+            ekf.update(
+                buf.z[a], HJacobian=lambda _x, h=Ha: h, Hx=lambda _x, v=hx: v, R=np.diag(buf.r[a])
+            )
+            run.inject(ekf, X)
+        status = run.finish_kf(ekf, k, stop, X)
         if status != cm.STATUS_OK:
             return status
-        log.counts[cm.CNT_STOP] = k + 1
     return cm.STATUS_OK
 
 
@@ -164,10 +204,7 @@ def run_ukf_filterpy(
         ins.from_full(Xs, q_new, n, out)
         return out
 
-    stops = sched.stops
-    for k in range(stops.shape[0]):
-        stop = stops[k]
-        t = int(stop[me.ST_T])
+    for k, stop, t in run.stops():
         # the central sigma point carries the process-noise accumulation and the new reference
         ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, X)
         i_next = run.span(X, t, True)
@@ -197,8 +234,8 @@ def run_ukf_filterpy(
 
 def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb_: int) -> None:
     """Gate with the shared code, then let filterpy update with the accepted rows."""
-    cfg, (_, _, _, inn_i, inn_f, ev_i, ev_f, counts) = run.cfg, run.log
-    n, rows, blocks, wm, wc = cfg.n, run.buf.rows, run.buf.blocks, cfg.wm, cfg.wc
+    cfg, buf = run.cfg, run.buf
+    n, rows, blocks, wm, wc = cfg.n, buf.rows, buf.blocks, cfg.wm, cfg.wc
     Xm = np.empty(ins.FULL_DIM)
     ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, Xm)
     ref = Xm[:3].copy()
@@ -208,38 +245,30 @@ def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb
     me.epoch_z(rows, m, run.fix, run.obs, ref, cfg.nhc_sigma, z, r)
     dr = np.empty(m)
     me.gate_shift(rows, m, run.fix, r, dr)
-    w_ib = run.u[3:6].copy()
+    ep = run.epoch(t, m, nb_)
+    pred = RowPrediction(rows, m, ref, ep.w_ib_b, cfg.lever_b)
     h_ref = np.empty(m)  # as the kernel: rows relative to the mean's prediction
-    me.epoch_h(Xm, rows, m, run.obs, ref, w_ib, cfg.lever_b, h_ref)
+    me.epoch_h(Xm, rows, m, run.obs, ref, ep.w_ib_b, cfg.lever_b, h_ref)
     z -= h_ref
     nis, accepted = np.empty(nb_), np.empty(nb_, np.int64)
     Z = np.empty((2 * n + 1, m))
     for attempt in range(2):
         sig = points.sigma_points(ukf.x, ukf.P)
-        sigma_h(sig, q_ref, n, rows, m, run.obs, ref, w_ib, cfg.lever_b, h_ref,
-                np.empty(ins.FULL_DIM), Z)  # fmt: skip
+        sigma_h(sig, q_ref, pred, run.obs, h_ref, np.empty(ins.FULL_DIM), Z)
         zp = wm @ Z
         dz = Z - zp
         S = np.ascontiguousarray(dz.T @ (wc[:, None] * dz) + np.diag(r))
         nu = z - zp
-        Sg = cm.gating_cov(S, dr, m)
-        cm.gate_blocks(nu, Sg, blocks, nb_, cfg.gate, nis, accepted, np.empty((3, 6)))
+        g = GatedBlocks(nu, cm.gating_cov(S, dr, m), blocks, nb_, nis, accepted)
+        cm.gate_blocks(nu, g.S, blocks, nb_, cfg.gate, nis, accepted, np.empty((3, 6)))
         if attempt == 1:
             break
-        reset = cm.streams_to_reset(t, blocks, nb_, accepted, run.buf.reject_since, cfg.timeout_s)
-        if reset.sum() == 0:
-            break
         P = np.ascontiguousarray(ukf.P)
-        for st in np.flatnonzero(reset):
-            big = cm.inflate_for_stream(P, int(st), nu, blocks, nb_, sc, cfg)
-            cm.record_event(ev_i, ev_f, counts, t, cm.EV_RESET, int(st), -1, big)
+        reset = cm.reset_timed_out(t, P, g, buf.reject_since, sc, cfg, run.log)
         ukf.P = P
-    cm.record_innovations(
-        t, nu, Sg, blocks, nb_, nis, accepted, cfg.gate, inn_i, inn_f, counts, ev_i, ev_f
-    )
-    cm.update_reject_since(t, blocks, nb_, accepted, run.buf.reject_since)
-    a = np.empty(m, np.int64)
-    a = a[: cm.accepted_rows(blocks, nb_, accepted, a)]
+        if not reset:
+            break
+    a = buf.acc_rows[: cm.close_gating(t, g, cfg.gate, buf, run.log)].copy()
     if a.size == 0:
         return
     ukf.sigmas_f = sig
@@ -248,7 +277,7 @@ def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb
         Xs = np.empty(ins.FULL_DIM)
         ins.to_full(np.asarray(s, dtype=float), q_ref, n, Xs)
         out = np.empty(m)
-        me.epoch_h(Xs, rows, m, run.obs, ref, w_ib, cfg.lever_b, out)
+        me.epoch_h(Xs, rows, m, run.obs, ref, ep.w_ib_b, cfg.lever_b, out)
         return (out - h_ref)[a]
 
     ukf.update(z[a], R=np.diag(r[a]), hx=hx)

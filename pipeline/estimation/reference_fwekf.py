@@ -18,10 +18,8 @@ from filterpy.kalman import KalmanFilter
 
 from navreplay.pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
 from navreplay.pipeline.estimation.kernels import common as cm
-from navreplay.pipeline.estimation.kernels.ekf import ekf_prepare
 from navreplay.pipeline.estimation.kernels.fwekf import RING_COLS, push_residuals
 from navreplay.pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
-from navreplay.pipeline.estimation.models import ins, ins_errors
 from navreplay.pipeline.estimation.models import measurement as me
 from navreplay.pipeline.estimation.reference import _Run
 from navreplay.pipeline.nav.earth import F64, I64
@@ -41,50 +39,34 @@ def run_fwekf_filterpy(
     run = _Run(sched, fix, obs, cfg, log)
     n, buf, counts = cfg.n, run.buf, log.counts
     fz, out_alpha = fading.fz, fading.out_alpha
-    kf = KalmanFilter(dim_x=n, dim_z=1)
-    kf.x = np.zeros(n)
-    kf.P = np.array(P0, dtype=float)
+    kf = run.error_filter(KalmanFilter, P0)
     X = x0.copy()
-    Phi, Qd = np.empty((n, n)), np.empty((n, n))
-    ones = np.ones(n)
     ring = np.full((int(fz[FZ_WINDOW]), RING_COLS), np.nan)
     n_ring, alpha = 0, 1.0
     out_alpha[0] = alpha
     cm.record_output(sched.t0, X, kf.P, log)
-    stops = sched.stops
-    for k in range(stops.shape[0]):
-        stop = stops[k]
-        t = int(stop[me.ST_T])
-        run.advance(run.span(X, t, True), t)
-        ins_errors.transition(X, run.acc, cfg.noise, n, Phi, Qd)
+    for k, stop, t in run.stops():
+        run.predict_nominal(X, t)
         a_k = alpha if stop[me.ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
-        kf.F, kf.Q = a_k * Phi, Qd.copy()  # eq. 26: (a Phi) P (a Phi)^T + Q
+        kf.F, kf.Q = a_k * run.Phi, run.Qd.copy()  # eq. 26: (a Phi) P (a Phi)^T + Q
         kf.x = np.zeros(n)
         kf.predict()
-        m, nb_ = run.layout(stop)
-        if m > 0:
-            P = np.ascontiguousarray(kf.P)
-            ma = int(ekf_prepare(t, X, P, m, nb_, fix, obs, run.u[3:6].copy(), cfg, buf, log))
-            kf.P = P
-            if ma > 0:
-                a = buf.acc_rows[:ma]
-                kf.dim_z = ma
-                R_w = np.diag(buf.r[a]) / (a_k * a_k)  # eq. 24: R / alpha^2 in gain and Joseph
-                kf.update(buf.nu[a].copy(), R=R_w, H=buf.H[a, :n].copy())
-                ins.inject(X, np.asarray(kf.x, dtype=float).reshape(n), n)
-                kf.x = np.zeros(n)
-            if stop[me.ST_FIX] >= 0:
-                n_ring = int(push_residuals(ring, n_ring, buf.rows, buf.nu, buf.S, m))
-                rules = fuzzy_rules(fading.rules)
-                alpha = float(infer_alpha(*residual_inputs(ring, n_ring), fz, rules))
-        P = np.ascontiguousarray(kf.P)
+        m, ma = run.prepare(kf, t, stop, X)
+        if ma > 0:
+            a = buf.acc_rows[:ma]
+            kf.dim_z = ma
+            R_w = np.diag(buf.r[a]) / (a_k * a_k)  # eq. 24: R / alpha^2 in gain and Joseph
+            kf.update(buf.nu[a].copy(), R=R_w, H=buf.H[a, :n].copy())
+            run.inject(kf, X)
+        if m > 0 and stop[me.ST_FIX] >= 0:
+            n_ring = int(push_residuals(ring, n_ring, buf.rows, buf.nu, buf.S, m))
+            rules = fuzzy_rules(fading.rules)
+            alpha = float(infer_alpha(*residual_inputs(ring, n_ring), fz, rules))
         if stop[me.ST_OUT] > 0 and counts[cm.CNT_OUT] < out_alpha.shape[0]:
             out_alpha[counts[cm.CNT_OUT]] = alpha
-        status = run.finish(t, stop, X, P, P, ones)
-        kf.P = P
+        status = run.finish_kf(kf, k, stop, X)
         if status != cm.STATUS_OK:
             return status
-        counts[cm.CNT_STOP] = k + 1
     return cm.STATUS_OK
 
 

@@ -27,7 +27,7 @@ from filterpy.kalman import ExtendedKalmanFilter, IMMEstimator
 
 from navreplay.pipeline.estimation.kernels import common as cm
 from navreplay.pipeline.estimation.kernels import vehicle as kv
-from navreplay.pipeline.estimation.kernels.records import RunLog
+from navreplay.pipeline.estimation.kernels.records import GatedBlocks, RunLog
 from navreplay.pipeline.estimation.models import vehicle as vm
 from navreplay.pipeline.nav.earth import F64
 
@@ -173,8 +173,9 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
             cm.update_reject_since(t, blocks, nb_, accepted, reject_since)
             nu_g, _, S_g = per[g]
             cm.record_innovations(
-                t, nu_g, S_g, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts, ev_i, ev_f
-            )
+                t, GatedBlocks(nu_g, S_g, blocks, nb_, nis, accepted), gate, inn_i, inn_f, counts,
+                ev_i, ev_f,
+            )  # fmt: skip
             ma = int(cm.accepted_rows(blocks, nb_, accepted, acc))
             a = acc[:ma]
             for f, (nu_f, H_f, S_f), r_f in zip(filters, per, r_of, strict=True):

@@ -22,7 +22,7 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
@@ -248,6 +248,7 @@ def run_filter(
     status, failure = "ok", None
     duration = 0.0
     compile_s = 0.0
+    meas = _measurements(kind.coupling, fixes, obs)
     for k_seg, seg in enumerate(imu_data.segments):
         al: Alignment | None = initial
         if initial is None or k_seg > 0:
@@ -257,7 +258,7 @@ def run_filter(
             continue
         alignments.append(al)
         out, code, t_fail, seg_events, seg_compile_s, alpha = _run_segment(
-            kernel, setup, params, kind.coupling, kind.nhc, imu_data, seg, fixes, obs, al
+            kernel, setup, params, kind, imu_data, seg, meas, al
         )
         compile_s += seg_compile_s
         parts.append(out)
@@ -337,9 +338,19 @@ def resolve_imu_noise(
     return floored, "params, floored by the log"
 
 
+class _Measurements(NamedTuple):
+    """A kernel's measurement tables (``models.measurement``) and their epoch times."""
+
+    fix: F64
+    fix_t: I64 | None
+    obs: F64
+    obs_start: I64
+    obs_t: I64 | None
+
+
 def _measurements(
     coupling: str, fixes: inp.FixData | None, obs: inp.ObsData | None
-) -> tuple[F64, I64 | None, F64, I64, I64 | None]:
+) -> _Measurements:
     """(fix rows, fix times, obs rows, obs epoch starts, obs epoch times) for a kernel.
 
     The table a filter does not read is passed empty, so loose and tight coupling share one
@@ -349,35 +360,34 @@ def _measurements(
     no_fix, no_obs = np.zeros((0, me.FIX_COLS)), np.zeros((0, me.OBS_COLS))
     if coupling == "loose":
         if fixes is None:
-            return no_fix, None, no_obs, np.zeros(1, np.int64), None
+            return _Measurements(no_fix, None, no_obs, np.zeros(1, np.int64), None)
         fix_t = fixes.t_ns[fixes.usable]
         fix = np.ascontiguousarray(fixes.fix[fixes.usable])
-        return fix, fix_t, no_obs, np.zeros(1, np.int64), None
+        return _Measurements(fix, fix_t, no_obs, np.zeros(1, np.int64), None)
     if obs is None:
-        return no_fix, None, no_obs, np.zeros(1, np.int64), None
-    return no_fix, None, np.ascontiguousarray(obs.obs), obs.start, obs.epoch_t_ns
+        return _Measurements(no_fix, None, no_obs, np.zeros(1, np.int64), None)
+    return _Measurements(no_fix, None, np.ascontiguousarray(obs.obs), obs.start, obs.epoch_t_ns)
 
 
 def _run_segment(
     kernel: KernelFn,
     setup: FilterSetup,
     params: InsFilterParams,
-    coupling: str,
-    nhc: bool,
+    kind: FilterKind,
     imu: inp.ImuData,
     seg: tuple[int, int],
-    fixes: inp.FixData | None,
-    obs: inp.ObsData | None,
+    meas: _Measurements,
     al: Alignment,
 ) -> tuple[tuple[I64, F64, F64, I64, F64], int, int, list[inp.Event], float, F64]:
+    """Run ``kernel`` over the IMU samples ``seg`` of ``imu`` from the alignment ``al``."""
     lo, hi = seg
     imu_t = imu.t_ns[lo:hi]
     imu_d = imu.data[lo:hi]
     t_end = int(imu_t[-1])
-    fix_arr, fix_t, obs_arr, obs_start, obs_t = _measurements(coupling, fixes, obs)
-    nhc_rate = params.nhc.rate_hz if nhc and params.nhc is not None else None
+    fix_arr, fix_t, obs_arr, obs_start, obs_t = meas
+    nhc_rate = params.nhc.rate_hz if kind.nhc and params.nhc is not None else None
     stops = inp.build_schedule(al.t_ns, t_end, params.step.step_s, fix_t, obs_t, nhc_rate)
-    m_max = inp.max_rows(stops, obs_start, coupling == "tight")
+    m_max = inp.max_rows(stops, obs_start, kind.coupling == "tight")
     i0, u0 = inp.interpolate_input(imu_t, imu_d, al.t_ns)
     n = setup.n
     n_out = int(stops[:, me.ST_OUT].sum()) + 1

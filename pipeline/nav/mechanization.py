@@ -60,6 +60,24 @@ def _sincos_near(lat: float, lat_ref: float, sin_ref: float, cos_ref: float) -> 
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def quat_dcm(
+    qw: float, qx: float, qy: float, qz: float
+) -> tuple[float, float, float, float, float, float, float, float, float]:
+    """C_b^n of the unit quaternion ``(qw, qx, qy, qz)``, its entries row by row (as
+    ``rotations.quat_to_dcm``)."""
+    c00 = qw * qw + qx * qx - qy * qy - qz * qz
+    c01 = 2.0 * (qx * qy - qw * qz)
+    c02 = 2.0 * (qx * qz + qw * qy)
+    c10 = 2.0 * (qx * qy + qw * qz)
+    c11 = qw * qw - qx * qx + qy * qy - qz * qz
+    c12 = 2.0 * (qy * qz - qw * qx)
+    c20 = 2.0 * (qx * qz - qw * qy)
+    c21 = 2.0 * (qy * qz + qw * qx)
+    c22 = qw * qw - qx * qx - qy * qy + qz * qz
+    return c00, c01, c02, c10, c11, c12, c20, c21, c22
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _rates(
     h: float,
     vn: float,
@@ -91,15 +109,7 @@ def _rates(
     ie_n, ie_d = OMEGA_IE * cl, -OMEGA_IE * sl
     en_n, en_e, en_d = ve * i_rnh, -vn * i_rmh, -ve * sl * i_cl * i_rnh
     # C_b^n from the quaternion
-    c00 = qw * qw + qx * qx - qy * qy - qz * qz
-    c01 = 2.0 * (qx * qy - qw * qz)
-    c02 = 2.0 * (qx * qz + qw * qy)
-    c10 = 2.0 * (qx * qy + qw * qz)
-    c11 = qw * qw - qx * qx + qy * qy - qz * qz
-    c12 = 2.0 * (qy * qz - qw * qx)
-    c20 = 2.0 * (qx * qz - qw * qy)
-    c21 = 2.0 * (qy * qz + qw * qx)
-    c22 = qw * qw - qx * qx - qy * qy + qz * qz
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = quat_dcm(qw, qx, qy, qz)
     # eq. 2: velocity, with Coriolis and transport-rate terms and normal gravity
     cwn, cwe, cwd = 2.0 * ie_n + en_n, en_e, 2.0 * ie_d + en_d
     # normal gravity as earth.gravity (Somigliana + free-air), sharing sin(lat) and 1/w

@@ -84,6 +84,7 @@ from navreplay.pipeline.estimation.kernels.common import (
     record_innovations,
 )
 from navreplay.pipeline.estimation.kernels.ekf import joseph_update
+from navreplay.pipeline.estimation.kernels.records import GatedBlocks
 from navreplay.pipeline.estimation.kernels.unscented import cross_cov, draw_sigmas
 from navreplay.pipeline.nav.earth import F64, I64
 
@@ -290,8 +291,8 @@ def prepare_update(
             if reset[s]:
                 big = reset_observed(P, NX, Hm, blocks, nb_, s, nu)
                 record_event(ev_i, ev_f, counts, t_ns, EV_RESET, s, -1, big)
-    record_innovations(t_ns, nu, S, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts,
-                       ev_i, ev_f)  # fmt: skip
+    record_innovations(t_ns, GatedBlocks(nu, S, blocks, nb_, nis, accepted), gate, inn_i, inn_f,
+                       counts, ev_i, ev_f)  # fmt: skip
     advance_stream_clocks(t_ns, blocks, nb_, accepted, reject_since)
     ma = accepted_rows(blocks, nb_, accepted, acc)
     return m, rows, Hm, rm, nu, S, Pxz, acc, ma

@@ -26,7 +26,12 @@ from navreplay.pipeline.estimation.kernels.records import CNT_STOP as CNT_STOP
 from navreplay.pipeline.estimation.kernels.records import CNT_T_FAIL as CNT_T_FAIL
 from navreplay.pipeline.estimation.kernels.records import INN_F_COLS as INN_F_COLS
 from navreplay.pipeline.estimation.kernels.records import INN_I_COLS as INN_I_COLS
-from navreplay.pipeline.estimation.kernels.records import EpochBuffers, RunLog, Settings
+from navreplay.pipeline.estimation.kernels.records import (
+    EpochBuffers,
+    GatedBlocks,
+    RunLog,
+    Settings,
+)
 from navreplay.pipeline.estimation.models.ins import E_CB, E_POS, E_VEL, N_LOOSE, X_VEL
 from navreplay.pipeline.estimation.models.measurement import S_NHC, S_OBS, S_VEL
 from navreplay.pipeline.nav.earth import F64, I64
@@ -152,14 +157,21 @@ def ensure_pd(P: F64, n: int, L: F64) -> tuple[bool, bool, float]:
 
 
 @njit(cache=True, error_model="numpy")
+def mat_mul_into(A: F64, B: F64, rows: int, inner: int, cols: int, out: F64) -> None:
+    """``out[:rows, :cols] = A[:rows, :inner] B[:inner, :cols]``, each entry summed in the
+    order of ``inner``."""
+    for i in range(rows):
+        for j in range(cols):
+            a = 0.0
+            for k in range(inner):
+                a += A[i, k] * B[k, j]
+            out[i, j] = a
+
+
+@njit(cache=True, error_model="numpy")
 def propagate_cov(P: F64, Phi: F64, Qd: F64, n: int, tmp: F64) -> None:
     """``P <- Phi P Phi^T + Qd`` in place (``tmp``: scratch (n, n))."""
-    for r in range(n):
-        for c in range(n):
-            a = 0.0
-            for k in range(n):
-                a += Phi[r, k] * P[k, c]
-            tmp[r, c] = a
+    mat_mul_into(Phi, P, n, n, n, tmp)
     for r in range(n):
         for c in range(r, n):
             a = Qd[r, c]
@@ -172,12 +184,7 @@ def propagate_cov(P: F64, Phi: F64, Qd: F64, n: int, tmp: F64) -> None:
 @njit(cache=True, error_model="numpy")
 def innovation_cov(H: F64, P: F64, r: F64, m: int, n: int, PHt: F64, S: F64) -> None:
     """``PHt = P H^T`` (n, m) and ``S = H P H^T + diag(r)`` (m, m) for the first ``m`` rows."""
-    for i in range(n):
-        for k in range(m):
-            a = 0.0
-            for j in range(n):
-                a += P[i, j] * H[k, j]
-            PHt[i, k] = a
+    mat_mul_into(P, H.T, n, n, m, PHt)
     for k in range(m):
         for q in range(k, m):
             a = 0.0
@@ -388,12 +395,7 @@ def record_event(
 @njit(cache=True, error_model="numpy")
 def record_innovations(
     t_ns: int,
-    nu: F64,
-    S: F64,
-    blocks: I64,
-    nb_: int,
-    nis: F64,
-    accepted: I64,
+    g: GatedBlocks,
     gate: F64,
     inn_i: I64,
     inn_f: F64,
@@ -401,9 +403,11 @@ def record_innovations(
     ev_i: I64,
     ev_f: F64,
 ) -> None:
-    """Append one innovation row per block, and a ``gate_reject`` event per rejected block
-    (rows past the capacity are counted, not written)."""
-    for b in range(nb_):
+    """Append one innovation row per block of ``g`` (with its threshold ``gate[d]``), and a
+    ``gate_reject`` event per rejected block (rows past the capacity are counted, not
+    written)."""
+    nu, S, blocks, nis, accepted = g.nu, g.S, g.blocks, g.nis, g.accepted
+    for b in range(g.nb):
         k = counts[CNT_INN]
         counts[CNT_INN] = k + 1
         if not accepted[b]:
@@ -450,3 +454,28 @@ def record_output(t_ns: int, X: F64, P_err: F64, log: RunLog) -> None:
             for c in range(n):
                 log.out_P[k, r, c] = P_err[r, c]
     log.counts[CNT_OUT] = k + 1
+
+
+@njit(cache=True, error_model="numpy")
+def reset_timed_out(
+    t_ns: int, P: F64, g: GatedBlocks, reject_since: I64, scale: F64, cfg: Settings, log: RunLog
+) -> bool:
+    """Reset the covariance of every stream rejected for the timeout or longer
+    (``streams_to_reset``, ``inflate_for_stream`` with ``scale``), each with a ``gate_reset``
+    event; True if any was."""
+    reset = streams_to_reset(t_ns, g.blocks, g.nb, g.accepted, reject_since, cfg.timeout_s)
+    for st in range(N_STREAMS):
+        if reset[st]:
+            big = inflate_for_stream(P, st, g.nu, g.blocks, g.nb, scale, cfg)
+            record_event(log.ev_i, log.ev_f, log.counts, t_ns, EV_RESET, st, -1, big)
+    return bool(reset.sum() > 0)
+
+
+@njit(cache=True, error_model="numpy")
+def close_gating(t_ns: int, g: GatedBlocks, gate: F64, buf: EpochBuffers, log: RunLog) -> int:
+    """An INS epoch's final gating decisions: record the innovations and rejections, advance
+    the rejection clocks (``buf.reject_since``) and write the accepted rows into
+    ``buf.acc_rows``; returns their number."""
+    record_innovations(t_ns, g, gate, log.inn_i, log.inn_f, log.counts, log.ev_i, log.ev_f)
+    update_reject_since(t_ns, g.blocks, g.nb, g.accepted, buf.reject_since)
+    return accepted_rows(g.blocks, g.nb, g.accepted, buf.acc_rows)

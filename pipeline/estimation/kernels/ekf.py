@@ -21,30 +21,38 @@ import numpy as np
 from navreplay.pipeline._jit import njit
 from navreplay.pipeline.estimation.kernels.common import (
     CNT_STOP,
-    EV_RESET,
-    N_STREAMS,
     STATUS_INDEFINITE,
     STATUS_OK,
-    accepted_rows,
     check_state,
     cho_solve,
     cholesky,
+    close_gating,
     epoch_buffers,
     fail,
     gate_blocks,
     gating_cov,
-    inflate_for_stream,
     innovation_cov,
     keep_pd,
+    mat_mul_into,
     propagate_cov,
-    record_event,
-    record_innovations,
     record_output,
-    streams_to_reset,
-    update_reject_since,
+    reset_timed_out,
 )
-from navreplay.pipeline.estimation.kernels.records import EpochBuffers, RunLog, Schedule, Settings
-from navreplay.pipeline.estimation.models.ins import ACC_DIM, inject, propagate_span
+from navreplay.pipeline.estimation.kernels.records import (
+    Epoch,
+    EpochBuffers,
+    GatedBlocks,
+    RunLog,
+    Schedule,
+    Settings,
+)
+from navreplay.pipeline.estimation.models.ins import (
+    ImuSpan,
+    Stepping,
+    inject,
+    propagate_span,
+    span_work,
+)
 from navreplay.pipeline.estimation.models.ins_errors import transition
 from navreplay.pipeline.estimation.models.measurement import (
     ST_OUT,
@@ -60,19 +68,17 @@ from navreplay.pipeline.nav.earth import F64, I64
 
 @njit(cache=True, error_model="numpy", inline="always")
 def ekf_prepare(
-    t_ns: int,
+    ep: Epoch,
     X: F64,
     P: F64,
-    m: int,
-    nb_: int,
     fix: F64 | None,
     obs: F64 | None,
-    w_ib_b: F64,
     cfg: Settings,
     buf: EpochBuffers,
     log: RunLog,
 ) -> int:
-    """Measurement front end of one EKF epoch: values, Jacobians, gating, timeout resets.
+    """Measurement front end of one EKF epoch ``ep``: values, Jacobians, gating, timeout
+    resets.
 
     Fills ``z``, ``r`` (variances), ``nu = z - h(X)``, ``H`` (m, n) and the prior innovation
     covariance ``S = H P H^T + R``; gates every block; resets the covariance of a stream
@@ -82,6 +88,7 @@ def ekf_prepare(
     Returns:
         the number of accepted rows.
     """
+    t_ns, m, nb_, w_ib_b = ep
     n, lever_b, gate = cfg.n, cfg.lever_b, cfg.gate
     rows, blocks, z, r, nu, H, S = buf.rows, buf.blocks, buf.z, buf.r, buf.nu, buf.H, buf.S
     ref = X[:3].copy()
@@ -100,23 +107,11 @@ def ekf_prepare(
     PHt = np.empty((n, m))
     for attempt in range(2):
         innovation_cov(H, P, r, m, n, PHt, S)
-        Sg = gating_cov(S, dr, m)
-        gate_blocks(nu, Sg, blocks, nb_, gate, nis, accepted, gwork)
-        if attempt == 1:
+        g = GatedBlocks(nu, gating_cov(S, dr, m), blocks, nb_, nis, accepted)
+        gate_blocks(nu, g.S, blocks, nb_, gate, nis, accepted, gwork)
+        if attempt == 1 or not reset_timed_out(t_ns, P, g, buf.reject_since, ones, cfg, log):
             break
-        reset = streams_to_reset(t_ns, blocks, nb_, accepted, buf.reject_since, cfg.timeout_s)
-        if reset.sum() == 0:
-            break
-        for st in range(N_STREAMS):
-            if reset[st]:
-                big = inflate_for_stream(P, st, nu, blocks, nb_, ones, cfg)
-                record_event(log.ev_i, log.ev_f, log.counts, t_ns, EV_RESET, st, -1, big)
-    record_innovations(
-        t_ns, nu, Sg, blocks, nb_, nis, accepted, gate, log.inn_i, log.inn_f, log.counts,
-        log.ev_i, log.ev_f,
-    )  # fmt: skip
-    update_reject_since(t_ns, blocks, nb_, accepted, buf.reject_since)
-    return accepted_rows(blocks, nb_, accepted, buf.acc_rows)
+    return close_gating(t_ns, g, gate, buf, log)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -140,12 +135,7 @@ def joseph_update(
     if not cholesky(Sa, ma, L):
         return dx, False
     Kt = np.empty((ma, n))  # (P H^T)^T, then S^-1 (P H^T)^T = K^T
-    for i in range(ma):
-        for j in range(n):
-            a = 0.0
-            for k in range(n):
-                a += Ha[i, k] * P[k, j]
-            Kt[i, j] = a
+    mat_mul_into(Ha, P, ma, n, n, Kt)
     cho_solve(L, ma, Kt, n)
     for j in range(n):
         a = 0.0
@@ -160,12 +150,7 @@ def joseph_update(
                 a -= Kt[k, i] * Ha[k, j]
             A[i, j] = a
     AP = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            a = 0.0
-            for k in range(n):
-                a += A[i, k] * P[k, j]
-            AP[i, j] = a
+    mat_mul_into(A, P, n, n, n, AP)
     for i in range(n):
         for j in range(i, n):
             a = 0.0
@@ -202,10 +187,9 @@ def run_ekf(
     Phi = np.empty((n, n))
     Qd = np.empty((n, n))
     tmp = np.empty((n, n))
-    work = np.zeros((9, 10))
-    acc = np.zeros(ACC_DIM)
+    step = Stepping(cfg.substeps, cfg.max_step_s, cfg.gap_s)
+    sw = span_work()
     u = sched.u0.copy()
-    u_end = np.empty(6)
     buf = epoch_buffers(m_max, n)
     record_output(sched.t0, X, P, log)
     t_cur = sched.t0
@@ -214,18 +198,15 @@ def run_ekf(
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
-        i = propagate_span(
-            X, sched.imu_t, sched.imu, i, t_cur, u, t, cfg.substeps, cfg.max_step_s, cfg.gap_s,
-            u_end, work, acc, True,
-        )  # fmt: skip
+        i = propagate_span(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), step, sw, True)
         for j in range(6):
-            u[j] = u_end[j]
+            u[j] = sw.u_end[j]
         t_cur = t
-        transition(X, acc, cfg.noise, n, Phi, Qd)
+        transition(X, sw.acc, cfg.noise, n, Phi, Qd)
         propagate_cov(P, Phi, Qd, n, tmp)
         m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
         if m > 0:
-            ma = ekf_prepare(t, X, P, m, nb_, fix, obs, u[3:6], cfg, buf, log)
+            ma = ekf_prepare(Epoch(t, m, nb_, u[3:6]), X, P, fix, obs, cfg, buf, log)
             if ma > 0:
                 dx, ok = joseph_update(P, n, buf.H, buf.S, buf.r, buf.nu, buf.acc_rows, ma)
                 if ok:

@@ -58,8 +58,21 @@ from navreplay.pipeline.estimation.kernels.common import (
     record_output,
 )
 from navreplay.pipeline.estimation.kernels.ekf import ekf_prepare, joseph_update
-from navreplay.pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
-from navreplay.pipeline.estimation.models.ins import ACC_DIM, inject, propagate_span
+from navreplay.pipeline.estimation.kernels.records import (
+    Epoch,
+    EpochBuffers,
+    Fading,
+    RunLog,
+    Schedule,
+    Settings,
+)
+from navreplay.pipeline.estimation.models.ins import (
+    ImuSpan,
+    Stepping,
+    inject,
+    propagate_span,
+    span_work,
+)
 from navreplay.pipeline.estimation.models.ins_errors import transition
 from navreplay.pipeline.estimation.models.measurement import (
     K_PR,
@@ -80,33 +93,33 @@ def fade_prior(P: F64, Phi: F64, Qd: F64, alpha: float) -> None:
 
 
 @njit(cache=True, error_model="numpy")
-def weighted_update(
-    P: F64, n: int, H: F64, S: F64, r: F64, nu: F64, acc_rows: I64, ma: int, alpha: float
-) -> tuple[F64, bool]:
+def weighted_update(P: F64, n: int, buf: EpochBuffers, ma: int, alpha: float) -> tuple[F64, bool]:
     """The weighted-EKF update (paper 004 eq. 24, 25, 27) of the accepted rows.
 
     Args:
         P: (n, n) weighted prior ``P^(alpha-)``, updated in place.
-        H, nu: (m_max, n) Jacobian and (m_max,) innovations (``ekf_prepare``).
-        S: (m_max, m_max) unweighted innovation covariance ``H P H^T + diag(r)``.
-        r: (m_max,) measurement variances ``R`` as declared.
-        acc_rows, ma: the accepted rows.
+        buf: the epoch as ``ekf_prepare`` left it: ``H`` (m_max, n) Jacobian, ``nu``
+            (m_max,) innovations, ``S`` (m_max, m_max) unweighted innovation covariance
+            ``H P H^T + diag(r)``, ``r`` (m_max,) measurement variances ``R`` as declared,
+            ``acc_rows``: the accepted rows.
+        ma: the number of accepted rows.
         alpha: the fading factor of this cycle (> 0).
 
     Returns:
         (dx, ok) as ``kernels.ekf.joseph_update``, whose Joseph form is used with ``R / alpha^2``
         both in the gain ``K = P H^T (H P H^T + R / alpha^2)^-1`` and in ``K R K^T / alpha^2``.
     """
+    r, acc_rows = buf.r, buf.acc_rows
     inv2 = 1.0 / (alpha * alpha)
     m = r.shape[0]
     r_w = np.empty(m)
-    S_w = S.copy()
+    S_w = buf.S.copy()
     for k in range(m):
         r_w[k] = r[k] * inv2
     for i in range(ma):
         k = acc_rows[i]
         S_w[k, k] += r_w[k] - r[k]
-    return joseph_update(P, n, H, S_w, r_w, nu, acc_rows, ma)
+    return joseph_update(P, n, buf.H, S_w, r_w, buf.nu, acc_rows, ma)
 
 
 @njit(cache=True)
@@ -148,10 +161,9 @@ def run_fwekf(
     L = np.empty((n, n))
     Phi = np.empty((n, n))
     Qd = np.empty((n, n))
-    work = np.zeros((9, 10))
-    acc = np.zeros(ACC_DIM)
+    step = Stepping(cfg.substeps, cfg.max_step_s, cfg.gap_s)
+    sw = span_work()
     u = sched.u0.copy()
-    u_end = np.empty(6)
     buf = epoch_buffers(sched.m_max, n)
     ring = np.full((int(fz[FZ_WINDOW]), RING_COLS), math.nan)
     n_ring = 0
@@ -164,20 +176,17 @@ def run_fwekf(
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
-        i = propagate_span(
-            X, sched.imu_t, sched.imu, i, t_cur, u, t, cfg.substeps, cfg.max_step_s, cfg.gap_s,
-            u_end, work, acc, True,
-        )  # fmt: skip
-        u[:] = u_end
+        i = propagate_span(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), step, sw, True)
+        u[:] = sw.u_end
         t_cur = t
-        transition(X, acc, cfg.noise, n, Phi, Qd)
+        transition(X, sw.acc, cfg.noise, n, Phi, Qd)
         a_k = alpha if stop[ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
         fade_prior(P, Phi, Qd, a_k)
         m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
         if m > 0:
-            ma = ekf_prepare(t, X, P, m, nb_, fix, obs, u[3:6], cfg, buf, log)
+            ma = ekf_prepare(Epoch(t, m, nb_, u[3:6]), X, P, fix, obs, cfg, buf, log)
             if ma > 0:
-                dx, ok = weighted_update(P, n, buf.H, buf.S, buf.r, buf.nu, buf.acc_rows, ma, a_k)
+                dx, ok = weighted_update(P, n, buf, ma, a_k)
                 if ok:
                     inject(X, dx, n)
             if stop[ST_FIX] >= 0:

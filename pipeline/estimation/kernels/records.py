@@ -18,6 +18,7 @@ from typing import NamedTuple, TypeVar
 
 import numpy as np
 
+from navreplay.pipeline.estimation.models.ins import SpanWork
 from navreplay.pipeline.nav.earth import F64, I64
 
 log = logging.getLogger(__name__)
@@ -187,8 +188,9 @@ class SigmaWork(NamedTuple):
 
     Attributes:
         sig: sigma points in filter coordinates (2n+1, n); sigX: as full states (2n+1, 18).
-        L: Cholesky factor (n, n); u_end: IMU input at the span's end (6,).
-        work, acc: ``ins.propagate_span`` scratch and accumulated span terms.
+        L: Cholesky factor (n, n).
+        prop: what ``ins.propagate_sigmas`` writes: the IMU input at the span's end, its
+            scratch and the accumulated span terms (``ins.SpanWork``).
         Phi, Qd: the span's transition and process noise (n, n); sc: coordinate scale (n,).
         lanes, Y: ``ins.propagate_sigmas`` lanes and stage buffer.
     """
@@ -196,9 +198,7 @@ class SigmaWork(NamedTuple):
     sig: F64
     sigX: F64  # noqa: N815 (X: the full state, as everywhere in estimation)
     L: F64
-    u_end: F64
-    work: F64
-    acc: F64
+    prop: SpanWork
     Phi: F64
     Qd: F64
     sc: F64
@@ -217,3 +217,65 @@ class Fading(NamedTuple):
     fz: F64
     rules: I64
     out_alpha: F64
+
+
+class Epoch(NamedTuple):
+    """The measurement epoch an update processes (its rows and blocks in ``EpochBuffers``).
+
+    Attributes:
+        t_ns: its time, ns.
+        m, nb: rows and blocks it uses (``measurement.epoch_layout``).
+        w_ib_b: the angular rate at the epoch, body, rad/s (3,) (antenna lever-arm velocity).
+    """
+
+    t_ns: int
+    m: int
+    nb: int
+    w_ib_b: F64
+
+
+class UkfState(NamedTuple):
+    """The UKF's estimate, updated in place.
+
+    Attributes:
+        s: the UKF coordinates (n,) (``models.ins``); P: their covariance (n, n).
+        q_ref: the reference quaternion of the attitude coordinates (4,).
+    """
+
+    s: F64
+    P: F64
+    q_ref: F64
+
+
+class RowPrediction(NamedTuple):
+    """What predicts an epoch's rows from a full state besides the satellite table
+    (``measurement.epoch_h``'s arguments).
+
+    Attributes:
+        rows: the row table (``models.measurement``); m: rows used.
+        ref: the reference position (lat, lon, h) of the NED position rows (3,).
+        w_ib_b: the angular rate, body, rad/s (3,); lever_b: antenna lever arm, body, m (3,).
+    """
+
+    rows: I64
+    m: int
+    ref: F64
+    w_ib_b: F64
+    lever_b: F64
+
+
+class GatedBlocks(NamedTuple):
+    """An epoch's innovations and the gating of its blocks (``common.gate_blocks``).
+
+    Attributes:
+        nu: innovations (m,); S: the covariance they were gated against (m, m).
+        blocks: the block table (``models.measurement``); nb: blocks used.
+        nis: NIS per block (nb,); accepted: 1 if the block passed its gate (nb,).
+    """
+
+    nu: F64
+    S: F64
+    blocks: I64
+    nb: int
+    nis: F64
+    accepted: I64

@@ -43,32 +43,30 @@ import numpy as np
 from navreplay.pipeline._jit import njit
 from navreplay.pipeline.estimation.kernels.common import (
     CNT_STOP,
-    EV_RESET,
-    N_STREAMS,
     STATUS_INDEFINITE,
     STATUS_OK,
-    accepted_rows,
     check_state,
     cho_solve,
     cholesky,
+    close_gating,
     epoch_buffers,
     fail,
     gate_blocks,
     gating_cov,
-    inflate_for_stream,
     keep_pd,
-    record_event,
-    record_innovations,
     record_output,
-    streams_to_reset,
-    update_reject_since,
+    reset_timed_out,
 )
 from navreplay.pipeline.estimation.kernels.records import (
+    Epoch,
     EpochBuffers,
+    GatedBlocks,
+    RowPrediction,
     RunLog,
     Schedule,
     Settings,
     SigmaWork,
+    UkfState,
 )
 from navreplay.pipeline.estimation.kernels.unscented import (
     cross_cov,
@@ -77,15 +75,17 @@ from navreplay.pipeline.estimation.kernels.unscented import (
     unscented_mean_cov,
 )
 from navreplay.pipeline.estimation.models.ins import (
-    ACC_DIM,
     E_CB,
     FULL_DIM,
     X_CB,
     X_CD,
     X_Q,
+    ImuSpan,
+    Stepping,
     coords_scale,
     from_full,
     propagate_sigmas,
+    span_work,
     to_full,
 )
 from navreplay.pipeline.estimation.models.ins_errors import transition
@@ -111,29 +111,19 @@ def _clock_only(L: F64, c: int) -> bool:
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def ukf_predict(
-    s: F64,
-    P: F64,
-    q_ref: F64,
-    sched: Schedule,
-    i: int,
-    span: tuple[int, int],
-    u: F64,
-    cfg: Settings,
-    ws: SigmaWork,
-) -> int:
-    """Steps 1-3 of the module docstring over one span ``(t_start, t_end)``, ns; ``s``,
-    ``P``, ``q_ref`` updated in place (``ws``: the workspace; its ``lanes`` and ``Y`` those of
-    ``ins.propagate_sigmas``, which integrates the span's sigma points together). Returns the
-    next IMU index, or -1 if ``P`` is not positive definite."""
+def ukf_predict(st: UkfState, span: ImuSpan, cfg: Settings, ws: SigmaWork) -> int:
+    """Steps 1-3 of the module docstring over one ``span``; ``st`` updated in place (``ws``:
+    the workspace; its ``lanes``, ``Y`` and ``prop`` those of ``ins.propagate_sigmas``, which
+    integrates the span's sigma points together). Returns the next IMU index, or -1 if ``P``
+    is not positive definite."""
     n, wm, wc, gamma, noise = cfg.n, cfg.wm, cfg.wc, cfg.ukf_gamma, cfg.noise
-    sig, sigX, L, u_end, work, acc = ws.sig, ws.sigX, ws.L, ws.u_end, ws.work, ws.acc
+    s, P, q_ref = st
+    sig, sigX, L, acc = ws.sig, ws.sigX, ws.L, ws.prop.acc
     Phi, Qd, sc, lanes, Y = ws.Phi, ws.Qd, ws.sc, ws.lanes, ws.Y
-    t_start, t_end = span
     if not draw_sigmas(s, P, n, gamma, L, sig):
         return -1
     ns = 2 * n + 1
-    T = (t_end - t_start) * 1e-9
+    T = (span.t_end - span.t_start) * 1e-9
     m = np.int64(0)  # not the literal 0: one compile of propagate_sigmas, not two
     for j in range(ns):
         to_full(sig[j], q_ref, n, sigX[j])
@@ -141,24 +131,8 @@ def ukf_predict(
         if j == 0 or c < E_CB or not _clock_only(L, c):
             lanes[m] = j
             m += 1
-    i_next = propagate_sigmas(
-        sigX,
-        lanes,
-        int(m),
-        sched.imu_t,
-        sched.imu,
-        i,
-        t_start,
-        u,
-        t_end,
-        cfg.substeps,
-        cfg.max_step_s,
-        cfg.gap_s,
-        u_end,
-        work,
-        acc,
-        Y,
-    )
+    step = Stepping(cfg.substeps, cfg.max_step_s, cfg.gap_s)
+    i_next = propagate_sigmas(sigX, lanes, int(m), span, step, ws.prop, Y)
     q = 0
     for j in range(ns):  # the points left out of lanes (ascending): clock-only columns
         if q < m and lanes[q] == j:
@@ -184,22 +158,20 @@ def ukf_predict(
 
 @njit(cache=True, error_model="numpy")
 def ukf_update(
-    t_ns: int,
-    s: F64,
-    P: F64,
-    q_ref: F64,
-    m: int,
-    nb_: int,
+    ep: Epoch,
+    st: UkfState,
     fix: F64 | None,
     obs: F64 | None,
-    w_ib_b: F64,
     cfg: Settings,
     buf: EpochBuffers,
     ws: SigmaWork,
     log: RunLog,
 ) -> bool:
-    """Step 4 of the module docstring; False if ``P`` was not positive definite."""
+    """Step 4 of the module docstring at epoch ``ep``, ``st`` updated in place; False if
+    ``P`` was not positive definite."""
     n, wm, wc, gamma, gate = cfg.n, cfg.wm, cfg.wc, cfg.ukf_gamma, cfg.gate
+    t_ns, m, nb_, w_ib_b = ep
+    s, P, q_ref = st
     lever_b, rows, blocks, sig, L = cfg.lever_b, buf.rows, buf.blocks, ws.sig, ws.L
     ns = 2 * n + 1
     Xm = np.empty(FULL_DIM)
@@ -226,53 +198,24 @@ def ukf_update(
     nis = np.empty(nb_)
     accepted = np.empty(nb_, np.int64)
     gwork = np.empty((3, 6))
+    pred = RowPrediction(rows, m, ref, w_ib_b, lever_b)
     for attempt in range(2):
         if not draw_sigmas(s, P, n, gamma, L, sig):
             return False
-        sigma_h(sig, q_ref, n, rows, m, obs, ref, w_ib_b, lever_b, h_ref, Xm, Z)
+        sigma_h(sig, q_ref, pred, obs, h_ref, Xm, Z)
         unscented_mean_cov(Z, wm, wc, m, zp, S)
         for k in range(m):
             S[k, k] += r[k]
             nu[k] = z[k] - zp[k]
-        Sg = gating_cov(S, dr, m)
-        gate_blocks(nu, Sg, blocks, nb_, gate, nis, accepted, gwork)
-        if attempt == 1 or not _reset_streams(
-            t_ns, P, nu, blocks, nb_, accepted, buf.reject_since, sc, cfg, log
-        ):
+        g = GatedBlocks(nu, gating_cov(S, dr, m), blocks, nb_, nis, accepted)
+        gate_blocks(nu, g.S, blocks, nb_, gate, nis, accepted, gwork)
+        if attempt == 1 or not reset_timed_out(t_ns, P, g, buf.reject_since, sc, cfg, log):
             break
     cross_cov(sig, s, Z, zp, wc, n, m, Pxz)
-    record_innovations(
-        t_ns, nu, Sg, blocks, nb_, nis, accepted, gate, log.inn_i, log.inn_f, log.counts,
-        log.ev_i, log.ev_f,
-    )  # fmt: skip
-    update_reject_since(t_ns, blocks, nb_, accepted, buf.reject_since)
-    a = np.empty(m, np.int64)
-    ma = accepted_rows(blocks, nb_, accepted, a)
+    ma = close_gating(t_ns, g, gate, buf, log)
     if ma > 0:
-        _apply_gain(s, P, n, Pxz, S, nu, a, ma)
+        _apply_gain(s, P, n, Pxz, S, nu, buf.acc_rows, ma)
     return True
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _reset_streams(
-    t_ns: int,
-    P: F64,
-    nu: F64,
-    blocks: I64,
-    nb_: int,
-    accepted: I64,
-    reject_since: I64,
-    sc: F64,
-    cfg: Settings,
-    log: RunLog,
-) -> bool:
-    """Reset the streams that timed out (``common.streams_to_reset``); True if any was."""
-    reset = streams_to_reset(t_ns, blocks, nb_, accepted, reject_since, cfg.timeout_s)
-    for st in range(N_STREAMS):
-        if reset[st]:
-            big = inflate_for_stream(P, st, nu, blocks, nb_, sc, cfg)
-            record_event(log.ev_i, log.ev_f, log.counts, t_ns, EV_RESET, st, -1, big)
-    return bool(reset.sum() > 0)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -319,9 +262,7 @@ def sigma_work(n: int) -> SigmaWork:
         np.empty((ns, n)),
         np.empty((ns, FULL_DIM)),
         np.empty((n, n)),
-        np.empty(6),
-        np.zeros((9, 10)),
-        np.zeros(ACC_DIM),
+        span_work(),
         np.empty((n, n)),
         np.empty((n, n)),
         np.empty(n),
@@ -353,6 +294,7 @@ def run_ukf(
     Pe = np.empty((n, n))
     X = np.empty(FULL_DIM)
     u = sched.u0.copy()
+    st = UkfState(s, P, q_ref)
     ws = sigma_work(n)
     buf = epoch_buffers(sched.m_max, n)
     ev_i, ev_f, counts = log.ev_i, log.ev_f, log.counts
@@ -363,19 +305,19 @@ def run_ukf(
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
-        i_next = ukf_predict(s, P, q_ref, sched, i, (t_cur, t), u, cfg, ws)
+        i_next = ukf_predict(st, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), cfg, ws)
         ok = i_next >= 0
         if ok:
             i = i_next
             for j in range(6):
-                u[j] = ws.u_end[j]
+                u[j] = ws.prop.u_end[j]
             t_cur = t
             ok = keep_pd(P, n, ws.L, t, ev_i, ev_f, counts)
         m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
         if ok and m > 0:
-            ok = ukf_update(
-                t, s, P, q_ref, m, nb_, fix, obs, u[3:6], cfg, buf, ws, log
-            ) and keep_pd(P, n, ws.L, t, ev_i, ev_f, counts)
+            ok = ukf_update(Epoch(t, m, nb_, u[3:6]), st, fix, obs, cfg, buf, ws, log) and keep_pd(
+                P, n, ws.L, t, ev_i, ev_f, counts
+            )
         to_full(s, q_ref, n, X)
         coords_scale(X, n, sc)
         status = check_state(X, P, sc, cfg) if ok else STATUS_INDEFINITE

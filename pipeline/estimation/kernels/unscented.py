@@ -13,9 +13,10 @@ import numpy as np
 
 from navreplay.pipeline._jit import njit
 from navreplay.pipeline.estimation.kernels.common import cholesky
+from navreplay.pipeline.estimation.kernels.records import RowPrediction
 from navreplay.pipeline.estimation.models.ins import to_full
 from navreplay.pipeline.estimation.models.measurement import epoch_h
-from navreplay.pipeline.nav.earth import F64, I64
+from navreplay.pipeline.nav.earth import F64
 
 
 def ukf_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[F64, F64, float]:
@@ -65,23 +66,15 @@ def unscented_mean_cov(sig: F64, wm: F64, wc: F64, n_out: int, mean: F64, cov: F
 
 @njit(cache=True, error_model="numpy", inline="always")
 def sigma_h(
-    sig: F64,
-    q_ref: F64,
-    n: int,
-    rows: I64,
-    m: int,
-    obs: F64 | None,
-    ref: F64,
-    w_ib_b: F64,
-    lever_b: F64,
-    h_ref: F64,
-    Xw: F64,
-    Z: F64,
+    sig: F64, q_ref: F64, pred: RowPrediction, obs: F64 | None, h_ref: F64, Xw: F64, Z: F64
 ) -> None:
-    """Predicted measurement rows of every sigma point minus ``h_ref`` (``Z[j, :m]``)."""
+    """Predicted measurement rows (``pred``, ``obs``) of every sigma point (rows of ``sig``,
+    UKF coordinates relative to ``q_ref``) minus ``h_ref`` (``Z[j, :m]``; ``Xw``: scratch
+    full state)."""
+    n, m = sig.shape[1], pred.m
     for j in range(sig.shape[0]):
         to_full(sig[j], q_ref, n, Xw)
-        epoch_h(Xw, rows, m, obs, ref, w_ib_b, lever_b, Z[j])
+        epoch_h(Xw, pred.rows, m, obs, pred.ref, pred.w_ib_b, pred.lever_b, Z[j])
         for k in range(m):
             Z[j, k] -= h_ref[k]
 

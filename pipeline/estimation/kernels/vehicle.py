@@ -55,7 +55,7 @@ from navreplay.pipeline.estimation.kernels.common import (
     update_reject_since,
 )
 from navreplay.pipeline.estimation.kernels.ekf import joseph_update
-from navreplay.pipeline.estimation.kernels.records import RunLog
+from navreplay.pipeline.estimation.kernels.records import GatedBlocks, RunLog
 from navreplay.pipeline.estimation.models import vehicle as vm
 from navreplay.pipeline.nav.earth import F64, I64
 
@@ -483,8 +483,8 @@ def run_vehicle(
                         innovation_cov(Ps[j], Hs[j], rs[j], m, Ss[j])
                 update_reject_since(t, blocks, nb_, accepted, reject_since)
                 record_innovations(
-                    t, nus[g], Ss[g], blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts,
-                    ev_i, ev_f,
+                    t, GatedBlocks(nus[g], Ss[g], blocks, nb_, nis, accepted), gate, inn_i, inn_f,
+                    counts, ev_i, ev_f,
                 )  # fmt: skip
                 ma = accepted_rows(blocks, nb_, accepted, acc)
                 for j in range(2):
@@ -509,8 +509,9 @@ def run_vehicle(
                 gate_with_reset(t, x, P, H, r, nu, m, S, blocks, nb_, vs, reject_since,
                                 nis, accepted, gwork, ev_i, ev_f, counts)  # fmt: skip
                 record_innovations(
-                    t, nu, S, blocks, nb_, nis, accepted, gate, inn_i, inn_f, counts, ev_i, ev_f
-                )
+                    t, GatedBlocks(nu, S, blocks, nb_, nis, accepted), gate, inn_i, inn_f, counts,
+                    ev_i, ev_f,
+                )  # fmt: skip
                 ma = accepted_rows(blocks, nb_, accepted, acc)
                 if ma > 0:
                     dx, ok = joseph_update(P, vm.NX, H, S, r, nu, acc, ma)

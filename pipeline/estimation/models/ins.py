@@ -35,6 +35,7 @@ in ``models.ins_errors``.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -53,6 +54,7 @@ from navreplay.pipeline.nav.mechanization import (
     NAV_DIM,
     propagate_into,
     propagate_lanes_into,
+    quat_dcm,
 )
 
 FULL_DIM = 18
@@ -66,6 +68,61 @@ ACC_C = 3  # 3..11: integral of C_b^n dt (row-major), s
 ACC_T = 12  # span duration, s
 ACC_GAP = 13  # total duration of IMU gaps inside the span, s
 ACC_DIM = 14
+
+
+class ImuSpan(NamedTuple):
+    """The IMU input of one span between two stops (``propagate_span``).
+
+    Attributes:
+        imu_t: sample times, int64 ns, strictly increasing, (N,).
+        imu: samples ``[f_x, f_y, f_z, w_x, w_y, w_z]`` in body FRD, (N, 6).
+        i: index of the first sample later than ``t_start``.
+        t_start: span start, int64 ns.
+        u_start: the input at ``t_start`` (interpolated), (6,).
+        t_end: span end, int64 ns, ``>= t_start``.
+    """
+
+    imu_t: I64
+    imu: F64
+    i: int
+    t_start: int
+    u_start: F64
+    t_end: int
+
+
+class Stepping(NamedTuple):
+    """How a span is integrated.
+
+    Attributes:
+        substeps: RK4 steps per IMU interval.
+        max_step_s: longest RK4 step, s (a longer interval takes more steps).
+        gap_s: sample intervals longer than this are IMU gaps (their time is accumulated).
+    """
+
+    substeps: int
+    max_step_s: float
+    gap_s: float
+
+
+class SpanWork(NamedTuple):
+    """What propagating a span writes besides the states (``span_work`` allocates it).
+
+    Attributes:
+        u_end: the input at the span's end, (6,).
+        work: scratch, (9, 10) (rows 5-8: the interval end inputs).
+        acc: the span accumulator (``ACC_*``, ``ACC_DIM``,): integrals of the nav-frame
+            specific force and of ``C_b^n``, span and gap durations, for ``transition``.
+    """
+
+    u_end: F64
+    work: F64
+    acc: F64
+
+
+@njit(cache=True, error_model="numpy")
+def span_work() -> SpanWork:
+    """A zeroed ``SpanWork``."""
+    return SpanWork(np.zeros(6), np.zeros((9, 10)), np.zeros(ACC_DIM))
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -105,16 +162,10 @@ def _log_div(q: F64, r: F64) -> tuple[float, float, float]:
 @njit(cache=True, error_model="numpy")
 def dcm_into(q: F64, C: F64) -> None:
     """C_b^n of the unit quaternion ``q`` (as ``rotations.quat_to_dcm``) into ``C`` (3, 3)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    C[0, 0] = w * w + x * x - y * y - z * z
-    C[0, 1] = 2.0 * (x * y - w * z)
-    C[0, 2] = 2.0 * (x * z + w * y)
-    C[1, 0] = 2.0 * (x * y + w * z)
-    C[1, 1] = w * w - x * x + y * y - z * z
-    C[1, 2] = 2.0 * (y * z - w * x)
-    C[2, 0] = 2.0 * (x * z - w * y)
-    C[2, 1] = 2.0 * (y * z + w * x)
-    C[2, 2] = w * w - x * x - y * y + z * z
+    c = quat_dcm(q[0], q[1], q[2], q[3])
+    C[0, 0], C[0, 1], C[0, 2] = c[0], c[1], c[2]
+    C[1, 0], C[1, 1], C[1, 2] = c[3], c[4], c[5]
+    C[2, 0], C[2, 1], C[2, 2] = c[6], c[7], c[8]
 
 
 @njit(cache=True, error_model="numpy")
@@ -224,35 +275,46 @@ def coords_scale(X: F64, n: int, out: F64) -> None:
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _span_start(span: ImuSpan, out: SpanWork, accumulate: bool) -> tuple[int, int, int]:
+    """Start a span: the input ``out.u_end`` at its start, the accumulator zeroed if
+    ``accumulate``; returns (next sample, start time, end time)."""
+    if accumulate:
+        for j in range(ACC_DIM):
+            out.acc[j] = 0.0
+    for j in range(6):
+        out.u_end[j] = span.u_start[j]
+    return span.i, span.t_start, span.t_end
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _next_interval(
-    imu_t: I64, i: int, t_cur: int, t_end: int, substeps: int, max_step_s: float
-) -> tuple[bool, int, float, int]:
-    """The interval from ``t_cur``: (ends at sample ``i``, its end time, its length in s, RK4
-    steps: ``substeps``, more if a step would exceed ``max_step_s``)."""
-    advance = i < imu_t.shape[0] and imu_t[i] <= t_end
-    t_next = imu_t[i] if advance else t_end
+    span: ImuSpan, i: int, t_cur: int, step: Stepping, u_cur: F64, f1: F64, w1: F64
+) -> tuple[bool, int, float, int, bool]:
+    """The interval of ``span`` from ``t_cur`` (``i``: the next sample, ``u_cur``: the input
+    at ``t_cur``): (ends at sample ``i``, its end time, its length in s, RK4 steps:
+    ``substeps``, more if a step would exceed ``max_step_s``, it lies in an IMU gap: samples
+    ``i - 1`` and ``i`` further apart than ``gap_s``, however the stops cut that gap); the
+    raw input at its end into ``f1``, ``w1`` (``_target_input``)."""
+    imu_t, substeps, max_step_s = span.imu_t, step.substeps, step.max_step_s
+    advance = i < imu_t.shape[0] and imu_t[i] <= span.t_end
+    t_next = imu_t[i] if advance else span.t_end
     dt = (t_next - t_cur) * 1e-9
     ns = substeps
     if dt > max_step_s * substeps:
         ns = math.ceil(dt / max_step_s)
-    return advance, t_next, dt, ns
+    in_gap = 0 < i < imu_t.shape[0] and (imu_t[i] - imu_t[i - 1]) * 1e-9 > step.gap_s
+    _target_input(span, i, t_cur, advance, u_cur, f1, w1)
+    return advance, t_next, dt, ns, in_gap
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _target_input(
-    imu_t: I64,
-    imu: F64,
-    i: int,
-    t_cur: int,
-    t_end: int,
-    advance: bool,
-    u_cur: F64,
-    f1: F64,
-    w1: F64,
+    span: ImuSpan, i: int, t_cur: int, advance: bool, u_cur: F64, f1: F64, w1: F64
 ) -> None:
-    """The raw input at the end of the next interval: sample ``i``, or the input interpolated
-    at ``t_end`` (``u_cur`` lies on the segment to sample ``i``), or ``u_cur`` held after the
-    last sample."""
+    """The raw input at the end of the next interval of ``span`` (from ``t_cur``, input
+    ``u_cur``): sample ``i``, or the input interpolated at ``t_end`` (``u_cur`` lies on the
+    segment to sample ``i``), or ``u_cur`` held after the last sample."""
+    imu_t, imu, t_end = span.imu_t, span.imu, span.t_end
     if advance:
         for j in range(3):
             f1[j] = imu[i, j]
@@ -271,16 +333,7 @@ def _target_input(
 @njit(cache=True, inline="always", error_model="numpy")
 def _accumulate(nav: F64, f0: F64, f1: F64, dt: float, acc: F64) -> None:
     """acc += (C_b^n mean(f0, f1) dt, C_b^n dt) with C_b^n at the interval start."""
-    qw, qx, qy, qz = nav[6], nav[7], nav[8], nav[9]
-    c00 = qw * qw + qx * qx - qy * qy - qz * qz
-    c01 = 2.0 * (qx * qy - qw * qz)
-    c02 = 2.0 * (qx * qz + qw * qy)
-    c10 = 2.0 * (qx * qy + qw * qz)
-    c11 = qw * qw - qx * qx + qy * qy - qz * qz
-    c12 = 2.0 * (qy * qz - qw * qx)
-    c20 = 2.0 * (qx * qz - qw * qy)
-    c21 = 2.0 * (qy * qz + qw * qx)
-    c22 = qw * qw - qx * qx - qy * qy + qz * qz
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = quat_dcm(nav[6], nav[7], nav[8], nav[9])
     fx, fy, fz = 0.5 * (f0[0] + f1[0]), 0.5 * (f0[1] + f1[1]), 0.5 * (f0[2] + f1[2])
     acc[ACC_FN] += dt * (c00 * fx + c01 * fy + c02 * fz)
     acc[ACC_FN + 1] += dt * (c10 * fx + c11 * fy + c12 * fz)
@@ -297,73 +350,45 @@ def _accumulate(nav: F64, f0: F64, f1: F64, dt: float, acc: F64) -> None:
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _accumulate_interval(
-    nav: F64, f0: F64, f1: F64, dt: float, imu_t: I64, i: int, gap_s: float, acc: F64
-) -> None:
-    """One interval into the span accumulator: ``_accumulate``, its duration, and the part of
-    an IMU gap it covers (a piece of a gap between two samples, however the stops cut it)."""
+def _accumulate_interval(nav: F64, f0: F64, f1: F64, dt: float, in_gap: bool, acc: F64) -> None:
+    """One interval into the span accumulator: ``_accumulate``, its duration, and, if it lies
+    in an IMU gap (``_next_interval``), the part of the gap it covers."""
     _accumulate(nav, f0, f1, dt, acc)
     acc[ACC_T] += dt
-    if 0 < i < imu_t.shape[0] and (imu_t[i] - imu_t[i - 1]) * 1e-9 > gap_s:
+    if in_gap:
         acc[ACC_GAP] += dt
 
 
 @njit(cache=True, error_model="numpy")
-def propagate_span(
-    X: F64,
-    imu_t: I64,
-    imu: F64,
-    i: int,
-    t_start: int,
-    u_start: F64,
-    t_end: int,
-    substeps: int,
-    max_step_s: float,
-    gap_s: float,
-    u_end: F64,
-    work: F64,
-    acc: F64,
-    accumulate: bool,
-) -> int:
-    """Integrate the full state ``X`` in place from ``t_start`` to ``t_end`` (paper 001 eq. 1-3).
+def propagate_span(X: F64, span: ImuSpan, step: Stepping, out: SpanWork, accumulate: bool) -> int:
+    """Integrate the full state ``X`` in place over ``span`` (paper 001 eq. 1-3).
 
-    The clock bias integrates the drift (``cb += cd T``). The IMU input is ``u_start`` (6:
-    specific force, angular rate; interpolated at ``t_start``), then every sample
+    The clock bias integrates the drift (``cb += cd T``). The IMU input is ``span.u_start``
+    (6: specific force, angular rate; interpolated at ``t_start``), then every sample
     ``i, i+1, ...`` with ``t_start < imu_t <= t_end``, then the input interpolated at
     ``t_end`` (held if no later sample exists); between inputs it is
-    linear. Each interval is integrated by ``propagate_into`` with ``substeps`` RK4 steps, more
-    if an interval exceeds ``max_step_s``; the state's own biases correct the input.
+    linear. Each interval is integrated by ``propagate_into`` with ``step.substeps`` RK4
+    steps, more if an interval exceeds ``step.max_step_s``; the state's own biases correct
+    the input.
 
     Args:
         X: full state (18,), propagated in place.
-        imu_t: sample times, int64 ns, strictly increasing, (N,).
-        imu: samples ``[f_x, f_y, f_z, w_x, w_y, w_z]`` in body FRD, (N, 6).
-        i: index of the first sample later than ``t_start``.
-        t_start, t_end: span limits, int64 ns, ``t_end >= t_start``.
-        u_start: input at ``t_start``, (6,).
-        substeps: RK4 steps per interval.
-        max_step_s: longest RK4 step, s.
-        gap_s: sample intervals longer than this are IMU gaps (their time is accumulated).
-        u_end: out, the input at ``t_end``, (6,).
-        work: scratch, (9, 10) (rows 5-8: the interval end inputs).
-        acc: out when ``accumulate`` (``ACC_DIM``,): integrals of the nav-frame specific
-            force and of ``C_b^n``, span and gap durations, for ``transition``.
-        accumulate: fill ``acc`` (done for the EKF nominal and the UKF central sigma point).
+        span: the IMU samples and the span's limits (``ImuSpan``).
+        step: the RK4 stepping and the IMU gap length (``Stepping``).
+        out: ``u_end`` receives the input at ``t_end``; ``work`` is scratch; ``acc`` is
+            filled when ``accumulate`` (``SpanWork``).
+        accumulate: fill ``out.acc`` (done for the EKF nominal and the UKF central sigma
+            point).
 
     Returns:
         The index of the first sample later than ``t_end``.
     """
     nav = X[:NAV_DIM]
+    u_end, work, acc = out.u_end, out.work, out.acc
     f0, w0, f1, w1 = work[5, :3], work[6, :3], work[7, :3], work[8, :3]
-    if accumulate:
-        for j in range(ACC_DIM):
-            acc[j] = 0.0
-    for j in range(6):
-        u_end[j] = u_start[j]
-    t_cur = t_start
+    i, t_cur, t_end = _span_start(span, out, accumulate)
     while t_cur < t_end:
-        advance, t_next, dt, ns = _next_interval(imu_t, i, t_cur, t_end, substeps, max_step_s)
-        _target_input(imu_t, imu, i, t_cur, t_end, advance, u_end, f1, w1)
+        advance, t_next, dt, ns, in_gap = _next_interval(span, i, t_cur, step, u_end, f1, w1)
         for j in range(3):
             f0[j] = u_end[j] - X[X_BA + j]
             w0[j] = u_end[3 + j] - X[X_BG + j]
@@ -372,12 +397,12 @@ def propagate_span(
             f1[j] -= X[X_BA + j]
             w1[j] -= X[X_BG + j]
         if accumulate:
-            _accumulate_interval(nav, f0, f1, dt, imu_t, i, gap_s, acc)
+            _accumulate_interval(nav, f0, f1, dt, in_gap, acc)
         propagate_into(nav, f0, w0, f1, w1, dt, ns, nav)
         t_cur = t_next
         if advance:
             i += 1
-    X[X_CB] += X[X_CD] * ((t_end - t_start) * 1e-9)
+    X[X_CB] += X[X_CD] * ((t_end - span.t_start) * 1e-9)
     return i
 
 
@@ -403,69 +428,50 @@ def _lane_inputs(X: F64, lanes: I64, m: int, u0: F64, f1: F64, w1: F64, Y: F64) 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _accumulate_lane0(
-    X0: F64, Y: F64, u0: F64, f1: F64, dt: float, imu_t: I64, i: int, gap_s: float, work: F64,
-    acc: F64,
-) -> None:  # fmt: skip
+    X0: F64, Y: F64, u0: F64, f1: F64, dt: float, in_gap: bool, out: SpanWork
+) -> None:
     """``propagate_span``'s accumulation over one interval for lane 0 (state ``X0`` at the
-    span start for its biases, its current navigation state in ``Y``)."""
+    span start for its biases, its current navigation state in ``Y``) into ``out.acc``."""
+    work = out.work
     f0c, f1c, nav0 = work[5, :3], work[6, :3], work[4]
     for j in range(3):
         f0c[j] = u0[j] - X0[X_BA + j]
         f1c[j] = f1[j] - X0[X_BA + j]
     for d in range(NAV_DIM):
         nav0[d] = Y[d * LANES]
-    _accumulate_interval(nav0, f0c, f1c, dt, imu_t, i, gap_s, acc)
+    _accumulate_interval(nav0, f0c, f1c, dt, in_gap, out.acc)
 
 
 @njit(cache=True, error_model="numpy")
 def propagate_sigmas(
-    X: F64,
-    lanes: I64,
-    m: int,
-    imu_t: I64,
-    imu: F64,
-    i: int,
-    t_start: int,
-    u_start: F64,
-    t_end: int,
-    substeps: int,
-    max_step_s: float,
-    gap_s: float,
-    u_end: F64,
-    work: F64,
-    acc: F64,
-    Y: F64,
+    X: F64, lanes: I64, m: int, span: ImuSpan, step: Stepping, out: SpanWork, Y: F64
 ) -> int:
     """``propagate_span`` for the rows ``X[lanes[:m]]`` of a stack of full states at once.
 
     Each row ends bitwise where ``propagate_span`` would take it (the same inputs, bias
     corrections and RK4 operations; ``mechanization.propagate_lanes_into`` integrates all rows
     of an interval together, which is what makes this faster). ``acc`` is filled along row
-    ``lanes[0]`` (the UKF's central sigma point), as ``propagate_span(..., accumulate=True)``
-    does. ``Y`` is workspace, (``mechanization.LN_DIM * mechanization.LANES``,); ``m`` is 1
-    to ``LANES``.
+    ``lanes[0]`` (the UKF's central sigma point) into ``out.acc``, as
+    ``propagate_span(..., accumulate=True)`` does. ``Y`` is workspace,
+    (``mechanization.LN_DIM * mechanization.LANES``,); ``m`` is 1 to ``LANES``.
 
     Returns:
         The index of the first sample later than ``t_end``.
     """
     L = LANES
-    f1, w1 = work[7, :3], work[8, :3]
+    u_end = out.u_end
+    f1, w1 = out.work[7, :3], out.work[8, :3]
     if not 0 < m <= L:
         raise ValueError("propagate_sigmas: needs 1 to mechanization.LANES states")
     for b in range(m):
         for d in range(NAV_DIM):
             Y[d * L + b] = X[lanes[b], d]
             Y[(LN_K + d) * L + b] = 0.0
-    for j in range(ACC_DIM):
-        acc[j] = 0.0
-    for j in range(6):
-        u_end[j] = u_start[j]
-    t_cur = t_start
+    i, t_cur, t_end = _span_start(span, out, True)
     while t_cur < t_end:
-        advance, t_next, dt, ns = _next_interval(imu_t, i, t_cur, t_end, substeps, max_step_s)
-        _target_input(imu_t, imu, i, t_cur, t_end, advance, u_end, f1, w1)
+        advance, t_next, dt, ns, in_gap = _next_interval(span, i, t_cur, step, u_end, f1, w1)
         _lane_inputs(X, lanes, m, u_end, f1, w1, Y)
-        _accumulate_lane0(X[lanes[0]], Y, u_end, f1, dt, imu_t, i, gap_s, work, acc)
+        _accumulate_lane0(X[lanes[0]], Y, u_end, f1, dt, in_gap, out)
         for j in range(3):
             u_end[j] = f1[j]
             u_end[3 + j] = w1[j]
@@ -473,7 +479,7 @@ def propagate_sigmas(
         t_cur = t_next
         if advance:
             i += 1
-    T = (t_end - t_start) * 1e-9
+    T = (t_end - span.t_start) * 1e-9
     for b in range(m):
         xb = X[lanes[b]]
         for d in range(NAV_DIM):

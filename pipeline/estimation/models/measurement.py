@@ -79,6 +79,19 @@ def sv_name(code: int) -> str:
     return f"{chr(code // 1000)}{code % 1000:02d}"
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _add_block(
+    rows: I64, blocks: I64, m: int, nb_: int, dim: int, stream: int, kind0: int, src: int
+) -> tuple[int, int]:
+    """Append a block of ``dim`` rows of kinds ``kind0, kind0 + 1, ...`` reading row ``src``
+    of its table (-1: none) after the ``m`` rows and ``nb_`` blocks used; returns them after
+    it."""
+    blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, dim, stream, -1
+    for a in range(dim):
+        rows[m + a, 0], rows[m + a, 1] = kind0 + a, src
+    return m + dim, nb_ + 1
+
+
 @njit(cache=True, error_model="numpy")
 def epoch_layout(
     stop: I64,
@@ -96,18 +109,10 @@ def epoch_layout(
     if fix is not None and fi >= 0:
         pdim = int(fix[fi, FX_POS_DIM])
         if pdim > 0:
-            blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, pdim, S_POS, -1
-            nb_ += 1
-            for a in range(pdim):
-                rows[m, 0], rows[m, 1] = K_POS + a, fi
-                m += 1
+            m, nb_ = _add_block(rows, blocks, m, nb_, pdim, S_POS, K_POS, fi)
         vdim = int(fix[fi, FX_VEL_DIM])
         if vdim > 0:
-            blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, vdim, S_VEL, -1
-            nb_ += 1
-            for a in range(vdim):
-                rows[m, 0], rows[m, 1] = K_VEL + a, fi
-                m += 1
+            m, nb_ = _add_block(rows, blocks, m, nb_, vdim, S_VEL, K_VEL, fi)
     oi = stop[ST_OBS]
     if obs is not None and oi >= 0:
         for k in range(obs_start[oi], obs_start[oi + 1]):
@@ -123,11 +128,7 @@ def epoch_layout(
                 blocks[nb_, 2], blocks[nb_, 3] = S_OBS, int(obs[k, OB_SV])
                 nb_ += 1
     if nhc_on and stop[ST_NHC] > 0:
-        blocks[nb_, 0], blocks[nb_, 1], blocks[nb_, 2], blocks[nb_, 3] = m, 2, S_NHC, -1
-        nb_ += 1
-        for a in range(2):
-            rows[m, 0], rows[m, 1] = K_NHC + a, -1
-            m += 1
+        m, nb_ = _add_block(rows, blocks, m, nb_, 2, S_NHC, K_NHC, -1)
     return m, nb_
 
 

@@ -43,6 +43,21 @@ def kinds(r: RunResult, kind: str) -> list[inp.Event]:
     return [e for e in r.events if e.kind == kind]
 
 
+def run_both(
+    tables: Tables, faulty: Tables, sensors: SensorMeta, name: str, filters: FiltersParams
+) -> tuple[RunResult, RunResult]:
+    """Filter ``name`` over the clean and the faulty tables."""
+    params = filters.get(name)
+    return run_filter(tables, sensors, name, params), run_filter(faulty, sensors, name, params)
+
+
+def assert_state_left(ok: RunResult, bad: RunResult, truth: pa.Table) -> None:
+    """The faulty run's position errors stay within 0.5 m of the clean run's."""
+    _, e_ok, _ = errors_and_sigmas(ok, truth)
+    _, e_bad, _ = errors_and_sigmas(bad, truth)
+    assert np.max(np.abs(e_bad[:, :3] - e_ok[:, :3])) < 0.5
+
+
 @pytest.fixture(scope="module")
 def drive(drive60: tuple[Tables, SensorMeta]) -> tuple[Tables, SensorMeta]:
     return drive60
@@ -58,15 +73,12 @@ def test_f1_single_position_jump_is_rejected_and_leaves_the_state(
     lat = gnss.column("lat_deg").to_numpy().copy()
     lat[k] += math.degrees(100.0 / 6_356_000.0)  # +100 m north
     faulty = dict(tables, gnss=with_column(gnss, "lat_deg", lat))
-    ok = run_filter(tables, sensors, name, filters.get(name))
-    bad = run_filter(faulty, sensors, name, filters.get(name))
+    ok, bad = run_both(tables, faulty, sensors, name, filters)
     t_jump = int(gnss.column("t_ns")[k].as_py())
     rejects = kinds(bad, "gate_reject")
     assert [(e.t_ns, e.stream) for e in rejects] == [(t_jump, "gnss_pos")]
     assert rejects[0].value > 4.0 * bad.inn_f[0, 1]  # NIS of a 100 m jump, far past the gate
-    _, e_ok, _ = errors_and_sigmas(ok, tables["truth"])
-    _, e_bad, _ = errors_and_sigmas(bad, tables["truth"])
-    assert np.max(np.abs(e_bad[:, :3] - e_ok[:, :3])) < 0.5
+    assert_state_left(ok, bad, tables["truth"])
 
 
 def test_f1_single_pseudorange_jump_is_rejected(
@@ -82,13 +94,10 @@ def test_f1_single_pseudorange_jump_is_rejected(
     pr[row] += 100.0
     faulty = dict(tables, gnss_obs=with_column(obs, "pseudorange_m", pr))
     for name in ("tc_ekf", "tc_ukf"):
-        ok = run_filter(tables, sensors, name, filters.get(name))
-        bad = run_filter(faulty, sensors, name, filters.get(name))
+        ok, bad = run_both(tables, faulty, sensors, name, filters)
         rejects = kinds(bad, "gate_reject")
         assert [(e.t_ns, e.sv) for e in rejects] == [(t_jump, obs.column("sv")[row].as_py())]
-        _, e_ok, _ = errors_and_sigmas(ok, tables["truth"])
-        _, e_bad, _ = errors_and_sigmas(bad, tables["truth"])
-        assert np.max(np.abs(e_bad[:, :3] - e_ok[:, :3])) < 0.5
+        assert_state_left(ok, bad, tables["truth"])
 
 
 def test_f2_persistent_step_is_followed_after_one_timeout_reset(

@@ -10,6 +10,7 @@ import pytest
 
 from navreplay.ingest.meta import SensorMeta
 from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.kernels.common import epoch_buffers
 from navreplay.pipeline.estimation.kernels.fwekf import fade_prior, weighted_update
 from navreplay.pipeline.estimation.models import ins
 from navreplay.pipeline.estimation.replay import run_filter
@@ -31,9 +32,10 @@ def _weighted_step(P: np.ndarray, H: np.ndarray, r: float, nu: float, alpha: flo
     """The kernel's update of one scalar measurement: returns dx, updates P in place."""
     n = P.shape[0]
     S = np.array([[H @ P @ H + r]])  # the unweighted S the front end computes
-    dx, ok = weighted_update(
-        P, n, H.reshape(1, n), S, np.array([r]), np.array([nu]), np.zeros(1, np.int64), 1, alpha
+    buf = epoch_buffers(1, n)._replace(
+        H=H.reshape(1, n), S=S, r=np.array([r]), nu=np.array([nu]), acc_rows=np.zeros(1, np.int64)
     )
+    dx, ok = weighted_update(P, n, buf, 1, alpha)
     assert ok
     return dx
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -41,12 +42,42 @@ def imu_span(X: np.ndarray, n_samples: int, dt_s: float) -> tuple[np.ndarray, np
                       (n_samples, 1))  # fmt: skip
 
 
+STEP = ins.Stepping(1, 0.02, 0.05)
+
+
+def span_of(t: np.ndarray, imu: np.ndarray, t_end: int) -> ins.ImuSpan:
+    """The span from the first sample (its input) to ``t_end``."""
+    return ins.ImuSpan(t, imu, 1, 0, imu[0], t_end)
+
+
 def propagate(X: np.ndarray, t: np.ndarray, imu: np.ndarray, t_end: int) -> np.ndarray:
     Y = X.copy()
-    acc = np.zeros(ins.ACC_DIM)
-    ins.propagate_span(Y, t, imu, 1, 0, imu[0], t_end, 1, 0.02, 0.05, np.empty(6),
-                       np.zeros((9, 10)), acc, False)  # fmt: skip
+    ins.propagate_span(Y, span_of(t, imu, t_end), STEP, ins.span_work(), False)
     return Y
+
+
+def central_differences(
+    X: np.ndarray, eps: np.ndarray, f: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
+    """Column ``j``: ``(f(X [+] eps_j e_j) - f(X [+] -eps_j e_j)) / (2 eps_j)``, the error-state
+    step applied with ``ins.inject``."""
+    cols = []
+    for j in range(N):
+        d = np.zeros(N)
+        d[j] = eps[j]
+        Xp, Xm = X.copy(), X.copy()
+        ins.inject(Xp, d, N)
+        ins.inject(Xm, -d, N)
+        cols.append((f(Xp) - f(Xm)) / (2 * eps[j]))
+    return np.stack(cols, axis=1)
+
+
+def transition_fd(
+    X: np.ndarray, t: np.ndarray, imu: np.ndarray, t_end: int, eps: np.ndarray
+) -> np.ndarray:
+    """Central differences of the span propagation from ``X`` to ``t_end``."""
+    Y0 = propagate(X, t, imu, t_end)
+    return central_differences(X, eps, lambda Z: ins.difference(propagate(Z, t, imu, t_end), Y0, N))
 
 
 def test_inject_and_difference_are_inverse() -> None:
@@ -74,16 +105,7 @@ def test_error_dynamics_match_finite_differences_of_the_mechanization() -> None:
     X = moving_state()
     T = 0.002
     t, imu = imu_span(X, 3, 0.001)
-    Y0 = propagate(X, t, imu, round(T * 1e9))
-    Phi_fd = np.empty((N, N))
-    for j in range(N):
-        d = np.zeros(N)
-        d[j] = FD_EPS[j]
-        Xp, Xm = X.copy(), X.copy()
-        ins.inject(Xp, d, N)
-        ins.inject(Xm, -d, N)
-        Yp, Ym = propagate(Xp, t, imu, round(T * 1e9)), propagate(Xm, t, imu, round(T * 1e9))
-        Phi_fd[:, j] = (ins.difference(Yp, Y0, N) - ins.difference(Ym, Y0, N)) / (2 * FD_EPS[j])
+    Phi_fd = transition_fd(X, t, imu, round(T * 1e9), FD_EPS)
     F = np.empty((N, N))
     C = quat_to_dcm(X[ins.X_Q : ins.X_Q + 4])
     ins_errors.error_jacobian(X, C @ (imu[0, :3] - X[ins.X_BA : ins.X_BA + 3]), C, N, F)
@@ -97,22 +119,14 @@ def test_span_transition_matches_finite_differences_to_second_order() -> None:
     """``transition`` over a 0.1 s span of 10 samples: Phi within the O(T^3) truncation."""
     X = moving_state()
     t, imu = imu_span(X, 12, 0.01)
-    acc = np.zeros(ins.ACC_DIM)
+    out = ins.span_work()
+    acc = out.acc
     Y0 = X.copy()
-    ins.propagate_span(Y0, t, imu, 1, 0, imu[0], 100_000_000, 1, 0.02, 0.05, np.empty(6),
-                       np.zeros((9, 10)), acc, True)  # fmt: skip
+    ins.propagate_span(Y0, span_of(t, imu, 100_000_000), STEP, out, True)
     Phi, Qd = np.empty((N, N)), np.empty((N, N))
     noise = ins_errors.noise_vector(2e-3, 2e-4, 1e-4, 1e-5, 0.1, 0.01, 2.0, 0.2)
     ins_errors.transition(Y0, acc, noise, N, Phi, Qd)
-    Phi_fd = np.empty((N, N))
-    for j in range(N):
-        d = np.zeros(N)
-        d[j] = EPS[j]
-        Xp, Xm = X.copy(), X.copy()
-        ins.inject(Xp, d, N)
-        ins.inject(Xm, -d, N)
-        Yp, Ym = propagate(Xp, t, imu, 100_000_000), propagate(Xm, t, imu, 100_000_000)
-        Phi_fd[:, j] = (ins.difference(Yp, Y0, N) - ins.difference(Ym, Y0, N)) / (2 * EPS[j])
+    Phi_fd = transition_fd(X, t, imu, 100_000_000, EPS)
     # third-order terms over 0.1 s at 0.2 rad/s turn rate: ~1 % of the largest couplings
     np.testing.assert_allclose(Phi, Phi_fd, rtol=0.02, atol=2e-3)
     assert np.allclose(Qd, Qd.T)
@@ -159,22 +173,19 @@ def test_sigma_points_propagated_together_equal_one_at_a_time(
     S = sigma_stack(X, 35, 1.0)
     lanes = np.arange(35, dtype=np.int64)[::-1].copy()  # lane order is free; lanes[0] accumulates
     ref = S.copy()
-    acc_ref = np.zeros(ins.ACC_DIM)
-    u_ref = np.empty(6)
+    span, step = span_of(t, imu, t_end), ins.Stepping(substeps, 0.02, 0.05)
+    out_ref = ins.span_work()
     for j in lanes:
-        i_ref = ins.propagate_span(ref[j], t, imu, 1, 0, imu[0], t_end, substeps, 0.02, 0.05,
-                                   u_ref, np.zeros((9, 10)), acc_ref if j == lanes[0] else
-                                   np.zeros(ins.ACC_DIM), j == lanes[0])  # fmt: skip
+        out_j = out_ref if j == lanes[0] else ins.span_work()
+        i_ref = ins.propagate_span(ref[j], span, step, out_j, j == lanes[0])
     got = S.copy()
-    acc = np.zeros(ins.ACC_DIM)
-    u_end = np.empty(6)
+    out = ins.span_work()
     Y = np.full(LN_DIM * LANES, np.nan)  # no lane may read what it did not write
-    i = ins.propagate_sigmas(got, lanes, 35, t, imu, 1, 0, imu[0], t_end, substeps, 0.02, 0.05,
-                             u_end, np.zeros((9, 10)), acc, Y)  # fmt: skip
+    i = ins.propagate_sigmas(got, lanes, 35, span, step, out, Y)
     assert i == i_ref
     assert np.array_equal(got, ref), np.abs(got - ref).max()
-    assert np.array_equal(acc, acc_ref)
-    assert np.array_equal(u_end, u_ref)
+    assert np.array_equal(out.acc, out_ref.acc)
+    assert np.array_equal(out.u_end, out_ref.u_end)
     assert not np.array_equal(got[0], S[0])
 
 
@@ -188,13 +199,11 @@ def test_sigma_lanes_fall_back_to_exact_trigonometry_when_latitude_moves_far() -
     S[1:, ins.X_VEL] = 50.0  # the other lanes stay near their reference
     lanes = np.arange(5, dtype=np.int64)
     ref = S.copy()
+    span, step = span_of(t, imu, 2_000_000_000), ins.Stepping(1, 2.0, 5.0)
     for j in lanes:
-        ins.propagate_span(ref[j], t, imu, 1, 0, imu[0], 2_000_000_000, 1, 2.0, 5.0, np.empty(6),
-                           np.zeros((9, 10)), np.zeros(ins.ACC_DIM), False)  # fmt: skip
+        ins.propagate_span(ref[j], span, step, ins.span_work(), False)
     got = S.copy()
-    ins.propagate_sigmas(got, lanes, 5, t, imu, 1, 0, imu[0], 2_000_000_000, 1, 2.0, 5.0,
-                         np.empty(6), np.zeros((9, 10)), np.zeros(ins.ACC_DIM),
-                         np.zeros(LN_DIM * LANES))  # fmt: skip
+    ins.propagate_sigmas(got, lanes, 5, span, step, ins.span_work(), np.zeros(LN_DIM * LANES))
     assert abs(got[0, ins.X_LAT] - S[0, ins.X_LAT]) > 1e-3
     assert np.array_equal(got, ref)
 
@@ -204,9 +213,9 @@ def test_propagate_sigmas_refuses_more_states_than_lanes() -> None:
     t, imu = imu_span(X, 12, 0.01)
     S = np.tile(X, (LANES + 1, 1))
     with pytest.raises(ValueError, match="1 to mechanization"):
-        ins.propagate_sigmas(S, np.arange(LANES + 1, dtype=np.int64), LANES + 1, t, imu, 1, 0,
-                             imu[0], 100_000_000, 1, 0.02, 0.05, np.empty(6), np.zeros((9, 10)),
-                             np.zeros(ins.ACC_DIM), np.zeros(LN_DIM * LANES))  # fmt: skip
+        ins.propagate_sigmas(S, np.arange(LANES + 1, dtype=np.int64), LANES + 1,
+                             span_of(t, imu, 100_000_000), STEP, ins.span_work(),
+                             np.zeros(LN_DIM * LANES))  # fmt: skip
 
 
 def epoch(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray]:
@@ -249,17 +258,13 @@ def test_measurement_jacobians_match_finite_differences(kind: str, tol: float) -
     me.epoch_jac(X, rows, m, obs, w, lever, N, H)
     eps = EPS.copy()
     eps[ins.E_ATT : ins.E_ATT + 3] = 1e-4  # 2e7 m pseudoranges: keep rounding below 1e-5
-    H_fd = np.zeros((m, N))
-    for j in range(N):
-        d = np.zeros(N)
-        d[j] = eps[j]
-        Xp, Xm = X.copy(), X.copy()
-        ins.inject(Xp, d, N)
-        ins.inject(Xm, -d, N)
-        hp, hm = np.zeros(m), np.zeros(m)
-        me.epoch_h(Xp, rows, m, obs, ref, w, lever, hp)
-        me.epoch_h(Xm, rows, m, obs, ref, w, lever, hm)
-        H_fd[:, j] = (hp - hm) / (2 * eps[j])
+
+    def h(Z: np.ndarray) -> np.ndarray:
+        out = np.zeros(m)
+        me.epoch_h(Z, rows, m, obs, ref, w, lever, out)
+        return out
+
+    H_fd = central_differences(X, eps, h)
     kinds = {"pos": (0, 1, 2), "vel": (3, 4, 5), "pr": (6,), "prr": (7,), "nhc": (8, 9)}
     sel = np.isin(rows[:m, 0], kinds[kind])
     np.testing.assert_allclose(H[sel], H_fd[sel], rtol=1e-4, atol=tol)
