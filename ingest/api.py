@@ -59,7 +59,7 @@ from navreplay.ingest.errors import IngestError
 from navreplay.ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
 from navreplay.ingest.readers import open_reader
 from navreplay.ingest.readers.base import Inventory, LogReader, ReadContext, Selection
-from navreplay.ingest.readers.rosmsg import DefinitionError
+from navreplay.ingest.readers.ros.rosmsg import DefinitionError
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.select import TablePlan, select_streams
 from navreplay.ingest.sink import TableSink

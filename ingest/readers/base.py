@@ -16,7 +16,7 @@ Developer note: adding a reader
      (``t_ns`` int64 on the stream's declared time base, SI units, angles in rad,
      lat/lon in deg), in the stream's declared axis ``frame`` (``frd``/``ned`` or ``flu``/
      ``enu``; ``ingest.frames`` converts). Decode straight into arrays: per-message Python
-     costs more than the arithmetic (see ``ingest.readers.rosmsg`` for the pattern).
+     costs more than the arithmetic (see ``ingest.readers.ros.rosmsg`` for the pattern).
      ``offsets`` gives, per row, the byte offset of its record (or of its enclosing chunk).
    - Damage: call ``ctx.damage.record(Defect(...))`` for every recoverable defect
      (truncation, corrupt chunk, garbage bytes, a trailing partial record); it raises

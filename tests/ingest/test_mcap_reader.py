@@ -16,8 +16,8 @@ from navreplay.ingest.damage import Completeness, DamageLog
 from navreplay.ingest.detect import detect
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.readers.base import ReadContext, Selection
-from navreplay.ingest.readers.mcap import McapReader
-from navreplay.ingest.readers.rosmsg import DefinitionError
+from navreplay.ingest.readers.ros.mcap import McapReader
+from navreplay.ingest.readers.ros.rosmsg import DefinitionError
 from navreplay.ingest.schema import TableName
 
 from .roslogs import (

@@ -15,8 +15,8 @@ from navreplay.ingest.damage import Completeness, DamageLog
 from navreplay.ingest.detect import detect
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.readers.base import ReadContext, Selection
-from navreplay.ingest.readers.ros1bag import Ros1BagReader
-from navreplay.ingest.readers.rosmsg import DefinitionError
+from navreplay.ingest.readers.ros.ros1bag import Ros1BagReader
+from navreplay.ingest.readers.ros.rosmsg import DefinitionError
 from navreplay.ingest.schema import TableName
 
 from .roslogs import ROS1, fix_stream, imu_data, imu_stream, msgdef, serialize, vec3, write_bag1

@@ -52,7 +52,7 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.ulogmsgs import GPS_TOPICS, TOPICS, UlogTopic, attitude_columns
+from navreplay.ingest.readers.ulog.ulogmsgs import GPS_TOPICS, TOPICS, UlogTopic, attitude_columns
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
 

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.readers.dfformat import DfFormat
-from navreplay.ingest.readers.mavmsgs import Converted
+from navreplay.ingest.readers.mavlink.dfformat import DfFormat
+from navreplay.ingest.readers.mavlink.mavmsgs import Converted
 from navreplay.ingest.schema import FixType, TableName
 
 F64 = npt.NDArray[np.float64]

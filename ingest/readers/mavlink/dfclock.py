@@ -25,11 +25,21 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.readers._mavscan import gather
-from navreplay.ingest.readers.dfformat import FMT_TYPE, DfFormat
-from navreplay.ingest.readers.dfmsgs import BY_NAME, DfExtras, Origin
-from navreplay.ingest.readers.dfscan import Formats, Records, ScanStats, Unusable, scan_blocks
-from navreplay.ingest.readers.mavclock import BootTracker, OffsetAccumulator, unroll_gps_week
+from navreplay.ingest.readers.mavlink._mavscan import gather
+from navreplay.ingest.readers.mavlink.dfformat import FMT_TYPE, DfFormat
+from navreplay.ingest.readers.mavlink.dfmsgs import BY_NAME, DfExtras, Origin
+from navreplay.ingest.readers.mavlink.dfscan import (
+    Formats,
+    Records,
+    ScanStats,
+    Unusable,
+    scan_blocks,
+)
+from navreplay.ingest.readers.mavlink.mavclock import (
+    BootTracker,
+    OffsetAccumulator,
+    unroll_gps_week,
+)
 from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
 
 I64Array = npt.NDArray[np.int64]

@@ -46,7 +46,7 @@ import numpy as np
 import numpy.typing as npt
 
 from navreplay.ingest.frames import enu_to_ned
-from navreplay.ingest.readers.rosmsg import Decoded, LeafKind, MessageDecoder
+from navreplay.ingest.readers.ros.rosmsg import Decoded, LeafKind, MessageDecoder
 from navreplay.ingest.schema import FixType, TableName, spec
 
 I64Array = npt.NDArray[np.int64]

@@ -57,7 +57,6 @@ from navreplay.ingest.ecef import (
     velocity_ned_from_course,
 )
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.readers import _npy
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
@@ -66,6 +65,7 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
+from navreplay.ingest.readers.tabular import _npy
 from navreplay.ingest.schema import FixType, TableName
 from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
 

@@ -1,5 +1,5 @@
 """NMEA 0183 receiver logs: one ``gnss`` row per GGA epoch (or ``truth`` for a reference
-receiver), decoded by ``ingest.readers._nmea``.
+receiver), decoded by ``ingest.readers.gnss._nmea``.
 
 Per epoch (one output cycle of the receiver):
 
@@ -45,14 +45,6 @@ import numpy.typing as npt
 
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
-from navreplay.ingest.readers._nmea import (
-    Epoch,
-    EpochBuilder,
-    Gga,
-    checksum_ok,
-    date_ymd,
-    time_of_day_s,
-)
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
@@ -60,6 +52,14 @@ from navreplay.ingest.readers.base import (
     ReadContext,
     Selection,
     StreamInfo,
+)
+from navreplay.ingest.readers.gnss._nmea import (
+    Epoch,
+    EpochBuilder,
+    Gga,
+    checksum_ok,
+    date_ymd,
+    time_of_day_s,
 )
 from navreplay.ingest.schema import FixType, TableName
 from navreplay.ingest.timebase import NS_PER_S, TimeBase, utc_to_gps_ns

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.readers._mavscan import END_PARTIAL, MAVLINK_V2, VALID, scan_tlog
-from navreplay.ingest.readers.mavdialect import Dialect
+from navreplay.ingest.readers.mavlink._mavscan import END_PARTIAL, MAVLINK_V2, VALID, scan_tlog
+from navreplay.ingest.readers.mavlink.mavdialect import Dialect
 
 BLOCK_BYTES = 8 << 20
 MIN_STAMP_US = 946_684_800 * 10**6  # 2000-01-01
@@ -39,7 +39,7 @@ class Packets:
     Attributes:
         buf: the block's bytes; ``payload``/``pos`` index into it.
         offset: file offset of each record (its 8-byte stamp).
-        flag: ``VALID``, ``BAD_CRC`` or ``UNKNOWN`` (``ingest.readers._mavscan``).
+        flag: ``VALID``, ``BAD_CRC`` or ``UNKNOWN`` (``ingest.readers.mavlink._mavscan``).
         stamp_us: the tlog's UNIX stamp (UTC, microseconds).
         msgid, sysid, compid, seq: header fields.
         payload: offset in ``buf`` of the payload; ``payload_len`` its (possibly trimmed)

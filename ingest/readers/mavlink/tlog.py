@@ -3,13 +3,13 @@
 Decoding uses pymavlink's dialect definitions (``ardupilotmega`` by default, ``mavlink.dialect``
 in dataset.yaml) for the CRC seeds, field layout and scalings, but never pymavlink's
 per-packet parser: each block of the file is framed and CRC-checked by a compiled scan
-(``ingest.readers._mavscan``), packets are grouped by message, and payloads are decoded with
-one structured-dtype view per message and block (``ingest.readers.mavmsgs`` converts them).
+(``ingest.readers.mavlink._mavscan``), packets are grouped by message, and payloads are decoded with
+one structured-dtype view per message and block (``ingest.readers.mavlink.mavmsgs`` converts them).
 
 Streams (``--list`` keys): the message name, with ``[n]`` for sensor instance n > 0
 (``RAW_IMU[1]``); ``StreamInfo.instance`` is the IMU/receiver number, which ``imu.instance``
-and ``gnss.instance`` select. Only the vehicle's packets are read (``ingest.readers.tlogclock``
-explains the vehicle, its boot segments and the time base).
+and ``gnss.instance`` select. Only the vehicle's packets are read
+(``ingest.readers.mavlink.tlogclock`` explains the vehicle, its boot segments and the time base).
 
 Damage (catalogue cases 13-15, 35, 37), recorded after the read pass:
 
@@ -34,7 +34,6 @@ import numpy.typing as npt
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.readers._mavscan import VALID
 from navreplay.ingest.readers.asof import AsofJoin, Left
 from navreplay.ingest.readers.base import (
     Batch,
@@ -44,10 +43,11 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.mavclock import ROLLOVER_NS
-from navreplay.ingest.readers.mavdialect import load_dialect
-from navreplay.ingest.readers.mavmsgs import BY_NAME, Extras, MavStream
-from navreplay.ingest.readers.tlogclock import (
+from navreplay.ingest.readers.mavlink._mavscan import VALID
+from navreplay.ingest.readers.mavlink.mavclock import ROLLOVER_NS
+from navreplay.ingest.readers.mavlink.mavdialect import load_dialect
+from navreplay.ingest.readers.mavlink.mavmsgs import BY_NAME, Extras, MavStream
+from navreplay.ingest.readers.mavlink.tlogclock import (
     EPOCH_MIN_US,
     HeldClock,
     TlogSurvey,
@@ -56,7 +56,7 @@ from navreplay.ingest.readers.tlogclock import (
     instances,
     survey,
 )
-from navreplay.ingest.readers.tlogscan import Packets, ScanStats, scan_blocks
+from navreplay.ingest.readers.mavlink.tlogscan import Packets, ScanStats, scan_blocks
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
 

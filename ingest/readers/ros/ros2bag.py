@@ -1,7 +1,7 @@
 """rosbag2 directories: MCAP storage through ``McapReader``, sqlite3 (and compressed bags)
 through rosbags.
 
-- MCAP storage files are read by ``ingest.readers.mcap.McapReader`` (same damage handling,
+- MCAP storage files are read by ``ingest.readers.ros.mcap.McapReader`` (same damage handling,
   same speed). A directory without ``metadata.yaml`` but with MCAP storage is read that way
   too, and the missing metadata is recorded as a recoverable defect (catalogue case 11);
   ``.db3`` storage without metadata is refused by ``ingest.detect``.
@@ -35,8 +35,13 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.mcap import McapReader
-from navreplay.ingest.readers.roscommon import RosChannel, decode_batch, make_channel, stream_info
+from navreplay.ingest.readers.ros.mcap import McapReader
+from navreplay.ingest.readers.ros.roscommon import (
+    RosChannel,
+    decode_batch,
+    make_channel,
+    stream_info,
+)
 
 
 class Ros2BagReader(LogReader):

@@ -33,11 +33,11 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.readers._mavscan import VALID, gather
-from navreplay.ingest.readers.mavclock import ROLLOVER_NS, BootTracker, OffsetAccumulator
-from navreplay.ingest.readers.mavdialect import Dialect, MessageDef
-from navreplay.ingest.readers.mavmsgs import BY_NAME, MavStream
-from navreplay.ingest.readers.tlogscan import Packets, ScanStats, scan_blocks
+from navreplay.ingest.readers.mavlink._mavscan import VALID, gather
+from navreplay.ingest.readers.mavlink.mavclock import ROLLOVER_NS, BootTracker, OffsetAccumulator
+from navreplay.ingest.readers.mavlink.mavdialect import Dialect, MessageDef
+from navreplay.ingest.readers.mavlink.mavmsgs import BY_NAME, MavStream
+from navreplay.ingest.readers.mavlink.tlogscan import Packets, ScanStats, scan_blocks
 from navreplay.ingest.timebase import TimeBase
 
 I64Array = npt.NDArray[np.int64]

@@ -1,7 +1,7 @@
 """PX4 ULog topics that feed canonical tables, and their conversion to canonical columns.
 
 pyulog gives each topic as a dict of column arrays (array fields flattened to ``name[i]``);
-the converters below only rename, scale and combine them (see ``ingest.readers.ulog`` for the
+the converters below only rename, scale and combine them (see ``ingest.readers.ulog.ulog`` for the
 topic table). Field names changed across PX4 releases (``vehicle_gps_position`` became
 ``sensor_gps``, integer ``lat``/``lon`` became ``latitude_deg``/``longitude_deg``): both are
 read.
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.readers.mavmsgs import Converted
+from navreplay.ingest.readers.mavlink.mavmsgs import Converted
 from navreplay.ingest.schema import FixType, TableName
 
 F64 = npt.NDArray[np.float64]

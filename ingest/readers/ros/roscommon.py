@@ -11,8 +11,8 @@ import numpy.typing as npt
 
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.readers.base import Batch, StreamInfo
-from navreplay.ingest.readers.rosconv import RosConversion, conversion_for
-from navreplay.ingest.readers.rosmsg import (
+from navreplay.ingest.readers.ros.rosconv import RosConversion, conversion_for
+from navreplay.ingest.readers.ros.rosmsg import (
     DefinitionError,
     Encoding,
     MessageDecoder,

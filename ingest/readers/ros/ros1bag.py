@@ -36,7 +36,12 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.roscommon import RosChannel, decode_batch, make_channel, stream_info
+from navreplay.ingest.readers.ros.roscommon import (
+    RosChannel,
+    decode_batch,
+    make_channel,
+    stream_info,
+)
 
 U8Array = npt.NDArray[np.uint8]
 I64Array = npt.NDArray[np.int64]

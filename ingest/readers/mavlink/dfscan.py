@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.readers._mavscan import END_PARTIAL, gather, scan_dataflash
-from navreplay.ingest.readers.dfformat import (
+from navreplay.ingest.readers.mavlink._mavscan import END_PARTIAL, gather, scan_dataflash
+from navreplay.ingest.readers.mavlink.dfformat import (
     FMT_FORMAT,
     FMT_LENGTH,
     FMT_TYPE,

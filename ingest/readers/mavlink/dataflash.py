@@ -1,15 +1,15 @@
 """ArduPilot DataFlash logs (``.bin``): self-describing binary records, decoded column-wise.
 
-Each block of the file is framed by a compiled scan (``ingest.readers.dfscan``), records are
+Each block of the file is framed by a compiled scan (``ingest.readers.mavlink.dfscan``), records are
 grouped by type, and each group is decoded with one structured-dtype view built from the
-log's own FMT records and pymavlink's format-character table (``ingest.readers.dfformat``);
-``ingest.readers.dfmsgs`` turns IMU, GPS+GPA, XKF1/NKF1 and SIM into canonical columns.
+log's own FMT records and pymavlink's format-character table (``ingest.readers.mavlink.dfformat``);
+``ingest.readers.mavlink.dfmsgs`` turns IMU, GPS+GPA, XKF1/NKF1 and SIM into canonical columns.
 
 Streams are keyed ``NAME[i]`` for types with an instance column (``IMU[0]``, ``GPS[1]``,
 ``XKF1[2]``: the EKF core) and by name otherwise; ``StreamInfo.instance`` is ``i``.
 
-Time (``ingest.readers.dfclock``): ``TimeUS`` (us since boot) is paired with GPS time per boot
-segment; every stream is then on GPS time, GPS fixes at their own GWk/GMS epoch.
+Time (``ingest.readers.mavlink.dfclock``): ``TimeUS`` (us since boot) is paired with GPS time
+per boot segment; every stream is then on GPS time, GPS fixes at their own GWk/GMS epoch.
 
 Damage (cases 15-17): garbage between records is skipped, resynchronising on a record whose
 successor also frames (DataFlash has no CRC), with runs and bytes counted and their offsets
@@ -38,11 +38,17 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.dfclock import DfSurvey, instances, survey
-from navreplay.ingest.readers.dfformat import DfFormat
-from navreplay.ingest.readers.dfmsgs import BY_NAME, JOIN_COLUMNS, DfExtras, DfStream, finish_gnss
-from navreplay.ingest.readers.dfscan import Formats, Records, ScanStats, scan_blocks
-from navreplay.ingest.readers.mavmsgs import Converted
+from navreplay.ingest.readers.mavlink.dfclock import DfSurvey, instances, survey
+from navreplay.ingest.readers.mavlink.dfformat import DfFormat
+from navreplay.ingest.readers.mavlink.dfmsgs import (
+    BY_NAME,
+    JOIN_COLUMNS,
+    DfExtras,
+    DfStream,
+    finish_gnss,
+)
+from navreplay.ingest.readers.mavlink.dfscan import Formats, Records, ScanStats, scan_blocks
+from navreplay.ingest.readers.mavlink.mavmsgs import Converted
 from navreplay.ingest.schema import FixType, TableName
 
 I64Array = npt.NDArray[np.int64]
