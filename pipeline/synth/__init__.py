@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     import pyarrow as pa
 
-    from navreplay.ingest.gnss import Ephemeris
+    from navreplay.ingest.gnss.ephemeris import Ephemeris
     from navreplay.ingest.meta import SensorMeta
 
 # dataset id -> module with write_dataset(name, synth_params, out_dir)

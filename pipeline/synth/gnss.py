@@ -10,8 +10,8 @@ receiver's clock reading, as in a RINEX file (RINEX 3.04 section 5.7): the recei
 
 - pseudorange ``rho = |R(w_e tau) r_i(t_r - tau) - r_ant(t_r)| + b(t) - sat_clock_m + noise``,
   the transmit time found by light-time iteration and the satellite expressed in the
-  receive-time ECEF frame (``ingest.gnss.transmit_state``); ``r_ant(t_r)`` is the antenna at
-  the epoch moved back along its velocity by ``b / c``; ``sat_clock_m`` is c times the
+  receive-time ECEF frame (``ingest.gnss.ephemeris.transmit_state``); ``r_ant(t_r)`` is the
+  antenna at the epoch moved back along its velocity by ``b / c``; ``sat_clock_m`` is c times the
   broadcast clock offset with the relativistic term, less TGD;
 - pseudorange rate: the exact time derivative of the noise-free geometric range (central
   difference over +-1 ms of the whole light-time solution) ``+ d(t) - sat_clock_drift_mps +
@@ -31,7 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from navreplay.ingest.gnss import (
+from navreplay.ingest.gnss.ephemeris import (
     C_MPS,
     LAMBDA_L1_M,
     Ephemeris,

@@ -1,4 +1,5 @@
-"""Test helper: a RINEX GPS navigation file read by georinex, as an ``ingest.gnss.Ephemeris``.
+"""Test helper: a RINEX GPS navigation file read by georinex, as an
+``ingest.gnss.ephemeris.Ephemeris``.
 
 georinex is the independent parser here (the project's own RINEX reader is not involved), so
 tests of the orbit code and of the RINEX writer compare against a third party's reading.
@@ -12,7 +13,7 @@ from pathlib import Path
 import georinex
 import numpy as np
 
-from navreplay.ingest.gnss import Ephemeris
+from navreplay.ingest.gnss.ephemeris import Ephemeris
 from navreplay.ingest.gpstime import GPS_EPOCH, NS_PER_S, NS_PER_WEEK
 
 

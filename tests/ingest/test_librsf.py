@@ -17,7 +17,7 @@ import pytest
 from navreplay.ingest.api import IngestOptions, IngestResult, ingest, inspect
 from navreplay.ingest.detect import Format, detect
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.gnss import C_MPS, rotate_earth
+from navreplay.ingest.gnss.ephemeris import C_MPS, rotate_earth
 from navreplay.ingest.readers.gnss.librsf import coarse_positions
 
 SMARTLOC = (

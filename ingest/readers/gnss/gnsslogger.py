@@ -6,8 +6,8 @@ TimeNanos,...``); fields are looked up by those names, so the versions' differen
 (v1.4 ``Latitude``/``(UTC)TimeInMs``, v2 ``LatitudeDegrees``/``UnixTimeMillis`` ...) read alike.
 
 ``Raw`` (with a RINEX navigation file given in the same ingest, as for RINEX observations):
-GPS L1 pseudoranges by Google's raw convention (``ingest.android``), satellite states from the
-broadcast ephemeris (``ingest.obsgeometry``), ``pseudorange_rate_mps`` from
+GPS L1 pseudoranges by Google's raw convention (``ingest.gnss.android``), satellite states from the
+broadcast ephemeris (``ingest.gnss.obsgeometry``), ``pseudorange_rate_mps`` from
 ``PseudorangeRateMetersPerSecond``, ``cn0_dbhz`` from ``Cn0DbHz``, sigmas from the reported
 uncertainties. Rows of other constellations and rows failing the validity checks are
 excluded and counted per reason (table counters ``excluded_<reason>``).
@@ -43,11 +43,12 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
-from navreplay.ingest.android import CONSTELLATIONS, RawColumns, pseudoranges
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import IngestError
-from navreplay.ingest.obsgeometry import observation_geometry
+from navreplay.ingest.gnss.android import CONSTELLATIONS, RawColumns, pseudoranges
+from navreplay.ingest.gnss.obsgeometry import observation_geometry
+from navreplay.ingest.gnss.rinexnav import NavData, Unreported, merge, read_nav
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
@@ -57,7 +58,6 @@ from navreplay.ingest.readers.base import (
     StreamInfo,
     selected_tables,
 )
-from navreplay.ingest.rinexnav import NavData, Unreported, merge, read_nav
 from navreplay.ingest.schema import FixType, TableName
 from navreplay.ingest.timebase import TimeBase
 

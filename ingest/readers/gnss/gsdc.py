@@ -3,7 +3,7 @@
 
 Recognised by their header (``ingest.detect``): ``*_derived.csv`` (2021) and
 ``device_gnss.csv`` (2022) carry satellite states and corrections and map onto ``gnss_obs``
-without an ephemeris (``ingest.gsdc``); the ground-truth files map onto ``truth``:
+without an ephemeris (``ingest.gnss.gsdc``); the ground-truth files map onto ``truth``:
 
 - 2021 ``*_ground_truth.csv``: ``millisSinceGpsEpoch`` (GPS time), ``latDeg``, ``lngDeg``,
   ``heightAboveWgs84EllipsoidM`` less 61 m, ``speedMps`` and ``courseDegree`` (velocity
@@ -27,10 +27,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 
-from navreplay.ingest import gsdc
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.gnss import gsdc
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,

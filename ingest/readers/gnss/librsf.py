@@ -46,7 +46,7 @@ from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.ecef import geodetic_from_ecef
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.gnss import C_MPS, rotate_earth
+from navreplay.ingest.gnss.ephemeris import C_MPS, rotate_earth
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,

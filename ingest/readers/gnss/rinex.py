@@ -3,8 +3,8 @@
 An observation file becomes ``gnss_obs`` together with the navigation files given in the
 same ingest (``navreplay ingest drive.obs drive.nav --out DIR``; ``ReadContext.siblings``):
 its GPS L1 C/A pseudoranges, Doppler (``pseudorange_rate_mps = -lambda_L1 * D1C``) and
-signal strength (``ingest.rinexobs``), with satellite positions, velocities and clocks
-computed from the broadcast ephemerides (``ingest.rinexnav``, ``ingest.obsgeometry``). A
+signal strength (``ingest.gnss.rinexobs``), with satellite positions, velocities and clocks
+computed from the broadcast ephemerides (``ingest.gnss.rinexnav``, ``ingest.gnss.obsgeometry``). A
 navigation file alone feeds no table; its inventory lists its records.
 
 Rows dropped and why are counted in the table's ``counters``: ``no_ephemeris`` (no valid
@@ -15,7 +15,7 @@ GPS week rollover (catalogue case 35): observation epochs that lie a whole numbe
 cycles before the navigation data (a receiver that wrote the 10-bit week) are moved forward
 to the navigation data's cycle, and vice versa (the earlier one is the wrong one); the shift
 is reported. Within a navigation file, a record's 10-bit week is corrected from its epoch
-(``ingest.rinexnav``).
+(``ingest.gnss.rinexnav``).
 """
 
 from __future__ import annotations
@@ -28,9 +28,12 @@ import numpy as np
 
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import IngestError
-from navreplay.ingest.gnss import LAMBDA_L1_M, Ephemeris
+from navreplay.ingest.gnss.ephemeris import LAMBDA_L1_M, Ephemeris
+from navreplay.ingest.gnss.obsgeometry import observation_geometry
+from navreplay.ingest.gnss.rinexnav import NavData, Unreported, merge, read_nav
+from navreplay.ingest.gnss.rinexobs import ObsRows, ObsScan, Signals, read_obs
+from navreplay.ingest.gnss.rinextext import Header
 from navreplay.ingest.gpstime import NS_PER_WEEK
-from navreplay.ingest.obsgeometry import observation_geometry
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
@@ -40,9 +43,6 @@ from navreplay.ingest.readers.base import (
     StreamInfo,
     selected_tables,
 )
-from navreplay.ingest.rinexnav import NavData, Unreported, merge, read_nav
-from navreplay.ingest.rinexobs import ObsRows, ObsScan, Signals, read_obs
-from navreplay.ingest.rinextext import Header
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.timebase import TimeBase
 

@@ -13,7 +13,7 @@ import pyarrow as pa
 import pytest
 
 from navreplay.ingest.config import load_dataset_config
-from navreplay.ingest.gnss import C_MPS, Ephemeris, select, transmit_state
+from navreplay.ingest.gnss.ephemeris import C_MPS, Ephemeris, select, transmit_state
 from navreplay.ingest.writers import rinex
 from navreplay.pipeline.nav import earth, spp
 from navreplay.pipeline.nav import mechanization as mech

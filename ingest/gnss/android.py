@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.gnss import C_MPS, F_L1_HZ
+from navreplay.ingest.gnss.ephemeris import C_MPS, F_L1_HZ
 from navreplay.ingest.gpstime import NS_PER_WEEK
 
 F64 = npt.NDArray[np.float64]

@@ -1,12 +1,12 @@
 """Satellite states of raw observations from the broadcast ephemeris, as ``gnss_obs`` columns.
 
 Given pseudoranges stamped at receiver epochs (RINEX observations, Android raw measurements)
-and GPS broadcast ephemerides (``ingest.gnss.Ephemeris``), ``observation_geometry`` fills the
-satellite columns of ``gnss_obs`` with the conventions of ``ingest.schema``:
+and GPS broadcast ephemerides (``ingest.gnss.ephemeris.Ephemeris``), ``observation_geometry``
+fills the satellite columns of ``gnss_obs`` with the conventions of ``ingest.schema``:
 
 - the satellite state at the transmit time of the signal, in the ECEF frame of the receive
-  time (Sagnac), from ``ingest.gnss.transmit_state``: light-time iteration on the geometric
-  range from the receiver;
+  time (Sagnac), from ``ingest.gnss.ephemeris.transmit_state``: light-time iteration on the
+  geometric range from the receiver;
 - the epoch is the receiver's clock reading (RINEX 3.04 section 5.7; Android's
   ``TimeNanos - FullBiasNanos - BiasNanos``), so the signal arrived at ``t - dt_r`` in GPS
   time, ``dt_r`` being the receiver clock offset that the pseudoranges also carry; that
@@ -17,7 +17,7 @@ satellite columns of ``gnss_obs`` with the conventions of ``ingest.schema``:
 - elevation and azimuth at the receiver; ``iono_delay_m`` from the broadcast Klobuchar model
   when the navigation file carries its coefficients.
 
-The receiver position and clock come from ``ingest.spp`` solved together with the satellite
+The receiver position and clock come from ``ingest.gnss.spp`` solved together with the satellite
 states (each depends on the other; three or four rounds converge to well below a millimetre
 in the satellite states). An epoch with fewer than four usable satellites borrows the
 position of the nearest solved epoch and solves its clock alone; with no solved epoch at all,
@@ -34,8 +34,14 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
-from navreplay.ingest import spp
-from navreplay.ingest.gnss import C_MPS, Ephemeris, elevation_azimuth, select, transmit_state
+from navreplay.ingest.gnss import spp
+from navreplay.ingest.gnss.ephemeris import (
+    C_MPS,
+    Ephemeris,
+    elevation_azimuth,
+    select,
+    transmit_state,
+)
 from navreplay.ingest.gpstime import NS_PER_S, NS_PER_WEEK
 
 F64 = npt.NDArray[np.float64]
@@ -56,7 +62,7 @@ class Geometry(NamedTuple):
         columns: ``gnss_obs`` columns for the kept rows (satellite state, clocks, elevation,
             azimuth, and ``iono_delay_m`` when Klobuchar coefficients were given).
         epoch_t_ns: the epochs of the kept rows, (E,).
-        receiver: per-epoch receiver solution (``ingest.spp.EpochFix``).
+        receiver: per-epoch receiver solution (``ingest.gnss.spp.EpochFix``).
         counters: rows dropped per reason (``no_ephemeris``, ``no_receiver_position``) and
             epochs solved / borrowed.
     """

@@ -5,7 +5,7 @@ time, about 3.5 ms per epoch whatever the satellite count (measured 3.3-7 s for 
 15-minute 1 Hz ``seoul_campus`` file and 12-24 s for one hour of 12 satellites on the 2-core
 test machine; ``benchmarks/bench_rinex.py`` prints the ratio): a 10 Hz receiver logging for an
 hour takes minutes, and it reports no line numbers. ``read_obs`` walks the epochs
-(``ingest.rinexepochs``), keeps the GPS records as fixed-width byte rows and converts each
+(``ingest.gnss.rinexepochs``), keeps the GPS records as fixed-width byte rows and converts each
 field column with one numpy cast, in chunks of ``CHUNK_ROWS`` rows: about 100x faster, with
 every row's line number. ``from_georinex`` reads the same rows through georinex; the tests
 hold the two equal, bit for bit, on every fixture (RINEX 2 and 3).
@@ -32,9 +32,9 @@ import numpy.typing as npt
 
 from navreplay.ingest.damage import Completeness, DamageLog, Defect
 from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.gnss.rinexepochs import Counts, Epoch, epochs
+from navreplay.ingest.gnss.rinextext import Header, open_lines, read_header
 from navreplay.ingest.gpstime import GPS_EPOCH, GPS_EPOCH_UNIX_NS, NS_PER_S
-from navreplay.ingest.rinexepochs import Counts, Epoch, epochs
-from navreplay.ingest.rinextext import Header, open_lines, read_header
 from navreplay.ingest.timebase import utc_to_gps_ns
 
 F64 = npt.NDArray[np.float64]
@@ -146,7 +146,7 @@ def read_obs(
     The file is opened again by the generator; the counts are complete once it is exhausted.
 
     Raises:
-        UnsupportedFormatError, CorruptLogError: see ``ingest.rinextext.read_header``;
+        UnsupportedFormatError, CorruptLogError: see ``ingest.gnss.rinextext.read_header``;
             ``signals``; and, under ``--strict``, any damage.
     """
     damage.offsets_are_lines = True

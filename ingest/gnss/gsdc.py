@@ -18,8 +18,8 @@ ephemeris is needed. Mapping (2021 name / 2022 name -> ``gnss_obs``):
   ``SvElevationDegrees``, ``SvAzimuthDegrees`` (2021 has no rate nor C/N0: null);
 - the satellite position and velocity are given "in an ECEF frame at the time of
   transmission" (GSDC data description): they are rotated into the receive-time frame of
-  ``gnss_obs`` by ``w_e * |s - r| / c`` (``ingest.gnss.rotate_earth``), ``r`` being the
-  receiver position (2022: ``WlsPosition*EcefMeters``; 2021: solved here, ``ingest.spp``).
+  ``gnss_obs`` by ``w_e * |s - r| / c`` (``ingest.gnss.ephemeris.rotate_earth``), ``r`` being the
+  receiver position (2022: ``WlsPosition*EcefMeters``; 2021: solved here, ``ingest.gnss.spp``).
   Without it a position solved from the table is off by tens of metres.
 
 Satellite ids: Android ``ConstellationType`` + ``Svid`` -> RINEX style (``G05``, ``R12``,
@@ -43,8 +43,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest import spp
-from navreplay.ingest.gnss import C_MPS, elevation_azimuth, rotate_earth
+from navreplay.ingest.gnss import spp
+from navreplay.ingest.gnss.ephemeris import C_MPS, elevation_azimuth, rotate_earth
 from navreplay.ingest.gpstime import NS_PER_S
 
 F64 = npt.NDArray[np.float64]

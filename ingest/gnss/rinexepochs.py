@@ -26,7 +26,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from navreplay.ingest.damage import Completeness, DamageLog, Defect
-from navreplay.ingest.rinextext import Header
+from navreplay.ingest.gnss.rinextext import Header
 
 _V2_EPOCH = re.compile(r"^ [ \d]\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d[ \d.]{11}  [0-6][ \d]{2}\d")
 _V2_EVENT = re.compile(r"^ {28}[2-5][ \d]{2}\d")  # an event line may leave the date blank

@@ -1,4 +1,5 @@
-"""RINEX 2 and 3 navigation files -> GPS broadcast ephemerides (``ingest.gnss.Ephemeris``).
+"""RINEX 2 and 3 navigation files -> GPS broadcast ephemerides
+(``ingest.gnss.ephemeris.Ephemeris``).
 
 Parsing is georinex's. Before handing it the text, ``read_nav`` walks the records itself so
 that damage is reported with line numbers (georinex reports none) and never aborts the file:
@@ -6,7 +7,7 @@ that damage is reported with line numbers (georinex reports none) and never abor
 - a record whose fields do not parse as numbers is skipped (``bad_data_skipped``, its line);
 - a last record cut short by the end of the file is dropped (``truncated``, its line);
 - records of systems without an orbit model here (GLONASS, Galileo, BeiDou ... only GPS
-  LNAV is implemented in ``ingest.gnss``) are counted per system and left out.
+  LNAV is implemented in ``ingest.gnss.ephemeris``) are counted per system and left out.
 
 GPS week (catalogue case 35): the week of ``toe`` is taken from the record's own epoch
 (``toc``, a calendar date), choosing the week that puts ``toe`` nearest ``toc``. A broadcast
@@ -29,9 +30,9 @@ import numpy as np
 
 from navreplay.ingest.damage import Completeness, DamageLog, Defect
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.gnss import Ephemeris, concat
+from navreplay.ingest.gnss.ephemeris import Ephemeris, concat
+from navreplay.ingest.gnss.rinextext import Header, open_lines, read_header
 from navreplay.ingest.gpstime import GPS_EPOCH, NS_PER_S, NS_PER_WEEK
-from navreplay.ingest.rinextext import Header, open_lines, read_header
 
 # georinex variable -> Ephemeris field
 _FIELDS = {
@@ -70,7 +71,7 @@ class NavData:
     """GPS ephemerides of one or more navigation files, and what else they said.
 
     Attributes:
-        ephemeris: the GPS LNAV records (healthy or not; ``ingest.gnss.select`` decides).
+        ephemeris: the GPS LNAV records (healthy or not; ``ingest.gnss.ephemeris.select`` decides).
         klobuchar: (alpha, beta) GPS ionospheric coefficients, or None.
         leap_seconds: header LEAP SECONDS, or None.
         records: records read per system name (``GPS``, ``GLONASS`` ...).

@@ -1,6 +1,7 @@
 """RINEX files as text: opening (plain, gzip, Hatanaka), the header, and the errors they raise.
 
-Shared by the observation and navigation modules (``ingest.rinexobs``, ``ingest.rinexnav``).
+Shared by the observation and navigation modules (``ingest.gnss.rinexobs``,
+``ingest.gnss.rinexnav``).
 ``open_lines`` yields the text lines of a RINEX file whatever its packing: gzip is streamed,
 Hatanaka-compressed observations (CRINEX) are expanded with the ``hatanaka`` package (the
 one georinex uses). ``read_header`` reads the header into a ``Header`` and refuses what

@@ -5,7 +5,7 @@ Files of one drive are put on one time base by ``ingest.timebase.reconcile``, bu
 the files proves that their clocks were what they claim: a ROS bag stamped in GPS time while
 declaring UTC, or a RINEX file written in UTC, is off by the leap seconds (18 s) and merges
 without complaint. This check solves a position per observation epoch from ``gnss_obs``
-(``ingest.spp``, the table's own satellite states and corrections, plus a standard
+(``ingest.gnss.spp``, the table's own satellite states and corrections, plus a standard
 troposphere) and compares it with the ``gnss`` fixes interpolated at the epoch shifted by a
 lag L (median horizontal distance), for every L in +-``max_lag_s`` in steps of the fix
 interval. With the receiver moving,
@@ -25,7 +25,7 @@ import numpy.typing as npt
 import pyarrow as pa
 import pymap3d
 
-from navreplay.ingest import spp
+from navreplay.ingest.gnss import spp
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

@@ -3,8 +3,8 @@
 Ingest needs a receiver position for two things, and neither is the navigation solution
 (that is ``pipeline``'s business): the satellite states of ``gnss_obs`` are taken at the
 signal's transmit time and rotated into the receive-time ECEF frame, which needs the
-receiver's place and clock (``ingest.obsgeometry``); and the cross-stream time check compares
-the receiver's fixes with positions solved from the observations (``ingest.gnsscheck``).
+receiver's place and clock (``ingest.gnss.obsgeometry``); and the cross-stream time check compares
+the receiver's fixes with positions solved from the observations (``ingest.gnss.fixcheck``).
 
 The model is that of ``gnss_obs``: ``rho_corr = |s - r| + b`` with ``rho_corr = pseudorange_m
 + sat_clock_m - iono_delay_m - tropo_delay_m`` (``ingest.schema``). All epochs are solved at
@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.gnss import C_MPS
+from navreplay.ingest.gnss.ephemeris import C_MPS
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
