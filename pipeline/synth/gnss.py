@@ -31,6 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from navreplay.ingest.gnss import spp
 from navreplay.ingest.gnss.ephemeris import (
     C_MPS,
     LAMBDA_L1_M,
@@ -41,7 +42,7 @@ from navreplay.ingest.gnss.ephemeris import (
     transmit_state,
 )
 from navreplay.ingest.schema import FixType
-from navreplay.pipeline.nav import earth, spp
+from navreplay.pipeline.nav import earth
 from navreplay.pipeline.nav.earth import F64, I64
 from navreplay.pipeline.nav.rotations import quat_to_dcm
 from navreplay.pipeline.synth.seoul_params import ReceiverParams
@@ -203,7 +204,8 @@ def fixes(
     where = np.searchsorted(t_ns, ep_t)
     for k, e in enumerate(where):
         a, b = starts[k], starts[k + 1]
-        q[e] = spp.dop_enu(sat_pos[a:b], ant.ecef_m[e])
+        c_en = earth.dcm_ecef_to_ned(ant.lat_rad[e], ant.lon_rad[e])
+        q[e] = spp.dop_enu(sat_pos[a:b], ant.ecef_m[e], c_en)
         nsat[e] = b - a
     sig_enu = params.fix_uere_m * np.sqrt(q[:, :3])
     a_gm = math.exp(-1.0 / (params.fix_tau_s * _rate(t_ns)))
