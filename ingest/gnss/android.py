@@ -36,14 +36,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from navreplay.ingest.arrays import F64, I64, Bools
 from navreplay.ingest.gnss.ephemeris import C_MPS, F_L1_HZ
 from navreplay.ingest.gpstime import NS_PER_WEEK
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
-B = npt.NDArray[np.bool_]
 
 STATE_CODE_LOCK = 1 << 0
 STATE_TOW_DECODED = 1 << 3
@@ -72,7 +68,7 @@ class RawColumns:
 
     time_nanos: I64
     full_bias_nanos: I64
-    full_bias_present: B
+    full_bias_present: Bools
     bias_nanos: F64
     time_offset_nanos: F64
     received_sv_time_nanos: I64
@@ -111,7 +107,7 @@ def pseudoranges(raw: RawColumns) -> Pseudoranges:
     ok = np.ones(n, dtype=bool)
     excluded: dict[str, int] = {}
 
-    def drop(mask: B, reason: str) -> None:
+    def drop(mask: Bools, reason: str) -> None:
         hit = ok & mask
         if hit.any():
             excluded[reason] = excluded.get(reason, 0) + int(hit.sum())

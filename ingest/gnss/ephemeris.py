@@ -20,10 +20,8 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
+from navreplay.ingest.arrays import F64, I64
 from navreplay.ingest.gpstime import NS_PER_S, NS_PER_WEEK
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 C_MPS = 299_792_458.0  # speed of light, m/s
 MU_GPS = 3.986005e14  # WGS-84 gravitational constant used by the GPS user algorithm, m^3/s^2

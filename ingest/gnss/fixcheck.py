@@ -21,14 +21,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 import pyarrow as pa
 import pymap3d
 
+from navreplay.ingest.arrays import F64, I64
 from navreplay.ingest.gnss import spp
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 MAX_LAG_S = 60.0
 MIN_MOTION_M = 50.0

@@ -43,13 +43,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import F64, I64, Bools
 from navreplay.ingest.gnss import spp
 from navreplay.ingest.gnss.ephemeris import C_MPS, elevation_azimuth, rotate_earth
 from navreplay.ingest.gpstime import NS_PER_S
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
-B = npt.NDArray[np.bool_]
 
 PRIMARY_SIGNALS = ("GPS_L1", "GLO_G1", "GAL_E1", "BDS_B1I", "QZS_J1", "BDS_B1C")
 _LETTER = {1: "G", 2: "S", 3: "R", 4: "J", 5: "C", 6: "E", 7: "I"}
@@ -128,7 +125,7 @@ def restamp_2021(millis: I64, received_sv_ns: F64, raw_pr_m: F64) -> tuple[I64, 
     return stamp - shift * NS_PER_S, shift
 
 
-def columns(sig: Signals, rows: I64) -> tuple[dict[str, np.ndarray], dict[str, B], int]:
+def columns(sig: Signals, rows: I64) -> tuple[dict[str, np.ndarray], dict[str, Bools], int]:
     """``gnss_obs`` columns of ``rows`` (sorted by time), their null masks, and the number
     of epochs whose receiver position had to be solved here."""
     t = sig.t_ns[rows]

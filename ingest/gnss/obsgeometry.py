@@ -31,9 +31,9 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-import numpy.typing as npt
 import pymap3d
 
+from navreplay.ingest.arrays import F64, I64, Bools
 from navreplay.ingest.gnss import spp
 from navreplay.ingest.gnss.ephemeris import (
     C_MPS,
@@ -43,10 +43,6 @@ from navreplay.ingest.gnss.ephemeris import (
     transmit_state,
 )
 from navreplay.ingest.gpstime import NS_PER_S, NS_PER_WEEK
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
-B = npt.NDArray[np.bool_]
 
 _ROUNDS = 8
 _CONVERGED_M = 1e-5
@@ -67,7 +63,7 @@ class Geometry(NamedTuple):
             epochs solved / borrowed.
     """
 
-    keep: B
+    keep: Bools
     columns: dict[str, F64]
     epoch_t_ns: I64
     receiver: spp.EpochFix
@@ -122,7 +118,7 @@ def observation_geometry(
         x = new
         if step < _CONVERGED_M:
             break
-    located: B = np.asarray(np.isfinite(x).all(axis=1), dtype=bool)
+    located: Bools = np.asarray(np.isfinite(x).all(axis=1), dtype=bool)
     counters["no_receiver_position"] = int(np.count_nonzero(~located[epoch]))
     counters["epochs_solved"] = int(np.count_nonzero(fix.solved))
     counters["epochs_position_borrowed"] = int(np.count_nonzero(located & ~fix.solved))

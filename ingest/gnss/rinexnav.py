@@ -34,8 +34,8 @@ from navreplay.ingest.gnss.ephemeris import Ephemeris, concat
 from navreplay.ingest.gnss.rinextext import Header, open_lines, read_header
 from navreplay.ingest.gpstime import GPS_EPOCH, NS_PER_S, NS_PER_WEEK
 
-# georinex variable -> Ephemeris field
-_FIELDS = {
+#: Ephemeris field -> georinex variable (also the tests' reading of a file through georinex)
+GEORINEX_FIELDS = {
     "af0_s": "SVclockBias",
     "af1_sps": "SVclockDrift",
     "af2_sps2": "SVclockDriftRate",
@@ -290,7 +290,7 @@ def _georinex(path: Path, text: str) -> Ephemeris:
     mask = np.isfinite(ds["sqrtA"].values)
     ti, si = np.nonzero(mask)
     cols: dict[str, np.ndarray] = {}
-    for ours, theirs in _FIELDS.items():
+    for ours, theirs in GEORINEX_FIELDS.items():
         cols[ours] = ds[theirs].values[ti, si]
     fit = ds["FitIntvl"].values[ti, si] if "FitIntvl" in ds else np.zeros(ti.size)
     cols["fit_interval_h"] = np.nan_to_num(fit)

@@ -30,15 +30,13 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import F64, I64
 from navreplay.ingest.damage import Completeness, DamageLog, Defect
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.gnss.rinexepochs import Counts, Epoch, epochs
 from navreplay.ingest.gnss.rinextext import Header, open_lines, read_header
 from navreplay.ingest.gpstime import GPS_EPOCH, GPS_EPOCH_UNIX_NS, NS_PER_S
 from navreplay.ingest.timebase import utc_to_gps_ns
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 CHUNK_ROWS = 50_000
 _GPS_EPOCH_ORDINAL = dt.date(1980, 1, 6).toordinal()

@@ -29,14 +29,10 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-import numpy.typing as npt
 from numba import njit
 
+from navreplay.ingest.arrays import F64, I64, Bools
 from navreplay.ingest.gnss.ephemeris import C_MPS
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
-B = npt.NDArray[np.bool_]
 
 STATE_DIM = 4
 _OUTLIER_M = 30.0
@@ -56,9 +52,9 @@ class EpochFix(NamedTuple):
 
     ecef_m: F64
     clock_m: F64
-    solved: B
+    solved: Bools
     rms_m: F64
-    used: B
+    used: Bools
 
 
 def epoch_index(t_ns: I64) -> tuple[I64, I64]:
@@ -224,8 +220,8 @@ def solve(
 
 @njit(cache=True)
 def _solve_each(
-    starts: I64, sat: F64, pr: F64, w: F64, used: B, x0: F64, max_iter: int, tol_m: float
-) -> tuple[F64, B]:
+    starts: I64, sat: F64, pr: F64, w: F64, used: Bools, x0: F64, max_iter: int, tol_m: float
+) -> tuple[F64, Bools]:
     """``solve_position`` on the used rows ``starts[k]:starts[k + 1]`` of every epoch k from
     ``x0[k]``; an epoch that does not converge keeps ``x0[k]``."""
     n_ep = starts.shape[0] - 1
@@ -249,7 +245,7 @@ def _residuals(sat: F64, pr: F64, epoch: I64, x: F64) -> F64:
     )
 
 
-def _worst_outliers(res: F64, epoch: I64, n_ep: int, used: B) -> I64:
+def _worst_outliers(res: F64, epoch: I64, n_ep: int, used: Bools) -> I64:
     """Per epoch with >= 6 used rows, the worst row if it is an outlier."""
     out: list[int] = []
     counts = np.bincount(epoch[used], minlength=n_ep)

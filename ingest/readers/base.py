@@ -42,11 +42,12 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Self
+from typing import ClassVar, Self
 
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64
 from navreplay.ingest.config import DatasetConfig
 from navreplay.ingest.damage import DamageLog
 from navreplay.ingest.detect import Detected, Format
@@ -146,10 +147,6 @@ class Selection:
     table: TableName
 
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-
-
 @dataclass
 class Batch:
     """A chunk of rows of one stream, decoded into canonical columns.
@@ -170,7 +167,7 @@ class Batch:
     key: str
     table: TableName
     columns: dict[str, np.ndarray]
-    offsets: IntArray
+    offsets: I64
     nulls: dict[str, npt.NDArray[np.bool_]] = field(default_factory=dict)
     frame: str | None = None
     counters: dict[str, int] = field(default_factory=dict)
@@ -189,12 +186,21 @@ class LogReader(ABC):
     """
 
     format: Format
+    #: a text format: the offsets of its damage report are line numbers, not bytes
+    offsets_are_lines: ClassVar[bool] = False
 
     def __init__(self, detected: Detected, ctx: ReadContext) -> None:
         self.detected = detected
         self.path = detected.path
         self.ctx = ctx
         self.damage = ctx.damage
+        if self.offsets_are_lines:
+            self.damage.offsets_are_lines = True
+
+    @property
+    def file(self) -> Path:
+        """The log's first file (of a single-file format, its only one)."""
+        return self.detected.files[0]
 
     @abstractmethod
     def inventory(self) -> Inventory:

@@ -19,6 +19,12 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Bag2Writer
 from rosbags.typesys import Stores, get_typestore
 
+from navreplay.ingest.damage import DamageLog
+from navreplay.ingest.detect import detect
+from navreplay.ingest.readers import open_reader
+from navreplay.ingest.readers.base import ReadContext, Selection
+from navreplay.ingest.schema import TableName
+
 ROS2 = get_typestore(Stores.ROS2_HUMBLE)
 ROS1 = get_typestore(Stores.ROS1_NOETIC)
 T0_NS = 1_700_000_000 * 10**9
@@ -317,3 +323,22 @@ def write_imu_mcap_fast(
             w.add_message(ch, log_time=t, data=row.tobytes(), publish_time=t)
         w.finish()  # type: ignore[no-untyped-call]
     return path
+
+
+def read_imu(path: Path, *, strict: bool = False) -> tuple[dict[str, np.ndarray], DamageLog]:
+    """The ``/imu/data`` stream of a ROS log (its reader found by its detected format) as
+    whole columns, and the damage log of the read."""
+    damage = DamageLog(path, strict=strict)
+    reader = open_reader(detect(path), ReadContext(damage))
+    parts = list(reader.read([Selection("/imu/data", TableName.IMU)]))
+    cols = (
+        {k: np.concatenate([b.columns[k] for b in parts]) for k in parts[0].columns}
+        if parts
+        else {}
+    )
+    return cols, damage
+
+
+def readable_before(original: bytes, cut: int, stream: Stream) -> int:
+    """How many messages of ``stream`` lie wholly before byte ``cut`` of the log ``original``."""
+    return sum(original.find(p) + len(p) <= cut for _, p in stream.messages)

@@ -15,7 +15,7 @@ from navreplay.ingest.api import ingest
 from navreplay.ingest.damage import Completeness, DamageLog
 from navreplay.ingest.detect import detect
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.readers.base import ReadContext, Selection
+from navreplay.ingest.readers.base import ReadContext
 from navreplay.ingest.readers.ros.mcap import McapReader
 from navreplay.ingest.readers.ros.rosmsg import DefinitionError
 from navreplay.ingest.schema import TableName
@@ -28,20 +28,10 @@ from .roslogs import (
     imu_stream,
     msgdef,
     odom_stream,
+    read_imu,
+    readable_before,
     write_mcap,
 )
-
-
-def read_imu(path: Path, *, strict: bool = False) -> tuple[dict[str, np.ndarray], DamageLog]:
-    damage = DamageLog(path, strict=strict)
-    reader = McapReader(detect(path), ReadContext(damage))
-    parts = list(reader.read([Selection("/imu/data", TableName.IMU)]))
-    cols = (
-        {k: np.concatenate([b.columns[k] for b in parts]) for k in parts[0].columns}
-        if parts
-        else {}
-    )
-    return cols, damage
 
 
 def _nonseeking_count(path: Path) -> int:
@@ -101,7 +91,7 @@ def test_truncated_uncompressed_mcap_keeps_exactly_the_complete_messages(tmp_pat
     path, data, original = _truncated(tmp_path, CompressionType.NONE)
     cut = path.stat().st_size
     stream = imu_stream(data)
-    complete = sum(original.find(p) + len(p) <= cut for _, p in stream.messages)
+    complete = readable_before(original, cut, stream)
     cols, damage = read_imu(path)
     assert len(cols["t_ns"]) == complete
     np.testing.assert_array_equal(cols["t_ns"], data.t_ns[:complete])

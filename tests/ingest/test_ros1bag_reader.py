@@ -14,24 +14,23 @@ from navreplay.ingest.api import ingest, inspect
 from navreplay.ingest.damage import Completeness, DamageLog
 from navreplay.ingest.detect import detect
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.readers.base import ReadContext, Selection
+from navreplay.ingest.readers.base import ReadContext
 from navreplay.ingest.readers.ros.ros1bag import Ros1BagReader
 from navreplay.ingest.readers.ros.rosmsg import DefinitionError
 from navreplay.ingest.schema import TableName
 
-from .roslogs import ROS1, fix_stream, imu_data, imu_stream, msgdef, serialize, vec3, write_bag1
-
-
-def read_imu(path: Path, *, strict: bool = False) -> tuple[dict[str, np.ndarray], DamageLog]:
-    damage = DamageLog(path, strict=strict)
-    reader = Ros1BagReader(detect(path), ReadContext(damage))
-    parts = list(reader.read([Selection("/imu/data", TableName.IMU)]))
-    cols = (
-        {k: np.concatenate([b.columns[k] for b in parts]) for k in parts[0].columns}
-        if parts
-        else {}
-    )
-    return cols, damage
+from .roslogs import (
+    ROS1,
+    fix_stream,
+    imu_data,
+    imu_stream,
+    msgdef,
+    read_imu,
+    readable_before,
+    serialize,
+    vec3,
+    write_bag1,
+)
 
 
 def _sha(path: Path) -> str:
@@ -106,7 +105,7 @@ def test_truncated_uncompressed_bag_keeps_exactly_the_complete_messages(tmp_path
     original = path.read_bytes()
     os.truncate(path, len(original) // 2)
     cut = path.stat().st_size
-    complete = sum(original.find(p) + len(p) <= cut for _, p in stream.messages)
+    complete = readable_before(original, cut, stream)
     cols, damage = read_imu(path)
     assert len(cols["t_ns"]) == complete
     np.testing.assert_array_equal(cols["t_ns"], data.t_ns[:complete])

@@ -43,6 +43,7 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
+from navreplay.ingest.arrays import F64, I64
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import IngestError
@@ -60,9 +61,6 @@ from navreplay.ingest.readers.base import (
 )
 from navreplay.ingest.schema import FixType, TableName
 from navreplay.ingest.timebase import TimeBase
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 RAW_KEY = "Raw:GPS"
 IMU_KEYS = {
@@ -144,10 +142,10 @@ class GnssLoggerReader(LogReader):
     """An Android GnssLogger text log (see the module docstring)."""
 
     format = Format.GNSSLOGGER
+    offsets_are_lines = True
 
     def __init__(self, detected: Detected, ctx: ReadContext) -> None:
         super().__init__(detected, ctx)
-        self.damage.offsets_are_lines = True
         self._records: dict[str, _Records] | None = None
         self._nav_files = [
             d for d in ctx.siblings if d.format == Format.RINEX and d.variant.startswith("nav")

@@ -57,10 +57,10 @@ class GsdcReader(LogReader):
     """One GSDC CSV file (see the module docstring)."""
 
     format = Format.GSDC
+    offsets_are_lines = True
 
     def __init__(self, detected: Detected, ctx: ReadContext) -> None:
         super().__init__(detected, ctx)
-        self.damage.offsets_are_lines = True
         self.variant = detected.variant
         self.key = _KEYS[self.variant]
         self._table: pa.Table | None = None

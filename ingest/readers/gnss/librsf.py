@@ -42,8 +42,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import F64, I64
 from navreplay.ingest.damage import Completeness, Defect
-from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.detect import Format
 from navreplay.ingest.ecef import geodetic_from_ecef
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.gnss.ephemeris import C_MPS, rotate_earth
@@ -51,15 +52,11 @@ from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
     LogReader,
-    ReadContext,
     Selection,
     StreamInfo,
 )
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.timebase import NS_PER_S, TimeBase
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 # type -> (table, number of fields after the type token, axis frame, what it holds)
 _TYPES: dict[str, tuple[TableName, int, str | None, str]] = {
@@ -98,11 +95,7 @@ class LibrsfReader(LogReader):
     """Reader of one libRSF text file (see the module docstring)."""
 
     format = Format.LIBRSF
-
-    def __init__(self, detected: Detected, ctx: ReadContext) -> None:
-        super().__init__(detected, ctx)
-        self.file = detected.files[0]
-        self.damage.offsets_are_lines = True
+    offsets_are_lines = True
 
     def inventory(self) -> Inventory:
         counts: dict[str, int] = {}

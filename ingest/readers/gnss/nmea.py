@@ -41,8 +41,8 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-import numpy.typing as npt
 
+from navreplay.ingest.arrays import Bools
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.readers.base import (
@@ -64,7 +64,6 @@ from navreplay.ingest.readers.gnss._nmea import (
 from navreplay.ingest.schema import FixType, TableName
 from navreplay.ingest.timebase import NS_PER_S, TimeBase, utc_to_gps_ns
 
-Bools = npt.NDArray[np.bool_]
 _MAX_LISTED = 20
 _DAY_NS = 86_400 * NS_PER_S
 _HALF_DAY_S = 43_200.0
@@ -99,11 +98,10 @@ class NmeaReader(LogReader):
     """Reader of one NMEA 0183 text log (see the module docstring)."""
 
     format = Format.NMEA
+    offsets_are_lines = True
 
     def __init__(self, detected: Detected, ctx: ReadContext) -> None:
         super().__init__(detected, ctx)
-        self.file = detected.files[0]
-        self.damage.offsets_are_lines = True
         cfg = ctx.config
         self.truth_key = cfg.truth.topic if cfg is not None else None
         self.config_date = _config_date(cfg.utc_date if cfg is not None else None)

@@ -34,10 +34,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-U8Array = npt.NDArray[np.uint8]
-I16Array = npt.NDArray[np.int16]
-I32Array = npt.NDArray[np.int32]
-I64Array = npt.NDArray[np.int64]
+from navreplay.ingest.arrays import I16, I32, I64, U8
 
 # Record flags (tlog).
 VALID = 0
@@ -60,7 +57,7 @@ _DF_LOOKAHEAD = 2 * 256 + 3  # a record is at most 255 bytes: room for a chain i
 
 
 @njit(cache=True, nogil=True)
-def x25_crc(buf: U8Array, start: int, stop: int, extra: int) -> int:  # pragma: no cover
+def x25_crc(buf: U8, start: int, stop: int, extra: int) -> int:  # pragma: no cover
     """CRC-16/MCRF4XX (MAVLink's X.25) of ``buf[start:stop]`` followed by the byte ``extra``."""
     crc = 0xFFFF
     for i in range(start, stop + 1):
@@ -73,7 +70,7 @@ def x25_crc(buf: U8Array, start: int, stop: int, extra: int) -> int:  # pragma: 
 
 @njit(cache=True, nogil=True)
 def _frame_tlog(  # noqa: PLR0911, PLR0912 (one compiled framing check, early exits)
-    buf: U8Array, p: int, end: int, crc_extra: I16Array, min_us: int, max_us: int
+    buf: U8, p: int, end: int, crc_extra: I16, min_us: int, max_us: int
 ) -> tuple[int, int]:  # pragma: no cover
     """(status, record length incl. the 8-byte stamp) of the record at ``p``."""
     if p + 9 > end:
@@ -118,18 +115,18 @@ def _frame_tlog(  # noqa: PLR0911, PLR0912 (one compiled framing check, early ex
 
 @njit(cache=True, nogil=True)
 def scan_tlog(
-    buf: U8Array,
+    buf: U8,
     end: int,
     final: bool,
     base: int,
     garbage_start: int,
-    crc_extra: I16Array,
+    crc_extra: I16,
     min_us: int,
     max_us: int,
-    rec_pos: I64Array,
+    rec_pos: I64,
     rec_flag: npt.NDArray[np.int8],
-    gap_pos: I64Array,
-    gap_len: I64Array,
+    gap_pos: I64,
+    gap_len: I64,
 ) -> tuple[int, int, int, int, int]:  # pragma: no cover
     """Frame the tlog records of ``buf[:end]`` (``buf[0]`` is file offset ``base``).
 
@@ -190,7 +187,7 @@ def scan_tlog(
 
 
 @njit(cache=True, nogil=True)
-def _df_known(buf: U8Array, p: int, fmt_len: I32Array) -> int:  # pragma: no cover
+def _df_known(buf: U8, p: int, fmt_len: I32) -> int:  # pragma: no cover
     """Length of the DataFlash record whose header is at ``p``, 0 if it is not one."""
     if buf[p] != DF_HEAD1 or buf[p + 1] != DF_HEAD2:
         return 0
@@ -198,7 +195,7 @@ def _df_known(buf: U8Array, p: int, fmt_len: I32Array) -> int:  # pragma: no cov
 
 
 @njit(cache=True, nogil=True)
-def _df_chain(buf: U8Array, s: int, end: int, fmt_len: I32Array) -> bool:  # pragma: no cover
+def _df_chain(buf: U8, s: int, end: int, fmt_len: I32) -> bool:  # pragma: no cover
     """A record starts at ``s`` and another right after it (or the data ends there)."""
     if s + 3 > end:
         return False
@@ -211,16 +208,16 @@ def _df_chain(buf: U8Array, s: int, end: int, fmt_len: I32Array) -> bool:  # pra
 
 @njit(cache=True, nogil=True)
 def scan_dataflash(  # noqa: PLR0912, PLR0915 (one compiled state machine; calls cost per record)
-    buf: U8Array,
+    buf: U8,
     end: int,
     final: bool,
     base: int,
     garbage_start: int,
-    fmt_len: I32Array,
-    rec_pos: I64Array,
-    rec_type: U8Array,
-    gap_pos: I64Array,
-    gap_len: I64Array,
+    fmt_len: I32,
+    rec_pos: I64,
+    rec_type: U8,
+    gap_pos: I64,
+    gap_len: I64,
 ) -> tuple[int, int, int, int, int]:  # pragma: no cover
     """Frame the DataFlash records of ``buf[:end]`` (``buf[0]`` is file offset ``base``).
 
@@ -288,7 +285,7 @@ def scan_dataflash(  # noqa: PLR0912, PLR0915 (one compiled state machine; calls
 
 
 @njit(cache=True, nogil=True)
-def gather(buf: U8Array, pos: I64Array, lens: I64Array, out: U8Array) -> None:  # pragma: no cover
+def gather(buf: U8, pos: I64, lens: I64, out: U8) -> None:  # pragma: no cover
     """``out[i, :lens[i]] = buf[pos[i]:pos[i] + lens[i]]``, zero-padded to ``out.shape[1]``.
 
     MAVLink 2 trims trailing zero bytes of a payload and MAVLink 1 packets lack the extension

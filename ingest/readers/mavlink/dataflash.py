@@ -51,7 +51,6 @@ from navreplay.ingest.readers.mavlink.dfscan import Formats, Records, ScanStats,
 from navreplay.ingest.readers.mavlink.mavmsgs import Converted
 from navreplay.ingest.schema import FixType, TableName
 
-I64Array = npt.NDArray[np.int64]
 JOIN_TOLERANCE_NS = 50_000_000
 
 
@@ -62,7 +61,6 @@ class DataFlashReader(LogReader):
 
     def __init__(self, detected: Detected, ctx: ReadContext) -> None:
         super().__init__(detected, ctx)
-        self.file = detected.files[0]
         self._s: DfSurvey | None = None
 
     def _survey(self) -> DfSurvey:

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64
 from navreplay.ingest.readers.mavlink._mavscan import gather
 from navreplay.ingest.readers.mavlink.dfformat import FMT_TYPE, DfFormat
 from navreplay.ingest.readers.mavlink.dfmsgs import BY_NAME, DfExtras, Origin
@@ -42,11 +43,10 @@ from navreplay.ingest.readers.mavlink.mavclock import (
 )
 from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
 
-I64Array = npt.NDArray[np.int64]
 WEEK_NS = SECONDS_PER_WEEK * NS_PER_S
 
 
-def instances(fixed: int, fmt: DfFormat, rec: Records, idx: npt.NDArray[np.intp]) -> I64Array:
+def instances(fixed: int, fmt: DfFormat, rec: Records, idx: npt.NDArray[np.intp]) -> I64:
     """Instance of records ``idx``: their ``I``/``C`` column, else ``fixed`` (legacy
     ``IMU2``); read without decoding the records."""
     col = fmt.instance_column
@@ -94,7 +94,7 @@ class DfSurvey:
         )
         return DfExtras(None if und is None else -und * 1e-3, origin)
 
-    def to_base(self, time_us: I64Array, offsets: I64Array) -> I64Array:
+    def to_base(self, time_us: I64, offsets: I64) -> I64:
         """``t_ns`` of records with ``time_us`` at file ``offsets``, on the file's base."""
         t = np.asarray(time_us, np.int64) * 1000
         if self.base == TimeBase.RECORDER:
@@ -102,7 +102,7 @@ class DfSurvey:
         segs = self.tracker.segment_of(np.asarray(offsets, np.int64))
         return t + np.array([o or 0 for o in self.offsets_ns], np.int64)[segs]
 
-    def fix_times(self, data: np.ndarray, t: I64Array) -> I64Array:
+    def fix_times(self, data: np.ndarray, t: I64) -> I64:
         """GPS fixes at their own epoch (GWk/GMS, rollover undone) where the receiver gave one."""
         if self.base != TimeBase.GPS or "GWk" not in (data.dtype.names or ()):
             return t
@@ -155,7 +155,7 @@ def survey(path: Path, utc_date: str | None = None) -> DfSurvey:
     return s
 
 
-def _time_us(formats: Formats, rec: Records) -> tuple[I64Array, npt.NDArray[np.bool_]]:
+def _time_us(formats: Formats, rec: Records) -> tuple[I64, npt.NDArray[np.bool_]]:
     """TimeUS of every record whose format starts with it (others 0), and that mask."""
     timed = [
         t
@@ -197,7 +197,7 @@ def _block(s: DfSurvey, rec: Records) -> None:
 
 
 def _records(
-    s: DfSurvey, rec: Records, idx: npt.NDArray[np.intp], fmt: DfFormat, t_us: I64Array
+    s: DfSurvey, rec: Records, idx: npt.NDArray[np.intp], fmt: DfFormat, t_us: I64
 ) -> None:
     name = fmt.name
     spec = BY_NAME.get(name)
@@ -228,9 +228,7 @@ def _records(
             s.origins.append((int(t_us[i]), lat, lon, alt))
 
 
-def _gps(
-    s: DfSurvey, rec: Records, idx: npt.NDArray[np.intp], data: np.ndarray, t_us: I64Array
-) -> None:
+def _gps(s: DfSurvey, rec: Records, idx: npt.NDArray[np.intp], data: np.ndarray, t_us: I64) -> None:
     week = np.asarray(data["GWk"], np.int64)
     tow_ns = np.asarray(data["GMS"], np.int64) * 1_000_000
     ok = (week > 0) & (np.asarray(data["Status"]) >= 2)

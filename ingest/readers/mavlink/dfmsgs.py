@@ -29,11 +29,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import F64
 from navreplay.ingest.readers.mavlink.dfformat import DfFormat
 from navreplay.ingest.readers.mavlink.mavmsgs import Converted
 from navreplay.ingest.schema import FixType, TableName
 
-F64 = npt.NDArray[np.float64]
 #: ArduPilot's LOCATION_SCALING_FACTOR_INV: 1e-7 degree units per metre (sphere 6378100 m).
 LOCATION_SCALING_FACTOR_INV = 89.83204953368922
 

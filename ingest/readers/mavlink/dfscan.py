@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64, U8
 from navreplay.ingest.readers.mavlink._mavscan import END_PARTIAL, gather, scan_dataflash
 from navreplay.ingest.readers.mavlink.dfformat import (
     FMT_FORMAT,
@@ -36,8 +37,6 @@ from navreplay.ingest.readers.mavlink.dfformat import (
 BLOCK_BYTES = 8 << 20
 MAX_LISTED = 20
 
-U8Array = npt.NDArray[np.uint8]
-I64Array = npt.NDArray[np.int64]
 _EMPTY = np.empty(0, np.int64)
 
 
@@ -45,16 +44,16 @@ _EMPTY = np.empty(0, np.int64)
 class Records:
     """The records of one block."""
 
-    buf: U8Array
-    pos: I64Array  # record start in buf
-    offset: I64Array  # record start in the file
-    type: U8Array
-    _groups: dict[int, I64Array] | None = field(default=None, repr=False)
+    buf: U8
+    pos: I64  # record start in buf
+    offset: I64  # record start in the file
+    type: U8
+    _groups: dict[int, I64] | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.pos)
 
-    def of_type(self, type_: int) -> I64Array:
+    def of_type(self, type_: int) -> I64:
         """Indices of the records of ``type_``, in file order (one sort per block)."""
         if self._groups is None:
             order = np.argsort(self.type, kind="stable")
@@ -130,7 +129,7 @@ class Formats:
             self._history.setdefault(type_, []).append((offset, made))
             self._names.setdefault(name, set()).add(type_)
 
-    def split(self, type_: int, offsets: I64Array) -> list[tuple[DfFormat | None, I64Array]]:
+    def split(self, type_: int, offsets: I64) -> list[tuple[DfFormat | None, I64]]:
         """(format, indices into ``offsets``) for records of ``type_`` at ``offsets``."""
         hist = self._history.get(type_)
         if type_ == FMT_TYPE:
@@ -141,7 +140,7 @@ class Formats:
             return [(hist[0][1], np.arange(len(offsets)))]  # the common case: one FMT
         starts = np.array([o for o, _ in hist], np.int64)
         which = np.searchsorted(starts, offsets, side="right") - 1
-        out: list[tuple[DfFormat | None, I64Array]] = []
+        out: list[tuple[DfFormat | None, I64]] = []
         for w in np.unique(which).tolist():
             fmt = hist[w][1] if w >= 0 else None
             out.append((fmt, np.flatnonzero(which == w)))

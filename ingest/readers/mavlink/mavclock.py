@@ -23,11 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64
 from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK
-
-I64Array = npt.NDArray[np.int64]
 
 #: A drop of the vehicle clock by more than this starts a new boot segment. Telemetry links
 #: deliver packets late by a second or more (a radio's buffer); a reboot restarts near zero.
@@ -49,7 +47,7 @@ class BootTracker:
     resets: list[tuple[int, int, int]] = field(default_factory=list)
     _max: int | None = None
 
-    def push(self, offsets: I64Array, boot_ns: I64Array) -> None:
+    def push(self, offsets: I64, boot_ns: I64) -> None:
         """Take the clock readings of one block (file order)."""
         lo = 0
         n = len(boot_ns)
@@ -69,7 +67,7 @@ class BootTracker:
             self._max = None
             lo = i
 
-    def segment_of(self, offsets: I64Array) -> I64Array:
+    def segment_of(self, offsets: I64) -> I64:
         """Segment index of each byte offset."""
         idx = np.searchsorted(np.asarray(self.starts, np.int64), offsets, side="right") - 1
         return np.asarray(idx, dtype=np.int64)
@@ -81,7 +79,7 @@ class OffsetAccumulator:
 
     _parts: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
 
-    def add(self, segments: I64Array, offsets_ns: I64Array) -> None:
+    def add(self, segments: I64, offsets_ns: I64) -> None:
         if not len(offsets_ns):
             return
         for seg in np.unique(segments).tolist():
@@ -102,9 +100,7 @@ class OffsetAccumulator:
         return sum(c for _, c in self._parts.get(segment, ()))
 
 
-def unroll_gps_week(
-    week: I64Array, tow_ns: I64Array, reference_gps_ns: int
-) -> tuple[I64Array, int]:
+def unroll_gps_week(week: I64, tow_ns: I64, reference_gps_ns: int) -> tuple[I64, int]:
     """GPS weeks corrected by multiples of 1024 to the epoch nearest ``reference_gps_ns``.
 
     Returns the corrected weeks and the number of weeks added (0 when none).

@@ -31,6 +31,7 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import CorruptLogError
@@ -60,8 +61,6 @@ from navreplay.ingest.readers.mavlink.tlogscan import Packets, ScanStats, scan_b
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
 
-I64Array = npt.NDArray[np.int64]
-
 JOIN_TOLERANCE_NS = 100_000_000
 #: A message id is suspected of a dialect mismatch when this share of its packets fail CRC.
 DIALECT_CRC_SHARE = 0.9
@@ -76,7 +75,6 @@ class TlogReader(LogReader):
 
     def __init__(self, detected: Detected, ctx: ReadContext) -> None:
         super().__init__(detected, ctx)
-        self.file = detected.files[0]
         name = ctx.config.mavlink.dialect if ctx.config is not None else "ardupilotmega"
         self.dialect = load_dialect(name)
         self._survey: TlogSurvey | None = None
@@ -226,7 +224,7 @@ class TlogReader(LogReader):
 
     def _utc(
         self, p: Packets, idx: npt.NDArray[np.intp], rec: np.ndarray, time_field: str
-    ) -> tuple[I64Array, str]:
+    ) -> tuple[I64, str]:
         """Vehicle time of packets ``idx`` as UTC ns (``time_boot_ms`` or ``time_usec``)."""
         s = self._surveyed()
         segs = np.clip(s.tracker.segment_of(p.offset[idx]), 0, max(len(s.segments) - 1, 0))
@@ -247,7 +245,7 @@ class TlogReader(LogReader):
 
     def _times(
         self, p: Packets, idx: npt.NDArray[np.intp], rec: np.ndarray, time_field: str | None
-    ) -> tuple[I64Array, str]:
+    ) -> tuple[I64, str]:
         """``t_ns`` on the file's base for packets ``idx``, and how it was obtained."""
         if time_field is not None:
             utc, how = self._utc(p, idx, rec, time_field)

@@ -33,14 +33,13 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64
 from navreplay.ingest.readers.mavlink._mavscan import VALID, gather
 from navreplay.ingest.readers.mavlink.mavclock import ROLLOVER_NS, BootTracker, OffsetAccumulator
 from navreplay.ingest.readers.mavlink.mavdialect import Dialect, MessageDef
 from navreplay.ingest.readers.mavlink.mavmsgs import BY_NAME, MavStream
 from navreplay.ingest.readers.mavlink.tlogscan import Packets, ScanStats, scan_blocks
 from navreplay.ingest.timebase import TimeBase
-
-I64Array = npt.NDArray[np.int64]
 
 #: ``time_usec`` values at or above this (2001-09-09) are UNIX epoch, below it time since boot
 #: (the MAVLink convention: "the receiving end can infer the format from the magnitude").
@@ -163,7 +162,7 @@ def _boot_clock(
         acc.add(tracker.segment_of(off[m]), st[m] - b[m])
 
 
-def _rollover(s: TlogSurvey, utc_ns: I64Array, stamp_ns: I64Array) -> I64Array:
+def _rollover(s: TlogSurvey, utc_ns: I64, stamp_ns: I64) -> I64:
     """Undo a 1024-week rollover of vehicle UTC values against the tlog stamps."""
     k = np.rint((stamp_ns - utc_ns) / ROLLOVER_NS).astype(np.int64)
     fixed = k != 0
@@ -229,7 +228,7 @@ def _streams(
                 s._undulation.add(np.zeros(int(have.sum()), np.int64), n_mm)
 
 
-def instances(spec: MavStream, rec: np.ndarray) -> I64Array:
+def instances(spec: MavStream, rec: np.ndarray) -> I64:
     """The sensor instance of each decoded message of ``spec``."""
     if spec.instance_field is None:
         return np.full(len(rec), spec.instance, dtype=np.int64)
@@ -287,14 +286,14 @@ class HeldClock:
         self._utc = np.empty(0, np.int64)
         self._stamp = np.empty(0, np.int64)
 
-    def push(self, offsets: I64Array, utc_ns: I64Array, stamp_ns: I64Array) -> None:
+    def push(self, offsets: I64, utc_ns: I64, stamp_ns: I64) -> None:
         """Timed packets of the next block (file order); the last of the previous is kept."""
         keep = slice(len(self._off) - 1, None) if len(self._off) else slice(0, 0)
         self._off = np.concatenate([self._off[keep], offsets])
         self._utc = np.concatenate([self._utc[keep], utc_ns])
         self._stamp = np.concatenate([self._stamp[keep], stamp_ns])
 
-    def at(self, offsets: I64Array, stamp_ns: I64Array) -> I64Array:
+    def at(self, offsets: I64, stamp_ns: I64) -> I64:
         """Vehicle UTC for untimed packets at ``offsets`` with tlog stamps ``stamp_ns``."""
         j = np.searchsorted(self._off, offsets) - 1
         have = j >= 0

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64, U8
 from navreplay.ingest.readers.mavlink._mavscan import END_PARTIAL, MAVLINK_V2, VALID, scan_tlog
 from navreplay.ingest.readers.mavlink.mavdialect import Dialect
 
@@ -27,8 +28,6 @@ MIN_STAMP_US = 946_684_800 * 10**6  # 2000-01-01
 MAX_STAMP_US = 4_102_444_800 * 10**6  # 2100-01-01
 MAX_LISTED = 20
 
-U8Array = npt.NDArray[np.uint8]
-I64Array = npt.NDArray[np.int64]
 _AR8 = np.arange(8, dtype=np.int64)
 
 
@@ -46,22 +45,22 @@ class Packets:
             length.
     """
 
-    buf: U8Array
-    offset: I64Array
+    buf: U8
+    offset: I64
     flag: npt.NDArray[np.int8]
-    stamp_us: I64Array
-    msgid: I64Array
-    sysid: I64Array
-    compid: I64Array
-    seq: I64Array
-    payload: I64Array
-    payload_len: I64Array
+    stamp_us: I64
+    msgid: I64
+    sysid: I64
+    compid: I64
+    seq: I64
+    payload: I64
+    payload_len: I64
 
     def __len__(self) -> int:
         return len(self.offset)
 
     @property
-    def source(self) -> I64Array:
+    def source(self) -> I64:
         """``sysid * 256 + compid`` per packet."""
         return self.sysid * 256 + self.compid
 
@@ -102,7 +101,7 @@ class ScanStats:
             self.unknown.update(_counts(p.msgid[unknown]))
         self._seq_gaps(p.source[ok], p.seq[ok])
 
-    def _seq_gaps(self, source: I64Array, seq: I64Array) -> None:
+    def _seq_gaps(self, source: I64, seq: I64) -> None:
         for src in np.unique(source).tolist():
             s = seq[source == src]
             last = self._last_seq.get(src)
@@ -113,18 +112,18 @@ class ScanStats:
             self._last_seq[src] = int(s[-1])
 
 
-def _counts(ids: I64Array) -> dict[int, int]:
+def _counts(ids: I64) -> dict[int, int]:
     values, counts = np.unique(ids, return_counts=True)
     return dict(zip(values.tolist(), counts.tolist(), strict=True))
 
 
-def packet_fields(buf: U8Array, pos: I64Array, flag: npt.NDArray[np.int8], base: int) -> Packets:
+def packet_fields(buf: U8, pos: I64, flag: npt.NDArray[np.int8], base: int) -> Packets:
     """Header fields of the records starting at ``pos`` (offsets in ``buf``)."""
     stamp = buf[pos[:, None] + _AR8].copy().view(">u8")[:, 0].astype(np.int64)
     v2 = buf[pos + 8] == MAVLINK_V2
     at = pos + 8
 
-    def byte(k1: int, k2: int) -> I64Array:
+    def byte(k1: int, k2: int) -> I64:
         return np.where(v2, buf[at + k2], buf[at + k1]).astype(np.int64)
 
     msgid = np.where(

@@ -25,16 +25,15 @@ import struct
 import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Literal
 
 import numpy as np
-import numpy.typing as npt
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.records import Channel, ChunkIndex, Schema, Statistics
 
+from navreplay.ingest.arrays import I64, U8
 from navreplay.ingest.damage import Completeness, DamageLog, Defect
 from navreplay.ingest.detect import MCAP_MAGIC, Detected, Format
 from navreplay.ingest.errors import CorruptLogError
@@ -55,9 +54,6 @@ from navreplay.ingest.readers.ros.roscommon import (
     stream_info,
 )
 
-U8Array = npt.NDArray[np.uint8]
-I64Array = npt.NDArray[np.int64]
-
 BLOCK_BYTES = 4 << 20
 _FOOTER_BYTES = 1 + 8 + 20 + len(MCAP_MAGIC)
 _AR2 = np.arange(2, dtype=np.int64)
@@ -68,16 +64,16 @@ _AR8 = np.arange(8, dtype=np.int64)
 class _Segment:
     """Message records found in one buffer (a chunk's records or a run of top-level ones)."""
 
-    buf: U8Array
-    pos: I64Array  # content start of each message record
-    lens: I64Array  # content length
-    offsets: I64Array  # file offset reported per row (the record, or its chunk)
+    buf: U8
+    pos: I64  # content start of each message record
+    lens: I64  # content length
+    offsets: I64  # file offset reported per row (the record, or its chunk)
 
-    def channel_ids(self) -> I64Array:
+    def channel_ids(self) -> I64:
         raw = self.buf[self.pos[:, None] + _AR2]
         return np.asarray(raw.view("<u2")[:, 0], dtype=np.int64)
 
-    def log_times(self) -> I64Array:
+    def log_times(self) -> I64:
         raw = self.buf[(self.pos + 6)[:, None] + _AR8]
         return np.asarray(raw.view("<u8")[:, 0], dtype=np.int64)
 
@@ -98,9 +94,8 @@ class McapReader(LogReader):
 
     format = Format.MCAP
 
-    def __init__(self, detected: Detected, ctx: ReadContext, *, file: Path | None = None) -> None:
+    def __init__(self, detected: Detected, ctx: ReadContext) -> None:
         super().__init__(detected, ctx)
-        self.file = file if file is not None else detected.files[0]
         self.size = self.file.stat().st_size
         self.channels: dict[int, RosChannel] = {}
         self._schemas: dict[int, Schema] = {}
@@ -296,11 +291,11 @@ class McapReader(LogReader):
 
     def _records(
         self,
-        arr: U8Array,
+        arr: U8,
         base: int,
-        ops: U8Array,
-        pos: I64Array,
-        lens: I64Array,
+        ops: U8,
+        pos: I64,
+        lens: I64,
         state: _WalkState,
         damage: DamageLog,
     ) -> Iterator[_Segment]:
@@ -342,7 +337,7 @@ class McapReader(LogReader):
             idx = np.asarray(run)
             yield _Segment(arr, pos[idx], lens[idx], base + pos[idx] - 9)
 
-    def _definition(self, op: int, content: U8Array, offset: int, damage: DamageLog) -> None:
+    def _definition(self, op: int, content: U8, offset: int, damage: DamageLog) -> None:
         try:
             stream = ReadDataStream(io.BytesIO(content.tobytes()))
             if op == Opcode.SCHEMA:
@@ -380,7 +375,7 @@ class McapReader(LogReader):
 
     # -------------------------------------------------------------------------------- chunks
     def _chunk(
-        self, content: U8Array, offset: int, damage: DamageLog, state: _WalkState
+        self, content: U8, offset: int, damage: DamageLog, state: _WalkState
     ) -> _Segment | None:
         header = _parse_chunk_header(content)
         if header is None:
@@ -415,10 +410,10 @@ class McapReader(LogReader):
 
     def _chunk_segment(
         self,
-        arr: U8Array,
-        ops: U8Array,
-        pos: I64Array,
-        lens: I64Array,
+        arr: U8,
+        ops: U8,
+        pos: I64,
+        lens: I64,
         offset: int,
         damage: DamageLog,
     ) -> _Segment:
@@ -449,7 +444,7 @@ class McapReader(LogReader):
 
     # ------------------------------------------------------------------------------- damage
     def _truncated(
-        self, damage: DamageLog, arr: U8Array, stop: int, base: int, state: _WalkState
+        self, damage: DamageLog, arr: U8, stop: int, base: int, state: _WalkState
     ) -> Iterator[_Segment]:
         self._flush_pending(state, damage)
         offset = base + stop
@@ -477,7 +472,7 @@ class McapReader(LogReader):
             )
         )
 
-    def _partial_chunk(self, content: U8Array, offset: int, damage: DamageLog) -> _Segment | None:
+    def _partial_chunk(self, content: U8, offset: int, damage: DamageLog) -> _Segment | None:
         header = _parse_chunk_header(content, partial=True)
         if header is None:
             return None
@@ -491,7 +486,7 @@ class McapReader(LogReader):
         ops, pos, lens, _stop, _status, _ = mcap_records(arr, 0, len(raw))
         return self._chunk_segment(arr, ops, pos, lens, offset, damage)
 
-    def _corrupt_length(self, damage: DamageLog, offset: int, arr: U8Array, stop: int) -> None:
+    def _corrupt_length(self, damage: DamageLog, offset: int, arr: U8, stop: int) -> None:
         (length,) = struct.unpack_from("<Q", arr.data, stop + 1) if len(arr) >= stop + 9 else (-1,)
         damage.record(
             Defect(
@@ -505,7 +500,7 @@ class McapReader(LogReader):
         )
 
     def _check_data_crc(
-        self, arr: U8Array, p: int, n: int, offset: int, state: _WalkState, damage: DamageLog
+        self, arr: U8, p: int, n: int, offset: int, state: _WalkState, damage: DamageLog
     ) -> None:
         if n < 4:
             return
@@ -530,7 +525,7 @@ class _WalkState:
 
 
 def _parse_chunk_header(
-    content: U8Array, *, partial: bool = False
+    content: U8, *, partial: bool = False
 ) -> tuple[int, int, int, int, str, int, int] | None:
     """(start, end, uncompressed size, crc, compression, records offset, records length)."""
     n = len(content)

@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 from typing import BinaryIO
 
 import numpy as np
-import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64, U8
 from navreplay.ingest.damage import Completeness, DamageLog, Defect
 from navreplay.ingest.detect import ROSBAG_MAGIC, Detected, Format
 from navreplay.ingest.errors import CorruptLogError
@@ -42,9 +42,6 @@ from navreplay.ingest.readers.ros.roscommon import (
     make_channel,
     stream_info,
 )
-
-U8Array = npt.NDArray[np.uint8]
-I64Array = npt.NDArray[np.int64]
 
 BLOCK_BYTES = 4 << 20
 OP_MSG, OP_BAG_HEADER, OP_INDEX, OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION = 2, 3, 4, 5, 6, 7
@@ -68,12 +65,12 @@ def parse_header(raw: bytes) -> dict[str, bytes]:
 
 @dataclass
 class _Segment:
-    buf: U8Array
-    dpos: I64Array
-    dlen: I64Array
-    conn: I64Array
-    time_ns: I64Array
-    offsets: I64Array
+    buf: U8
+    dpos: I64
+    dlen: I64
+    conn: I64
+    time_ns: I64
+    offsets: I64
 
 
 @dataclass
@@ -92,7 +89,6 @@ class Ros1BagReader(LogReader):
 
     def __init__(self, detected: Detected, ctx: ReadContext) -> None:
         super().__init__(detected, ctx)
-        self.file = detected.files[0]
         self.size = self.file.stat().st_size
         self.channels: dict[int, RosChannel] = {}
 
@@ -293,7 +289,7 @@ class Ros1BagReader(LogReader):
 
     def _records(
         self,
-        arr: U8Array,
+        arr: U8,
         base: int,
         rec: dict[str, np.ndarray],
         state: _State,
@@ -325,7 +321,7 @@ class Ros1BagReader(LogReader):
                     np.array([offset], np.int64),
                 )
 
-    def _connection_at(self, arr: U8Array, h0: int, hl: int, d0: int, dl: int, offset: int) -> None:
+    def _connection_at(self, arr: U8, h0: int, hl: int, d0: int, dl: int, offset: int) -> None:
         try:
             header = parse_header(arr[h0 : h0 + hl].tobytes())
             self._connection(header, arr[d0 : d0 + dl].tobytes())
@@ -336,7 +332,7 @@ class Ros1BagReader(LogReader):
 
     def _chunk(
         self,
-        arr: U8Array,
+        arr: U8,
         h0: int,
         hl: int,
         d0: int,
@@ -399,7 +395,7 @@ class Ros1BagReader(LogReader):
         )
 
     def _truncated(
-        self, arr: U8Array, stop: int, base: int, state: _State, damage: DamageLog
+        self, arr: U8, stop: int, base: int, state: _State, damage: DamageLog
     ) -> Iterator[_Segment]:
         self._flush_lost(state, damage)
         offset = base + stop
@@ -430,7 +426,7 @@ class Ros1BagReader(LogReader):
             )
         )
 
-    def _partial_chunk(self, arr: U8Array, stop: int, base: int, state: _State) -> _Segment | None:
+    def _partial_chunk(self, arr: U8, stop: int, base: int, state: _State) -> _Segment | None:
         if stop + 4 > len(arr):
             return None
         (hl,) = struct.unpack_from("<I", arr.data, stop)

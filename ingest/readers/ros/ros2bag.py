@@ -17,6 +17,7 @@ without them is decoded with rosbags' standard ROS 2 types, which the report not
 
 from __future__ import annotations
 
+import dataclasses
 import sqlite3
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -59,7 +60,12 @@ class Ros2BagReader(LogReader):
         if plain_mcap:
             for f in detected.files:
                 child = DamageLog(f, strict=ctx.damage.strict)
-                self._parts.append((McapReader(detected, ReadContext(child), file=f), child))
+                self._parts.append(
+                    (
+                        McapReader(dataclasses.replace(detected, files=(f,)), ReadContext(child)),
+                        child,
+                    )
+                )
 
     def inventory(self) -> Inventory:
         if self._parts:

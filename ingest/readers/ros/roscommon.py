@@ -7,8 +7,8 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64, U8
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.readers.base import Batch, StreamInfo
 from navreplay.ingest.readers.ros.rosconv import RosConversion, conversion_for
@@ -21,9 +21,6 @@ from navreplay.ingest.readers.ros.rosmsg import (
 )
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.timebase import MIN_PLAUSIBLE_UTC_NS, TimeBase
-
-U8Array = npt.NDArray[np.uint8]
-I64Array = npt.NDArray[np.int64]
 
 
 @dataclass
@@ -136,11 +133,11 @@ MISMATCH_AFTER = 16
 def decode_batch(
     path: Path,
     channel: RosChannel,
-    buf: U8Array,
-    starts: I64Array,
-    ends: I64Array,
-    log_ns: I64Array,
-    offsets: I64Array,
+    buf: U8,
+    starts: I64,
+    ends: I64,
+    log_ns: I64,
+    offsets: I64,
     *,
     strict: bool = False,
 ) -> Batch:

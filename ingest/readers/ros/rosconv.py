@@ -45,11 +45,11 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64
 from navreplay.ingest.frames import enu_to_ned
 from navreplay.ingest.readers.ros.rosmsg import Decoded, LeafKind, MessageDecoder
 from navreplay.ingest.schema import FixType, TableName, spec
 
-I64Array = npt.NDArray[np.int64]
 Columns = dict[str, np.ndarray]
 Nulls = dict[str, npt.NDArray[np.bool_]]
 
@@ -86,7 +86,7 @@ class RosConversion:
     table: TableName
     frame: str | None
     wants: tuple[str, ...]
-    convert: Callable[[Decoded, I64Array], Converted]
+    convert: Callable[[Decoded, I64], Converted]
     optional: tuple[str, ...] = ("header.frame_id",)
     role: str = ""
 
@@ -135,7 +135,7 @@ def _time(decoder: MessageDecoder) -> tuple[str, ...]:
     return ()
 
 
-def _t_ns(decoded: Decoded, time_leaves: tuple[str, ...], log_ns: I64Array) -> tuple[I64Array, int]:
+def _t_ns(decoded: Decoded, time_leaves: tuple[str, ...], log_ns: I64) -> tuple[I64, int]:
     """Row times and the number of rows that fell back to the log time."""
     if time_leaves == _STAMP:
         sec = decoded.values[_STAMP[0]].astype(np.int64)
@@ -157,7 +157,7 @@ def _imu(decoder: MessageDecoder) -> RosConversion:
     wants = (*tl, *vec, *covs, "header.frame_id")
     optional = (*covs, "header.frame_id")
 
-    def convert(d: Decoded, log_ns: I64Array) -> Converted:
+    def convert(d: Decoded, log_ns: I64) -> Converted:
         t, fallback = _t_ns(d, tl, log_ns)
         cols: Columns = {"t_ns": t}
         counters = {"time_from_log": fallback}
@@ -192,7 +192,7 @@ def _navsatfix(decoder: MessageDecoder) -> RosConversion:
         "header.frame_id",
     )
 
-    def convert(d: Decoded, log_ns: I64Array) -> Converted:
+    def convert(d: Decoded, log_ns: I64) -> Converted:
         t, fallback = _t_ns(d, tl, log_ns)
         status = d.values["status.status"].astype(np.int64)
         fix = np.full(len(t), FixType.NO_FIX, dtype=np.int8)
@@ -230,7 +230,7 @@ def _twist(decoder: MessageDecoder, base: str) -> RosConversion | None:
         return None
     wants = (*tl, speed, yaw, "header.frame_id")
 
-    def convert(d: Decoded, log_ns: I64Array) -> Converted:
+    def convert(d: Decoded, log_ns: I64) -> Converted:
         t, fallback = _t_ns(d, tl, log_ns)
         cols: Columns = {
             "t_ns": t,
@@ -252,7 +252,7 @@ def _gnss_velocity(decoder: MessageDecoder) -> RosConversion | None:
     lin = tuple(f"twist.twist.linear.{a}" for a in _VEC)
     wants = (*tl, *lin, "twist.covariance", "header.frame_id")
 
-    def convert(d: Decoded, log_ns: I64Array) -> Converted:
+    def convert(d: Decoded, log_ns: I64) -> Converted:
         t, fallback = _t_ns(d, tl, log_ns)
         e, n, u = (d.values[p].astype(np.float64) for p in lin)
         vn, ve, vd = enu_to_ned(e, n, u)
@@ -296,7 +296,7 @@ def _truth_like(decoder: MessageDecoder) -> RosConversion | None:
     known = {c.name for c in spec(TableName.TRUTH).columns}
     wants = (*tl, *fields)
 
-    def convert(d: Decoded, log_ns: I64Array) -> Converted:
+    def convert(d: Decoded, log_ns: I64) -> Converted:
         t, fallback = _t_ns(d, tl, log_ns)
         cols: Columns = {"t_ns": t}
         for f in fields:

@@ -29,11 +29,10 @@ from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 from rosbags.typesys.base import TypesysError
 
+from navreplay.ingest.arrays import I64, U8
 from navreplay.ingest.errors import IngestError
 
 Encoding = Literal["ros1", "cdr"]
-U8Array = npt.NDArray[np.uint8]
-I64Array = npt.NDArray[np.int64]
 
 _PRIMS: dict[str, tuple[str, int]] = {
     "bool": ("u1", 1),
@@ -256,9 +255,7 @@ class MessageDecoder:
     def leaf(self, path: str) -> Leaf | None:
         return self._by_path.get(path)
 
-    def decode(
-        self, buf: U8Array, starts: I64Array, ends: I64Array, want: Sequence[str]
-    ) -> Decoded:
+    def decode(self, buf: U8, starts: I64, ends: I64, want: Sequence[str]) -> Decoded:
         """Decode the messages ``buf[starts[i]:ends[i]]`` and return the ``want`` leaves.
 
         Payloads that do not fit the definition are flagged in ``Decoded.bad``, never read
@@ -275,9 +272,7 @@ class MessageDecoder:
         shape = (0,) if leaf.count == 1 else (0, leaf.count)
         return np.empty(shape, dtype=np.dtype(leaf.dtype))
 
-    def _decode_vectorised(
-        self, buf: U8Array, starts: I64Array, ends: I64Array, want: set[str]
-    ) -> Decoded:
+    def _decode_vectorised(self, buf: U8, starts: I64, ends: I64, want: set[str]) -> Decoded:
         cdr = self.encoding == "cdr"
         check = _Checker(starts, ends)
         big = _cdr_big_endian(buf, starts, check) if cdr else False
@@ -319,14 +314,14 @@ class MessageDecoder:
     def _skip_variable(
         self,
         leaf: Leaf,
-        buf: U8Array,
-        pos: I64Array,
-        origin: I64Array,
+        buf: U8,
+        pos: I64,
+        origin: I64,
         check: _Checker,
         big: bool,
         want: set[str],
         strings: dict[str, str],
-    ) -> I64Array:
+    ) -> I64:
         """Advance past a string or sequence (reading its length); sample wanted strings."""
         cdr = self.encoding == "cdr"
         if cdr:
@@ -348,9 +343,7 @@ class MessageDecoder:
         check.bound(pos, f"field {leaf.path} runs past the end of the payload")
         return check.safe(pos)
 
-    def _decode_fallback(
-        self, buf: U8Array, starts: I64Array, ends: I64Array, want: Sequence[str]
-    ) -> Decoded:
+    def _decode_fallback(self, buf: U8, starts: I64, ends: I64, want: Sequence[str]) -> Decoded:
         store = self._fallback_store()
         check = _Checker(starts, ends)
         rows: list[object | None] = []
@@ -413,7 +406,7 @@ def _with_dependencies(types: Mapping[str, Any]) -> dict[str, Any]:
 class _Checker:
     """Per-row validity while decoding: a bad row is flagged, never read out of bounds."""
 
-    def __init__(self, starts: I64Array, ends: I64Array) -> None:
+    def __init__(self, starts: I64, ends: I64) -> None:
         self.starts = starts
         self.ends = ends
         self.bad = np.zeros(len(starts), bool)
@@ -426,10 +419,10 @@ class _Checker:
             self.reason = f"{reason} (payload of {int(self.ends[i] - self.starts[i])} bytes)"
         self.bad |= mask
 
-    def bound(self, need: I64Array, what: str) -> None:
+    def bound(self, need: I64, what: str) -> None:
         self.fail(need > self.ends, f"payload {what}")
 
-    def safe(self, pos: I64Array) -> I64Array:
+    def safe(self, pos: I64) -> I64:
         """Positions of bad rows reset to their start so later reads stay in the buffer."""
         return np.where(self.bad, self.starts, pos) if self.bad.any() else pos
 
@@ -439,7 +432,7 @@ class _Checker:
         return Decoded(values, strings, self.bad, self.reason)
 
 
-def _cdr_big_endian(buf: U8Array, starts: I64Array, check: _Checker) -> bool:
+def _cdr_big_endian(buf: U8, starts: I64, check: _Checker) -> bool:
     """Check the 4-byte CDR encapsulation headers; True for big-endian payloads."""
     check.bound(starts + 4, "shorter than the 4-byte CDR header")
     if not len(buf):
@@ -457,12 +450,12 @@ def _cdr_big_endian(buf: U8Array, starts: I64Array, check: _Checker) -> bool:
     return bool(big)
 
 
-def _align(pos: I64Array, origin: I64Array, size: int) -> I64Array:
+def _align(pos: I64, origin: I64, size: int) -> I64:
     rel = pos - origin
     return origin + ((rel + (size - 1)) // size) * size
 
 
-def _read_u32(buf: U8Array, pos: I64Array, big: bool) -> I64Array:
+def _read_u32(buf: U8, pos: I64, big: bool) -> I64:
     raw = np.take(buf, pos[:, None] + _AR[4], mode="clip")
     return np.asarray(raw.view(">u4" if big else "<u4")[:, 0], dtype=np.int64)
 

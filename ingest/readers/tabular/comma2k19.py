@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import F64, I64, Bools
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.ecef import (
@@ -68,10 +69,6 @@ from navreplay.ingest.readers.base import (
 from navreplay.ingest.readers.tabular import _npy
 from navreplay.ingest.schema import FixType, TableName
 from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
-
-I64 = npt.NDArray[np.int64]
-F64 = npt.NDArray[np.float64]
-Bools = npt.NDArray[np.bool_]
 
 NO_EPHEMERIS = (
     "raw pseudoranges (u-blox/Qualcomm) not convertible to gnss_obs: the segment carries no "

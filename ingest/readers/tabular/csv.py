@@ -51,12 +51,11 @@ class CsvReader(LogReader):
     """Reader of one delimited text file, for every ``csv:`` mapping that names it."""
 
     format = Format.CSV
+    offsets_are_lines = True
 
     def __init__(self, detected: Detected, ctx: ReadContext) -> None:
         super().__init__(detected, ctx)
-        self.file = detected.files[0]
         self.sources = self._sources()
-        self.damage.offsets_are_lines = True
 
     def _sources(self) -> list[CsvSource]:
         cfg, base = self.ctx.config, self.ctx.config_dir or Path.cwd()

@@ -38,8 +38,8 @@ from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import CorruptLogError
@@ -58,7 +58,6 @@ from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
 
 log = logging.getLogger(__name__)
 
-I64Array = npt.NDArray[np.int64]
 JOIN_TOLERANCE_NS = 50_000_000
 _HEADER = 16
 
@@ -70,7 +69,6 @@ class UlogReader(LogReader):
 
     def __init__(self, detected: Detected, ctx: ReadContext) -> None:
         super().__init__(detected, ctx)
-        self.file = detected.files[0]
         self._ulog: Any = None
         self._offset_ns: int | None = None
         self._pairs = 0
@@ -105,7 +103,7 @@ class UlogReader(LogReader):
         return self._ulog
 
     def _pair_clock(self) -> None:
-        diffs: list[I64Array] = []
+        diffs: list[I64] = []
         for d in self._ulog.data_list:
             if d.name in GPS_TOPICS and "time_utc_usec" in d.data:
                 utc = d.data["time_utc_usec"].astype(np.int64)
@@ -121,7 +119,7 @@ class UlogReader(LogReader):
         self._load()
         return TimeBase.GPS if self._offset_ns is not None else TimeBase.RECORDER
 
-    def to_base(self, timestamp_us: np.ndarray) -> I64Array:
+    def to_base(self, timestamp_us: np.ndarray) -> I64:
         t = np.asarray(timestamp_us, dtype=np.int64) * 1000
         if self._offset_ns is None:
             return t
@@ -193,7 +191,7 @@ class UlogReader(LogReader):
         return None
 
     def _with_attitude(
-        self, key: str, topic: UlogTopic, t: I64Array, conv: Any, offsets: I64Array, ulog: Any
+        self, key: str, topic: UlogTopic, t: I64, conv: Any, offsets: I64, ulog: Any
     ) -> Batch:
         join = AsofJoin(("roll_rad", "pitch_rad", "yaw_rad"), JOIN_TOLERANCE_NS)
         for d in ulog.data_list:

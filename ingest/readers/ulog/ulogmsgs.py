@@ -13,12 +13,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from navreplay.ingest.arrays import F64
 from navreplay.ingest.readers.mavlink.mavmsgs import Converted
 from navreplay.ingest.schema import FixType, TableName
 
-F64 = npt.NDArray[np.float64]
 Data = Mapping[str, np.ndarray]
 #: PX4's CONSTANTS_RADIUS_OF_EARTH (geo.h), the sphere of its map projection.
 PX4_EARTH_RADIUS_M = 6_371_000.0
