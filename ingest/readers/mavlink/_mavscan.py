@@ -35,6 +35,7 @@ import numpy.typing as npt
 from numba import njit
 
 from navreplay.ingest.arrays import I16, I32, I64, U8
+from navreplay.ingest.damage import Completeness, Defect
 
 # Record flags (tlog).
 VALID = 0
@@ -299,3 +300,15 @@ def gather(buf: U8, pos: I64, lens: I64, out: U8) -> None:  # pragma: no cover
             out[i, k] = buf[start + k]
         for k in range(m, width):
             out[i, k] = 0
+
+
+def partial_record_defect(offset: int, n_bytes: int) -> Defect:
+    """The defect of a log that ends inside its last record (``n_bytes`` from ``offset``)."""
+    return Defect(
+        Completeness.PARTIAL_RECORD_DROPPED,
+        f"1 trailing partial record dropped at offset {offset} "
+        f"({n_bytes} bytes): the file ends inside it",
+        offset=offset,
+        messages_lost=1,
+        bytes_skipped=n_bytes,
+    )

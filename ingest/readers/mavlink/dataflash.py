@@ -38,6 +38,7 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
+from navreplay.ingest.readers.mavlink._mavscan import partial_record_defect
 from navreplay.ingest.readers.mavlink.dfclock import DfSurvey, instances, survey
 from navreplay.ingest.readers.mavlink.dfformat import DfFormat
 from navreplay.ingest.readers.mavlink.dfmsgs import (
@@ -231,12 +232,7 @@ class DataFlashReader(LogReader):
         dmg = self.damage
         dmg.note(s.time_note())
         dmg.count("records_framed", stats.records)
-        for offset, before, after in s.tracker.resets:
-            dmg.count("boot_resets")
-            dmg.note(
-                f"reboot at offset {offset}: TimeUS dropped from {before / 1e9:.3f} s to "
-                f"{after / 1e9:.3f} s; segments paired separately"
-            )
+        s.tracker.note_resets(dmg, reboot="reboot", clock="TimeUS")
         if s.week_shift:
             dmg.count("gps_week_rollover_corrected", s.gps_rows)
             dmg.note(
@@ -261,16 +257,7 @@ class DataFlashReader(LogReader):
                 )
             )
         if stats.partial_offset is not None:
-            dmg.record(
-                Defect(
-                    Completeness.PARTIAL_RECORD_DROPPED,
-                    f"1 trailing partial record dropped at offset {stats.partial_offset} "
-                    f"({stats.partial_bytes} bytes): the file ends inside it",
-                    offset=stats.partial_offset,
-                    messages_lost=1,
-                    bytes_skipped=stats.partial_bytes,
-                )
-            )
+            dmg.record(partial_record_defect(stats.partial_offset, stats.partial_bytes))
 
 
 def _parse_key(key: str) -> tuple[DfStream, int] | None:

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from navreplay.ingest.arrays import I64
+from navreplay.ingest.damage import DamageLog
 from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK
 
 #: A drop of the vehicle clock by more than this starts a new boot segment. Telemetry links
@@ -46,6 +47,16 @@ class BootTracker:
     starts: list[int] = field(default_factory=lambda: [0])
     resets: list[tuple[int, int, int]] = field(default_factory=list)
     _max: int | None = None
+
+    def note_resets(self, damage: DamageLog, *, reboot: str, clock: str) -> None:
+        """Count each reset in ``damage`` and describe it: ``reboot`` names the event and
+        ``clock`` the vehicle clock in the log's terms."""
+        for offset, before, after in self.resets:
+            damage.count("boot_resets")
+            damage.note(
+                f"{reboot} at offset {offset}: {clock} dropped from {before / 1e9:.3f} s to "
+                f"{after / 1e9:.3f} s; segments paired separately"
+            )
 
     def push(self, offsets: I64, boot_ns: I64) -> None:
         """Take the clock readings of one block (file order)."""

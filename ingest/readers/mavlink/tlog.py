@@ -44,7 +44,7 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.mavlink._mavscan import VALID
+from navreplay.ingest.readers.mavlink._mavscan import VALID, partial_record_defect
 from navreplay.ingest.readers.mavlink.mavclock import ROLLOVER_NS
 from navreplay.ingest.readers.mavlink.mavdialect import load_dialect
 from navreplay.ingest.readers.mavlink.mavmsgs import BY_NAME, Extras, MavStream
@@ -288,12 +288,7 @@ class TlogReader(LogReader):
         if other:
             dmg.count("packets_from_other_senders", other)
             dmg.note(f"{other} convertible packets from senders other than the vehicle ignored")
-        for offset, before, after in s.tracker.resets:
-            dmg.count("boot_resets")
-            dmg.note(
-                f"vehicle reboot at offset {offset}: time since boot dropped from "
-                f"{before / 1e9:.3f} s to {after / 1e9:.3f} s; segments paired separately"
-            )
+        s.tracker.note_resets(dmg, reboot="vehicle reboot", clock="time since boot")
         if s.rollover_rows:
             dmg.count("gps_week_rollover_corrected", s.rollover_rows)
             dmg.note(
@@ -303,16 +298,7 @@ class TlogReader(LogReader):
         self._garbage(stats)
         self._bad_packets(stats)
         if stats.partial_offset is not None:
-            dmg.record(
-                Defect(
-                    Completeness.PARTIAL_RECORD_DROPPED,
-                    f"1 trailing partial record dropped at offset {stats.partial_offset} "
-                    f"({stats.partial_bytes} bytes): the file ends inside it",
-                    offset=stats.partial_offset,
-                    messages_lost=1,
-                    bytes_skipped=stats.partial_bytes,
-                )
-            )
+            dmg.record(partial_record_defect(stats.partial_offset, stats.partial_bytes))
 
     def _garbage(self, stats: ScanStats) -> None:
         if not stats.garbage_runs:
