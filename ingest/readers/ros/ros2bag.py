@@ -26,7 +26,7 @@ from typing import Any, Literal
 import numpy as np
 
 from navreplay.ingest.damage import Completeness, DamageLog, Defect
-from navreplay.ingest.detect import MCAP_MAGIC, SQLITE_MAGIC, Detected, Format
+from navreplay.ingest.detect import MCAP_MAGIC, SQLITE_MAGIC, Detected, Format, has_magic
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.readers.base import (
     Batch,
@@ -53,7 +53,7 @@ class Ros2BagReader(LogReader):
     def __init__(self, detected: Detected, ctx: ReadContext) -> None:
         super().__init__(detected, ctx)
         plain_mcap = detected.variant == "mcap" and all(
-            _has_magic(f, MCAP_MAGIC) for f in detected.files
+            has_magic(f, MCAP_MAGIC) for f in detected.files
         )
         self._parts: list[tuple[McapReader, DamageLog]] = []
         self._known: tuple[list[Any], dict[int, RosChannel], str | None] | None = None
@@ -183,7 +183,7 @@ class Ros2BagReader(LogReader):
         """Per-topic first/last time from sqlite3 storage (empty for other storage)."""
         out: dict[str, tuple[int, int]] = {}
         for f in self.detected.files:
-            if not _has_magic(f, SQLITE_MAGIC):
+            if not has_magic(f, SQLITE_MAGIC):
                 continue
             try:
                 con = sqlite3.connect(f"file:{f}?mode=ro&immutable=1", uri=True)
@@ -263,14 +263,6 @@ class Ros2BagReader(LogReader):
             np.asarray(ordinals, np.int64),
             strict=self.damage.strict,
         )
-
-
-def _has_magic(path: Path, magic: bytes) -> bool:
-    try:
-        with path.open("rb") as fh:
-            return fh.read(len(magic)) == magic
-    except OSError:
-        return False
 
 
 def _min(a: int | None, b: int | None) -> int | None:
