@@ -4,9 +4,12 @@
 Developer note: adding a reader
 -------------------------------
 1. ``ingest/detect.py`` already recognises the format (add a recogniser there if not).
-2. Write ``ingest/readers/<format>.py`` with a subclass of ``LogReader``:
+2. Write ``ingest/readers/<family>/<format>.py`` (family: ``ros``, ``mavlink``, ``ulog``,
+   ``gnss``, ``tabular``, or a new one) with a subclass of ``LogReader``:
 
-   - ``__init__(detected, ctx)``: open nothing expensive; keep ``ctx.damage`` for defects.
+   - ``format`` (and ``offsets_are_lines = True`` for a text format); ``__init__(detected,
+     ctx)`` if it needs one: open nothing expensive; ``self.file`` is the (first) file and
+     ``self.damage`` the damage log.
    - ``inventory()``: every stream the log holds (``StreamInfo``: key, message type, count,
      first/last time, the canonical table it can feed, time base, frame). ``--list`` prints
      it and the automatic selection (``ingest.select``) chooses from it. Keys are stable
