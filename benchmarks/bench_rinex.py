@@ -2,7 +2,7 @@
 
 GPS observation files of N epochs x 12 satellites (C1C D1C S1C, 1 Hz) are written as RINEX
 3.04 (``ingest.writers.rinex``) and as RINEX 2.11 (two lines per satellite, GLONASS rows
-mixed in: ``tests.ingest.gnssfiles``). ``ingest.rinexobs.read_obs`` (all GPS rows into
+mixed in: ``tests.ingest.gnssfiles``). ``ingest.gnss.rinexobs.read_obs`` (all GPS rows into
 arrays) is timed against ``georinex.load`` of the same observation types (an xarray Dataset),
 whose epoch-by-epoch concatenation makes it cost ~3.5 ms per epoch. Both give the same
 values (``tests/ingest/test_rinex_reader.py``). The navigation file, parsed by georinex in
@@ -23,9 +23,9 @@ import numpy as np
 
 from benchmarks._table import print_table, timed
 from navreplay.ingest.damage import DamageLog
+from navreplay.ingest.gnss.rinexobs import from_georinex, read_obs, signals
+from navreplay.ingest.gnss.rinextext import open_lines, read_header
 from navreplay.ingest.gpstime import gps_from_calendar
-from navreplay.ingest.rinexobs import from_georinex, read_obs, signals
-from navreplay.ingest.rinextext import open_lines, read_header
 from navreplay.ingest.schema import from_columns
 from navreplay.ingest.writers import rinex
 

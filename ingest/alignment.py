@@ -27,8 +27,7 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow.parquet as pq
 
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
+from navreplay.ingest.arrays import F64, I64
 
 SPEED_TABLES = ("gnss", "vehicle", "truth", "estimator")
 MAX_LAG_S = 30.0

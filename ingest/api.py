@@ -22,7 +22,7 @@ so a stream split over several files (a split bag) continues across them.
                                                   speed-signal lags (ingest.alignment)
                gnss_check {against, files, status, lag_s, median_m_at_lag,
                            median_m_at_zero, epochs, motion_m}}
-                                  gnss_obs positions vs the fixes (ingest.gnsscheck)
+                                  gnss_obs positions vs the fixes (ingest.gnss.fixcheck)
     files[]   {name, format, variant, streams[] (the inventory), inventory_notes[],
                completeness[] ("complete", "truncated", "corrupt_chunks_skipped", ...),
                defects[] {kind, reason, offset, messages_lost, messages_recovered,
@@ -59,7 +59,7 @@ from navreplay.ingest.errors import IngestError
 from navreplay.ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
 from navreplay.ingest.readers import open_reader
 from navreplay.ingest.readers.base import Inventory, LogReader, ReadContext, Selection
-from navreplay.ingest.readers.rosmsg import DefinitionError
+from navreplay.ingest.readers.ros.rosmsg import DefinitionError
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.select import TablePlan, select_streams
 from navreplay.ingest.sink import TableSink
@@ -344,7 +344,7 @@ def _gnss_check(
     options: IngestOptions,
 ) -> dict[str, Any] | None:
     """Fixes (else the truth) against positions solved from the observations
-    (``ingest.gnsscheck``), when the dataset has both; a time offset between them is a
+    (``ingest.gnss.fixcheck``), when the dataset has both; a time offset between them is a
     warning, or an error under strict."""
     obs_sink = sinks.get(TableName.GNSS_OBS)
     fix_sink = sinks.get(TableName.GNSS) or sinks.get(TableName.TRUTH)
@@ -352,9 +352,9 @@ def _gnss_check(
         return None
     import pyarrow.parquet as pq
 
-    from navreplay.ingest import gnsscheck
+    from navreplay.ingest.gnss import fixcheck
 
-    result = gnsscheck.check(pq.read_table(obs_sink.path), pq.read_table(fix_sink.path))
+    result = fixcheck.check(pq.read_table(obs_sink.path), pq.read_table(fix_sink.path))
     obs_files = ", ".join(sorted({names[s.file_index] for s in obs_sink.plan.sources}))
     fix_files = ", ".join(sorted({names[s.file_index] for s in fix_sink.plan.sources}))
     against = fix_sink.table.value

@@ -336,7 +336,7 @@ def _detect_dir(path: Path) -> Detected:
     arrays = _comma2k19_arrays(path)
     if arrays:
         return Detected(path, Format.COMMA2K19, arrays, variant="segment")
-    mcaps = sorted(p for p in path.iterdir() if p.is_file() and _has_magic(p, MCAP_MAGIC))
+    mcaps = sorted(p for p in path.iterdir() if p.is_file() and has_magic(p, MCAP_MAGIC))
     if mcaps:
         return Detected(
             path,
@@ -346,7 +346,7 @@ def _detect_dir(path: Path) -> Detected:
             recovery=f"rosbag2 directory without metadata.yaml: read its {len(mcaps)} MCAP "
             "storage file(s) directly",
         )
-    dbs = sorted(p for p in path.iterdir() if p.is_file() and _has_magic(p, SQLITE_MAGIC))
+    dbs = sorted(p for p in path.iterdir() if p.is_file() and has_magic(p, SQLITE_MAGIC))
     if dbs:
         raise _db3_without_metadata(dbs[0])
     raise UnsupportedFormatError(
@@ -360,11 +360,12 @@ def _comma2k19_arrays(path: Path) -> tuple[Path, ...]:
     """The ``.npy`` files of a comma2k19 segment directory (empty if it is not one)."""
     parts = [path / p for p in _COMMA_PARTS if (path / p).is_dir()]
     found = sorted(f for part in parts for f in part.rglob("*") if f.is_file())
-    arrays = tuple(f for f in found if _has_magic(f, NPY_MAGIC))
+    arrays = tuple(f for f in found if has_magic(f, NPY_MAGIC))
     return arrays if len(arrays) * 2 >= len(found) else ()
 
 
-def _has_magic(path: Path, magic: bytes) -> bool:
+def has_magic(path: Path, magic: bytes) -> bool:
+    """Whether ``path`` begins with ``magic`` (False if it cannot be read)."""
     try:
         with path.open("rb") as fh:
             return fh.read(len(magic)) == magic

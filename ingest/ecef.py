@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
-F64 = npt.NDArray[np.float64]
+from navreplay.ingest.arrays import F64
 
 
 def geodetic_from_ecef(xyz_m: npt.ArrayLike) -> tuple[F64, F64, F64]:

@@ -24,9 +24,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import numpy.typing as npt
 
-FloatArray = npt.NDArray[np.float64]
+from navreplay.ingest.arrays import F64
+
 Vec3 = tuple[float, float, float]
 
 ACC = ("acc_x_mps2", "acc_y_mps2", "acc_z_mps2")
@@ -58,14 +58,12 @@ def flu_to_frd(columns: dict[str, np.ndarray], table: str) -> list[str]:
     return changed
 
 
-def enu_to_ned(
-    e: FloatArray, n: FloatArray, u: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
+def enu_to_ned(e: F64, n: F64, u: F64) -> tuple[F64, F64, F64]:
     """ENU components -> (north, east, down)."""
     return n, e, -u
 
 
-def dcm_from_rpy_deg(rpy_deg: Vec3) -> FloatArray:
+def dcm_from_rpy_deg(rpy_deg: Vec3) -> F64:
     """``Rz(yaw) @ Ry(pitch) @ Rx(roll)`` for (roll, pitch, yaw) in degrees."""
     r, p, y = (math.radians(a) for a in rpy_deg)
     cr, sr, cp, sp, cy, sy = (
@@ -85,7 +83,7 @@ def dcm_from_rpy_deg(rpy_deg: Vec3) -> FloatArray:
     )
 
 
-def rpy_deg_from_dcm(c: FloatArray) -> Vec3:
+def rpy_deg_from_dcm(c: F64) -> Vec3:
     """Inverse of ``dcm_from_rpy_deg`` (pitch in [-90, 90] deg)."""
     roll = math.atan2(c[2, 1], c[2, 2])
     pitch = -math.asin(max(-1.0, min(1.0, float(c[2, 0]))))
@@ -93,7 +91,7 @@ def rpy_deg_from_dcm(c: FloatArray) -> Vec3:
     return (math.degrees(roll), math.degrees(pitch), math.degrees(yaw))
 
 
-def level_from_gravity(f_sensor: FloatArray) -> Vec3:
+def level_from_gravity(f_sensor: F64) -> Vec3:
     """Mounting (roll, pitch, 0) in degrees that turns ``f_sensor`` into (0, 0, -|f|)."""
     fx, fy, fz = (float(v) for v in f_sensor)
     roll = math.atan2(-fy, -fz)
@@ -101,7 +99,7 @@ def level_from_gravity(f_sensor: FloatArray) -> Vec3:
     return (math.degrees(roll), math.degrees(pitch), 0.0)
 
 
-def tilt_deg(f_sensor: FloatArray) -> float:
+def tilt_deg(f_sensor: F64) -> float:
     """Angle between ``f_sensor`` and the body's up direction (-z), degrees."""
     norm = float(np.linalg.norm(f_sensor))
     if norm == 0.0:
@@ -109,7 +107,7 @@ def tilt_deg(f_sensor: FloatArray) -> float:
     return math.degrees(math.acos(max(-1.0, min(1.0, -float(f_sensor[2]) / norm))))
 
 
-def rotate_imu(columns: dict[str, np.ndarray], c_body_sensor: FloatArray) -> None:
+def rotate_imu(columns: dict[str, np.ndarray], c_body_sensor: F64) -> None:
     """Apply ``v_body = C @ v_sensor`` to specific force and angular rate, in place."""
     for names in (ACC, GYRO):
         v = np.stack([columns[n] for n in names])

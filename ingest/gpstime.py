@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-I64 = npt.NDArray[np.int64]
+from navreplay.ingest.arrays import I64
 
 NS_PER_S = 1_000_000_000
 SECONDS_PER_WEEK = 604_800

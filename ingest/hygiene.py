@@ -31,13 +31,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64, Bools
 from navreplay.ingest.errors import CorruptLogError
 
 STEP_MIN_SAMPLES = 3
 _MAX_LISTED = 10
-
-I64Array = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 @dataclass
@@ -45,14 +43,14 @@ class Rows:
     """Rows of one stream: canonical columns, per-row record offsets and null masks."""
 
     columns: dict[str, np.ndarray]
-    offsets: I64Array
-    nulls: dict[str, BoolArray] = field(default_factory=dict)
+    offsets: I64
+    nulls: dict[str, Bools] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.offsets)
 
     @property
-    def t(self) -> I64Array:
+    def t(self) -> I64:
         return self.columns["t_ns"]
 
     def take(self, idx: npt.NDArray[Any]) -> Rows:
@@ -245,7 +243,7 @@ class StreamCleaner:
             )
         )
 
-    def _drop_late(self, rows: Rows, idx: I64Array, path: Path) -> None:
+    def _drop_late(self, rows: Rows, idx: I64, path: Path) -> None:
         self._strict(path, int(rows.offsets[idx[0]]), "older than the reorder window")
         self.counts.dropped_late += len(idx)
         room = _MAX_LISTED - len(self.counts.dropped_late_offsets)
@@ -322,7 +320,7 @@ class StreamCleaner:
         return rows.take(np.arange(0))
 
 
-def _late_run(t: I64Array, i: int, threshold: int) -> int:
+def _late_run(t: I64, i: int, threshold: int) -> int:
     """Length of the run from ``i`` of samples below ``threshold`` that do not decrease,
     counted up to ``STEP_MIN_SAMPLES`` (all that the step decision needs)."""
     end = min(len(t), i + STEP_MIN_SAMPLES)
@@ -332,7 +330,7 @@ def _late_run(t: I64Array, i: int, threshold: int) -> int:
     return j - i
 
 
-def _median_dt(t: I64Array) -> int | None:
+def _median_dt(t: I64) -> int | None:
     dt = np.diff(np.sort(t))
     dt = dt[dt > 0]
     return int(np.median(dt)) if dt.size else None

@@ -26,6 +26,7 @@ from enum import StrEnum
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64
 from navreplay.ingest.errors import IngestError
 from navreplay.ingest.gpstime import (
     GPS_EPOCH_UNIX_NS,
@@ -44,8 +45,6 @@ _LEAP_STEPS_UNIX_NS = LEAP_STEPS_UNIX_NS
 # with such header stamps ran on simulated or boot time.
 MIN_PLAUSIBLE_UTC_NS = 946_684_800 * NS_PER_S
 
-IntArray = npt.NDArray[np.int64]
-
 
 class TimeBase(StrEnum):
     """What a ``t_ns`` value counts (see the module docstring)."""
@@ -55,18 +54,18 @@ class TimeBase(StrEnum):
     RECORDER = "recorder"
 
 
-def leap_seconds_at_utc(utc_ns: int | IntArray) -> IntArray:
+def leap_seconds_at_utc(utc_ns: int | I64) -> I64:
     """GPS - UTC in whole seconds at POSIX time ``utc_ns`` (0 before 1981-07-01)."""
     return np.searchsorted(_LEAP_STEPS_UNIX_NS, np.asarray(utc_ns, dtype=np.int64), side="right")
 
 
-def utc_to_gps_ns(utc_ns: IntArray) -> IntArray:
+def utc_to_gps_ns(utc_ns: I64) -> I64:
     """POSIX UTC nanoseconds -> GPS nanoseconds since the GPS epoch."""
     utc = np.asarray(utc_ns, dtype=np.int64)
     return utc - GPS_EPOCH_UNIX_NS + leap_seconds_at_utc(utc).astype(np.int64) * NS_PER_S
 
 
-def gps_to_utc_ns(gps_ns: IntArray) -> IntArray:
+def gps_to_utc_ns(gps_ns: I64) -> I64:
     """GPS nanoseconds since the GPS epoch -> POSIX UTC nanoseconds (``ingest.gpstime``).
 
     The inverse of ``utc_to_gps_ns`` except inside an inserted leap second, which POSIX time
@@ -75,7 +74,7 @@ def gps_to_utc_ns(gps_ns: IntArray) -> IntArray:
     return utc_unix_ns_from_gps(np.asarray(gps_ns, dtype=np.int64))
 
 
-def gps_week_tow_to_ns(week: npt.ArrayLike, tow_ns: npt.ArrayLike) -> IntArray:
+def gps_week_tow_to_ns(week: npt.ArrayLike, tow_ns: npt.ArrayLike) -> I64:
     """GPS week (full, not modulo 1024) and time of week in ns -> GPS nanoseconds."""
     w = np.asarray(week, dtype=np.int64)
     return w * (SECONDS_PER_WEEK * NS_PER_S) + np.asarray(tow_ns, dtype=np.int64)
@@ -146,7 +145,7 @@ def reconcile(
     return Reconciliation(target, leap, tuple(decisions))
 
 
-def convert(t_ns: IntArray, source: TimeBase, target: TimeBase) -> IntArray:
+def convert(t_ns: I64, source: TimeBase, target: TimeBase) -> I64:
     """Convert ``t_ns`` from ``source`` to ``target`` base (UTC <-> GPS, or identity)."""
     if source == target:
         return t_ns

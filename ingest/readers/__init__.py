@@ -14,19 +14,19 @@ from navreplay.ingest.errors import UnsupportedFormatError
 from navreplay.ingest.readers.base import LogReader, ReadContext
 
 REGISTRY: dict[Format, str] = {
-    Format.MCAP: "navreplay.ingest.readers.mcap:McapReader",
-    Format.ROS1BAG: "navreplay.ingest.readers.ros1bag:Ros1BagReader",
-    Format.ROS2BAG: "navreplay.ingest.readers.ros2bag:Ros2BagReader",
-    Format.CSV: "navreplay.ingest.readers.csv:CsvReader",
-    Format.RINEX: "navreplay.ingest.readers.rinex:RinexReader",
-    Format.GNSSLOGGER: "navreplay.ingest.readers.gnsslogger:GnssLoggerReader",
-    Format.GSDC: "navreplay.ingest.readers.gsdc:GsdcReader",
-    Format.TLOG: "navreplay.ingest.readers.tlog:TlogReader",
-    Format.DATAFLASH: "navreplay.ingest.readers.dataflash:DataFlashReader",
-    Format.ULOG: "navreplay.ingest.readers.ulog:UlogReader",
-    Format.COMMA2K19: "navreplay.ingest.readers.comma2k19:Comma2k19Reader",
-    Format.LIBRSF: "navreplay.ingest.readers.librsf:LibrsfReader",
-    Format.NMEA: "navreplay.ingest.readers.nmea:NmeaReader",
+    Format.MCAP: "navreplay.ingest.readers.ros.mcap:McapReader",
+    Format.ROS1BAG: "navreplay.ingest.readers.ros.ros1bag:Ros1BagReader",
+    Format.ROS2BAG: "navreplay.ingest.readers.ros.ros2bag:Ros2BagReader",
+    Format.CSV: "navreplay.ingest.readers.tabular.csv:CsvReader",
+    Format.RINEX: "navreplay.ingest.readers.gnss.rinex:RinexReader",
+    Format.GNSSLOGGER: "navreplay.ingest.readers.gnss.gnsslogger:GnssLoggerReader",
+    Format.GSDC: "navreplay.ingest.readers.gnss.gsdc:GsdcReader",
+    Format.TLOG: "navreplay.ingest.readers.mavlink.tlog:TlogReader",
+    Format.DATAFLASH: "navreplay.ingest.readers.mavlink.dataflash:DataFlashReader",
+    Format.ULOG: "navreplay.ingest.readers.ulog.ulog:UlogReader",
+    Format.COMMA2K19: "navreplay.ingest.readers.tabular.comma2k19:Comma2k19Reader",
+    Format.LIBRSF: "navreplay.ingest.readers.gnss.librsf:LibrsfReader",
+    Format.NMEA: "navreplay.ingest.readers.gnss.nmea:NmeaReader",
 }
 
 

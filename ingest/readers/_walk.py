@@ -19,20 +19,18 @@ Status codes returned with the stop position:
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 from numba import njit
+
+from navreplay.ingest.arrays import I64, U8
 
 OK = 0
 INCOMPLETE = 1
 TOO_LONG = 2
 BAD_HEADER = 3
 
-U8Array = npt.NDArray[np.uint8]
-I64Array = npt.NDArray[np.int64]
-
 
 @njit(cache=True, nogil=True)
-def _u64(data: U8Array, pos: int) -> np.uint64:  # pragma: no cover (compiled)
+def _u64(data: U8, pos: int) -> np.uint64:  # pragma: no cover (compiled)
     v = np.uint64(0)
     for k in range(8):
         v |= np.uint64(data[pos + k]) << np.uint64(8 * k)
@@ -40,7 +38,7 @@ def _u64(data: U8Array, pos: int) -> np.uint64:  # pragma: no cover (compiled)
 
 
 @njit(cache=True, nogil=True)
-def _u32(data: U8Array, pos: int) -> int:  # pragma: no cover (compiled)
+def _u32(data: U8, pos: int) -> int:  # pragma: no cover (compiled)
     return (
         int(data[pos])
         | (int(data[pos + 1]) << 8)
@@ -51,7 +49,7 @@ def _u32(data: U8Array, pos: int) -> int:  # pragma: no cover (compiled)
 
 @njit(cache=True, nogil=True)
 def walk_mcap(
-    data: U8Array, start: int, limit: int, ops: U8Array, pos: I64Array, lens: I64Array
+    data: U8, start: int, limit: int, ops: U8, pos: I64, lens: I64
 ) -> tuple[int, int, int, int]:  # pragma: no cover (compiled)
     """Find MCAP records ``opcode u8 | length u64 | content`` in ``data[start:]``.
 
@@ -82,7 +80,7 @@ def walk_mcap(
 
 @njit(cache=True, nogil=True)
 def _field_is(
-    data: U8Array, name_pos: int, name_len: int, a: int, b: int, c: int, d: int
+    data: U8, name_pos: int, name_len: int, a: int, b: int, c: int, d: int
 ) -> bool:  # pragma: no cover
     # Compare a header field name with up to 4 ASCII codes (0 = unused).
     want = 0
@@ -100,16 +98,16 @@ def _field_is(
 
 @njit(cache=True, nogil=True)
 def walk_ros1(  # noqa: PLR0911, PLR0912 (one compiled state machine; calls would cost per record)
-    data: U8Array,
+    data: U8,
     start: int,
     limit: int,
-    ops: U8Array,
-    hpos: I64Array,
-    hlen: I64Array,
-    dpos: I64Array,
-    dlen: I64Array,
-    conn: I64Array,
-    time_ns: I64Array,
+    ops: U8,
+    hpos: I64,
+    hlen: I64,
+    dpos: I64,
+    dlen: I64,
+    conn: I64,
+    time_ns: I64,
 ) -> tuple[int, int, int, int]:  # pragma: no cover (compiled)
     """Find ROS 1 bag records ``header_len u32 | header | data_len u32 | data``.
 
@@ -178,9 +176,7 @@ def walk_ros1(  # noqa: PLR0911, PLR0912 (one compiled state machine; calls woul
         p += total
 
 
-def mcap_records(
-    data: U8Array, start: int, limit: int
-) -> tuple[U8Array, I64Array, I64Array, int, int, int]:
+def mcap_records(data: U8, start: int, limit: int) -> tuple[U8, I64, I64, int, int, int]:
     """Walk MCAP records of ``data`` from ``start``: (ops, pos, lens, stop, status, declared)."""
     cap = (len(data) - start) // 9 + 1
     ops = np.empty(cap, np.uint8)
@@ -190,9 +186,7 @@ def mcap_records(
     return ops[:k], pos[:k], lens[:k], stop, status, declared
 
 
-def ros1_records(
-    data: U8Array, start: int, limit: int
-) -> tuple[dict[str, np.ndarray], int, int, int]:
+def ros1_records(data: U8, start: int, limit: int) -> tuple[dict[str, np.ndarray], int, int, int]:
     """Walk ROS 1 bag records of ``data`` from ``start``: (arrays, stop, status, declared)."""
     cap = (len(data) - start) // 8 + 1
     ops = np.empty(cap, np.uint8)

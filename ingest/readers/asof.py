@@ -16,9 +16,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64
+
 Columns = dict[str, np.ndarray]
 Nulls = dict[str, npt.NDArray[np.bool_]]
-I64Array = npt.NDArray[np.int64]
 
 _KEEP_NS = 1_000_000_000
 
@@ -27,10 +28,10 @@ _KEEP_NS = 1_000_000_000
 class Left:
     """Rows of the left stream: time, columns, null masks and record offsets."""
 
-    t: I64Array
+    t: I64
     columns: Columns
     nulls: Nulls
-    offsets: I64Array
+    offsets: I64
 
     def __len__(self) -> int:
         return len(self.t)
@@ -57,7 +58,7 @@ class AsofJoin:
     matched: int = 0
     unmatched: int = 0
     _left: list[Left] = field(default_factory=list)
-    _rt: I64Array = field(default_factory=lambda: np.empty(0, np.int64))
+    _rt: I64 = field(default_factory=lambda: np.empty(0, np.int64))
     _rcols: Columns = field(default_factory=dict)
     _frontier: int | None = None
 
@@ -65,7 +66,7 @@ class AsofJoin:
         if len(rows):
             self._left.append(rows)
 
-    def push_right(self, t: I64Array, columns: Columns) -> None:
+    def push_right(self, t: I64, columns: Columns) -> None:
         if not len(t):
             return
         rt = np.concatenate([self._rt, t])

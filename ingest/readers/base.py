@@ -4,9 +4,12 @@
 Developer note: adding a reader
 -------------------------------
 1. ``ingest/detect.py`` already recognises the format (add a recogniser there if not).
-2. Write ``ingest/readers/<format>.py`` with a subclass of ``LogReader``:
+2. Write ``ingest/readers/<family>/<format>.py`` (family: ``ros``, ``mavlink``, ``ulog``,
+   ``gnss``, ``tabular``, or a new one) with a subclass of ``LogReader``:
 
-   - ``__init__(detected, ctx)``: open nothing expensive; keep ``ctx.damage`` for defects.
+   - ``format`` (and ``offsets_are_lines = True`` for a text format); ``__init__(detected,
+     ctx)`` if it needs one: open nothing expensive; ``self.file`` is the (first) file and
+     ``self.damage`` the damage log.
    - ``inventory()``: every stream the log holds (``StreamInfo``: key, message type, count,
      first/last time, the canonical table it can feed, time base, frame). ``--list`` prints
      it and the automatic selection (``ingest.select``) chooses from it. Keys are stable
@@ -16,7 +19,7 @@ Developer note: adding a reader
      (``t_ns`` int64 on the stream's declared time base, SI units, angles in rad,
      lat/lon in deg), in the stream's declared axis ``frame`` (``frd``/``ned`` or ``flu``/
      ``enu``; ``ingest.frames`` converts). Decode straight into arrays: per-message Python
-     costs more than the arithmetic (see ``ingest.readers.rosmsg`` for the pattern).
+     costs more than the arithmetic (see ``ingest.readers.ros.rosmsg`` for the pattern).
      ``offsets`` gives, per row, the byte offset of its record (or of its enclosing chunk).
    - Damage: call ``ctx.damage.record(Defect(...))`` for every recoverable defect
      (truncation, corrupt chunk, garbage bytes, a trailing partial record); it raises
@@ -42,11 +45,12 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Self
+from typing import ClassVar, Self
 
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64
 from navreplay.ingest.config import DatasetConfig
 from navreplay.ingest.damage import DamageLog
 from navreplay.ingest.detect import Detected, Format
@@ -146,10 +150,6 @@ class Selection:
     table: TableName
 
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-
-
 @dataclass
 class Batch:
     """A chunk of rows of one stream, decoded into canonical columns.
@@ -170,7 +170,7 @@ class Batch:
     key: str
     table: TableName
     columns: dict[str, np.ndarray]
-    offsets: IntArray
+    offsets: I64
     nulls: dict[str, npt.NDArray[np.bool_]] = field(default_factory=dict)
     frame: str | None = None
     counters: dict[str, int] = field(default_factory=dict)
@@ -189,12 +189,21 @@ class LogReader(ABC):
     """
 
     format: Format
+    #: a text format: the offsets of its damage report are line numbers, not bytes
+    offsets_are_lines: ClassVar[bool] = False
 
     def __init__(self, detected: Detected, ctx: ReadContext) -> None:
         self.detected = detected
         self.path = detected.path
         self.ctx = ctx
         self.damage = ctx.damage
+        if self.offsets_are_lines:
+            self.damage.offsets_are_lines = True
+
+    @property
+    def file(self) -> Path:
+        """The log's first file (of a single-file format, its only one)."""
+        return self.detected.files[0]
 
     @abstractmethod
     def inventory(self) -> Inventory:

@@ -16,10 +16,9 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import F64
 from navreplay.ingest.atomic import atomic_write_text
 from navreplay.ingest.errors import IngestError
-
-F64 = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -37,11 +37,10 @@ import numpy.typing as npt
 import pyarrow as pa
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from navreplay.ingest.arrays import F64
 from navreplay.ingest.atomic import atomic_path
 from navreplay.ingest.errors import IngestError
 from navreplay.ingest.schema import from_columns
-
-F64 = npt.NDArray[np.float64]
 
 UINT8_MAX = 255
 UINT16_MAX = 65535

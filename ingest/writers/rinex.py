@@ -1,5 +1,5 @@
 """RINEX 3.04 writers: GPS observation files from ``gnss_obs`` and navigation files from
-``ingest.gnss.Ephemeris``.
+``ingest.gnss.ephemeris.Ephemeris``.
 
 Observation file: one signal, GPS L1 C/A, with ``C1C`` (pseudorange, m), ``D1C`` (Doppler,
 Hz, ``-pseudorange_rate_mps / LAMBDA_L1_M``, positive when the range shrinks) and ``S1C``
@@ -27,7 +27,7 @@ import numpy as np
 import pyarrow as pa
 
 from navreplay.ingest.atomic import atomic_write_text
-from navreplay.ingest.gnss import LAMBDA_L1_M, Ephemeris
+from navreplay.ingest.gnss.ephemeris import LAMBDA_L1_M, Ephemeris
 from navreplay.ingest.gpstime import NS_PER_S, calendar_from_gps, leap_seconds, week_and_seconds
 from navreplay.ingest.tables import package_version
 

@@ -10,7 +10,7 @@ moves along its body x axis):
   acceleration seen in the GNSS velocity: ``f^b = C_n^b (a^n - g^n)`` solved for pitch and
   roll at the known heading (static levelling when the vehicle is at rest);
 - position and velocity: the GNSS antenna moved back by the lever arm; without fixes, a
-  single-point solution (``pipeline.nav.spp``) from the pseudoranges and rates;
+  single-point solution (``ingest.gnss.spp``) from the pseudoranges and rates;
 - gyro bias: the mean angular rate over the last static window before the start (at least
   ``init.static_window_s``) minus the earth rate; zero without a static window;
 - clock (tight coupling): medians of the pseudorange and rate residuals at the start.
@@ -29,12 +29,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from navreplay.ingest.config import ImuNoise
+from navreplay.ingest.gnss import spp
 from navreplay.pipeline.estimation.config import InitParams
 from navreplay.pipeline.estimation.inputs import FixData, ImuData, ObsData
 from navreplay.pipeline.estimation.models import ins
 from navreplay.pipeline.estimation.models import measurement as me
 from navreplay.pipeline.estimation.models.gnss import AN_DIM, AN_RE, AN_VE, antenna
-from navreplay.pipeline.nav import spp
 from navreplay.pipeline.nav.earth import F64, OMEGA_IE, ecef_to_geodetic, gravity, radii
 
 log = logging.getLogger(__name__)
@@ -88,7 +88,7 @@ class _Track:
 
 
 def _spp(rows: F64) -> tuple[F64, float, F64, float] | None:
-    """Single-point position and velocity of one epoch's ``obs`` rows (``pipeline.nav.spp``).
+    """Single-point position and velocity of one epoch's ``obs`` rows (``ingest.gnss.spp``).
 
     Returns:
         (ECEF position m, clock bias m, ECEF velocity m/s, clock drift m/s), or None with

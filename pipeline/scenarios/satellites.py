@@ -7,7 +7,7 @@ during the window rank after it, highest first). Satellites below the mask are d
 windows too, so exactly ``min(k, visible)`` reach a tightly coupled filter.
 
 ``refix`` recomputes the receiver fixes of the windows from the kept pseudoranges and rates by
-single-point positioning (``nav.spp``), as a receiver tracking only those satellites would
+single-point positioning (``ingest.gnss.spp``), as a receiver tracking only those satellites would
 report them: accuracy from the solution covariance, ``num_sats = k``. With fewer than four
 satellites a receiver has no fix; those rows are removed by the caller.
 """
@@ -21,8 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
+from navreplay.ingest.gnss import spp
 from navreplay.pipeline.estimation.inputs import corrected_observables, float_column
-from navreplay.pipeline.nav import earth, spp
+from navreplay.pipeline.nav import earth
 from navreplay.pipeline.nav.earth import F64, I64
 from navreplay.pipeline.scenarios.config import Policy
 

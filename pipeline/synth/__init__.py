@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Protocol
 if TYPE_CHECKING:
     import pyarrow as pa
 
-    from navreplay.ingest.gnss import Ephemeris
+    from navreplay.ingest.gnss.ephemeris import Ephemeris
     from navreplay.ingest.meta import SensorMeta
     from navreplay.pipeline.synth.car import CarSpeedRampParams
     from navreplay.pipeline.synth.fwekf import FwekfReferenceParams

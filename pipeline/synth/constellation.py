@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from navreplay.ingest.gnss import MU_GPS, OMEGA_E_GPS, Ephemeris
+from navreplay.ingest.gnss.ephemeris import MU_GPS, OMEGA_E_GPS, Ephemeris
 from navreplay.ingest.gpstime import NS_PER_S, NS_PER_WEEK
 from navreplay.pipeline.synth.seoul_params import ConstellationParams
 

@@ -10,8 +10,8 @@ receiver's clock reading, as in a RINEX file (RINEX 3.04 section 5.7): the recei
 
 - pseudorange ``rho = |R(w_e tau) r_i(t_r - tau) - r_ant(t_r)| + b(t) - sat_clock_m + noise``,
   the transmit time found by light-time iteration and the satellite expressed in the
-  receive-time ECEF frame (``ingest.gnss.transmit_state``); ``r_ant(t_r)`` is the antenna at
-  the epoch moved back along its velocity by ``b / c``; ``sat_clock_m`` is c times the
+  receive-time ECEF frame (``ingest.gnss.ephemeris.transmit_state``); ``r_ant(t_r)`` is the
+  antenna at the epoch moved back along its velocity by ``b / c``; ``sat_clock_m`` is c times the
   broadcast clock offset with the relativistic term, less TGD;
 - pseudorange rate: the exact time derivative of the noise-free geometric range (central
   difference over +-1 ms of the whole light-time solution) ``+ d(t) - sat_clock_drift_mps +
@@ -31,7 +31,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from navreplay.ingest.gnss import (
+from navreplay.ingest.gnss import spp
+from navreplay.ingest.gnss.ephemeris import (
     C_MPS,
     LAMBDA_L1_M,
     Ephemeris,
@@ -41,7 +42,7 @@ from navreplay.ingest.gnss import (
     transmit_state,
 )
 from navreplay.ingest.schema import FixType
-from navreplay.pipeline.nav import earth, spp
+from navreplay.pipeline.nav import earth
 from navreplay.pipeline.nav.earth import F64, I64
 from navreplay.pipeline.nav.rotations import quat_to_dcm
 from navreplay.pipeline.synth.columns import axis_columns
@@ -200,7 +201,8 @@ def fixes(
     where = np.searchsorted(t_ns, ep_t)
     for k, e in enumerate(where):
         a, b = starts[k], starts[k + 1]
-        q[e] = spp.dop_enu(sat_pos[a:b], ant.ecef_m[e])
+        c_en = earth.dcm_ecef_to_ned(ant.lat_rad[e], ant.lon_rad[e])
+        q[e] = spp.dop_enu(sat_pos[a:b], ant.ecef_m[e], c_en)
         nsat[e] = b - a
     sig_enu = params.fix_uere_m * np.sqrt(q[:, :3])
     a_gm = math.exp(-1.0 / (params.fix_tau_s * _rate(t_ns)))

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from navreplay.ingest.gnss import C_MPS, LAMBDA_L1_M
+from navreplay.ingest.gnss.ephemeris import C_MPS, LAMBDA_L1_M
 from navreplay.ingest.gpstime import calendar_from_gps
 from navreplay.ingest.writers import rinex
 

@@ -2,7 +2,7 @@
 
 There is no GnssLogger writer outside Android; this one follows the text format of the real
 logs (``../shared/data``: header lines ``# Raw,utcTimeMillis,TimeNanos,...``) and inverts
-the raw convention of ``ingest.android`` so that the synthesizer's pseudoranges come back to
+the raw convention of ``ingest.gnss.android`` so that the synthesizer's pseudoranges come back to
 float precision:
 
 - ``TimeNanos`` is a hardware clock (``HW0_NS`` at the first epoch), ``BiasNanos`` = 0.25 and
@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from navreplay.ingest.gnss import C_MPS
+from navreplay.ingest.gnss.ephemeris import C_MPS
 from navreplay.ingest.gpstime import NS_PER_WEEK, utc_unix_ns_from_gps
 
 HW0_NS = 21_000_000_000_000

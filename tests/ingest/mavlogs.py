@@ -22,7 +22,7 @@ from pymavlink.DFReader import FORMAT_TO_STRUCT
 from pymavlink.dialects.v20 import ardupilotmega as apm
 from pymavlink.generator.mavcrc import x25crc
 
-from navreplay.ingest.readers.dfformat import make_format
+from navreplay.ingest.readers.mavlink.dfformat import make_format
 
 G = 9.80665
 UTC0_US = 1_700_000_000 * 10**6  # 2023-11-14T22:13:20Z: the vehicle's UTC at boot + BOOT_US

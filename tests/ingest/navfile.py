@@ -1,6 +1,8 @@
-"""Test helper: a RINEX GPS navigation file read by georinex, as an ``ingest.gnss.Ephemeris``.
+"""Test helper: a RINEX GPS navigation file read by georinex, as an
+``ingest.gnss.ephemeris.Ephemeris``.
 
-georinex is the independent parser here (the project's own RINEX reader is not involved), so
+georinex is the independent parser here (the project's own RINEX reader is not involved, only its
+names of georinex's variables, ``GEORINEX_FIELDS``), so
 tests of the orbit code and of the RINEX writer compare against a third party's reading.
 """
 
@@ -12,7 +14,8 @@ from pathlib import Path
 import georinex
 import numpy as np
 
-from navreplay.ingest.gnss import Ephemeris
+from navreplay.ingest.gnss.ephemeris import Ephemeris
+from navreplay.ingest.gnss.rinexnav import GEORINEX_FIELDS
 from navreplay.ingest.gpstime import GPS_EPOCH, NS_PER_S, NS_PER_WEEK
 
 
@@ -22,33 +25,7 @@ def read_gps_nav(path: Path) -> Ephemeris:
         warnings.simplefilter("ignore", FutureWarning)  # georinex vs newer xarray, harmless
         ds = georinex.load(path)
     cols: dict[str, list[float]] = {name: [] for name in Ephemeris._fields}
-    rename = {
-        "af0_s": "SVclockBias",
-        "af1_sps": "SVclockDrift",
-        "af2_sps2": "SVclockDriftRate",
-        "tgd_s": "TGD",
-        "sqrt_a_sqrtm": "sqrtA",
-        "e": "Eccentricity",
-        "i0_rad": "Io",
-        "idot_radps": "IDOT",
-        "omega0_rad": "Omega0",
-        "omega_dot_radps": "OmegaDot",
-        "arg_perigee_rad": "omega",
-        "m0_rad": "M0",
-        "delta_n_radps": "DeltaN",
-        "cuc_rad": "Cuc",
-        "cus_rad": "Cus",
-        "crc_m": "Crc",
-        "crs_m": "Crs",
-        "cic_rad": "Cic",
-        "cis_rad": "Cis",
-        "iode": "IODE",
-        "iodc": "IODC",
-        "health": "health",
-        "accuracy_m": "SVacc",
-        "fit_interval_h": "FitIntvl",
-        "transmit_sow_s": "TransTime",
-    }
+    rename = {**GEORINEX_FIELDS, "fit_interval_h": "FitIntvl"}
     times = ds["time"].values
     for sv in ds["sv"].values:
         if not str(sv).startswith("G"):

@@ -13,11 +13,20 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+import pytest
 from mcap.writer import CompressionType, IndexType, Writer
 from rosbags.rosbag1 import Writer as Bag1Writer
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Bag2Writer
 from rosbags.typesys import Stores, get_typestore
+
+from navreplay.ingest.api import ingest
+from navreplay.ingest.damage import Completeness, DamageLog, Defect
+from navreplay.ingest.detect import detect
+from navreplay.ingest.readers import open_reader
+from navreplay.ingest.readers.base import ReadContext, Selection
+from navreplay.ingest.readers.ros.rosmsg import DefinitionError
+from navreplay.ingest.schema import TableName
 
 ROS2 = get_typestore(Stores.ROS2_HUMBLE)
 ROS1 = get_typestore(Stores.ROS1_NOETIC)
@@ -317,3 +326,48 @@ def write_imu_mcap_fast(
             w.add_message(ch, log_time=t, data=row.tobytes(), publish_time=t)
         w.finish()  # type: ignore[no-untyped-call]
     return path
+
+
+def read_imu(path: Path, *, strict: bool = False) -> tuple[dict[str, np.ndarray], DamageLog]:
+    """The ``/imu/data`` stream of a ROS log (its reader found by its detected format) as
+    whole columns, and the damage log of the read."""
+    damage = DamageLog(path, strict=strict)
+    reader = open_reader(detect(path), ReadContext(damage))
+    parts = list(reader.read([Selection("/imu/data", TableName.IMU)]))
+    cols = (
+        {k: np.concatenate([b.columns[k] for b in parts]) for k in parts[0].columns}
+        if parts
+        else {}
+    )
+    return cols, damage
+
+
+def read_truncated(
+    path: Path, original: bytes, data: ImuData, stream: Stream
+) -> tuple[int, Defect]:
+    """Read ``path``, the log ``original`` cut short, and check that exactly the IMU messages
+    of ``stream`` (``data``) lying wholly before the cut come back; returns their count and
+    the truncation defect."""
+    cut = path.stat().st_size
+    complete = sum(original.find(p) + len(p) <= cut for _, p in stream.messages)
+    cols, damage = read_imu(path)
+    assert len(cols["t_ns"]) == complete
+    np.testing.assert_array_equal(cols["t_ns"], data.t_ns[:complete])
+    (defect,) = damage.defects
+    assert defect.kind == Completeness.TRUNCATED
+    assert defect.offset is not None
+    assert 0 < defect.offset < cut
+    return complete, defect
+
+
+def assert_definition_mismatch_is_fatal(path: Path, out: Path) -> None:
+    """Ingesting ``path`` stops at the ``/imu/data`` definition that does not describe its
+    payloads, naming the file, the topic and an offset, and writes nothing."""
+    with pytest.raises(DefinitionError) as err:
+        ingest([path], out)
+    text = str(err.value)
+    assert "definition mismatch" in text
+    assert str(path) in text
+    assert "/imu/data" in text
+    assert err.value.offset is not None
+    assert not out.exists()

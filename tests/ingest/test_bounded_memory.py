@@ -59,7 +59,7 @@ def test_autopilot_log_memory_does_not_grow_with_the_log(kind: str, tmp_path: Pa
     small = write(tmp_path / f"small.{kind}", 20.0)
     large = write(tmp_path / f"large.{kind}", 80.0)
     module = "tlogscan" if kind == "tlog" else "dfscan"
-    setup = f"import navreplay.ingest.readers.{module} as m; m.BLOCK_BYTES = 1 << 17"
+    setup = f"import navreplay.ingest.readers.mavlink.{module} as m; m.BLOCK_BYTES = 1 << 17"
     rss_small = _peak_rss_mb(small, tmp_path / "s", setup)
     rss_large = _peak_rss_mb(large, tmp_path / "l", setup)
     assert rss_large < 512

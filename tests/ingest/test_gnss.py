@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from navreplay.ingest import gnss
+from navreplay.ingest.gnss import ephemeris
 from navreplay.ingest.gpstime import NS_PER_S, NS_PER_WEEK
 from tests.ingest.navfile import read_gps_nav
 
@@ -18,14 +18,14 @@ NAV_2016 = SHARED / "gps_measurement_tools" / "android_raw_2016" / "hour2350.16n
 
 
 @pytest.fixture(scope="module")
-def real_eph() -> gnss.Ephemeris:
+def real_eph() -> ephemeris.Ephemeris:
     if not NAV_2016.is_file():
         pytest.skip(f"shared data absent: {NAV_2016}")
     return read_gps_nav(NAV_2016)
 
 
 def test_positions_and_clocks_match_rtklib_on_a_real_navigation_file(
-    real_eph: gnss.Ephemeris,
+    real_eph: ephemeris.Ephemeris,
 ) -> None:
     rtk = pytest.importorskip("pyrtklib")
     nav, obs, sta = rtk.nav_t(), rtk.obs_t(), rtk.sta_t()
@@ -44,9 +44,9 @@ def test_positions_and_clocks_match_rtklib_on_a_real_navigation_file(
         for dt in (-5400.0, -1.5, 0.0, 3333.3, 7200.0):
             rs, dts, var = rtk.Arr1Ddouble(6), rtk.Arr1Ddouble(2), rtk.Arr1Ddouble(1)
             rtk.eph2pos(rtk.timeadd(e.toe, dt), e, rs, dts, var)
-            st = gnss.orbit(real_eph, j, toe_ns, dt)
+            st = ephemeris.orbit(real_eph, j, toe_ns, dt)
             worst_pos = max(worst_pos, float(np.abs(st.pos_m[0] - [rs[0], rs[1], rs[2]]).max()))
-            worst_clk = max(worst_clk, abs(st.clock_s[0] - dts[0]) * gnss.C_MPS)
+            worst_clk = max(worst_clk, abs(st.clock_s[0] - dts[0]) * ephemeris.C_MPS)
             checked += 1
     assert checked > 250
     assert worst_pos < 1e-6  # metres: same algorithm, same constants
@@ -54,13 +54,13 @@ def test_positions_and_clocks_match_rtklib_on_a_real_navigation_file(
 
 
 def test_velocity_and_clock_drift_are_the_derivatives_of_position_and_clock(
-    real_eph: gnss.Ephemeris,
+    real_eph: ephemeris.Ephemeris,
 ) -> None:
     idx = np.arange(0, len(real_eph), 5)
     t = real_eph.toe_ns[idx] + 1234 * NS_PER_S
     h = 0.01
-    st = gnss.orbit(real_eph, idx, t)
-    up, dn = gnss.orbit(real_eph, idx, t, h), gnss.orbit(real_eph, idx, t, -h)
+    st = ephemeris.orbit(real_eph, idx, t)
+    up, dn = ephemeris.orbit(real_eph, idx, t, h), ephemeris.orbit(real_eph, idx, t, -h)
     fd_vel = (up.pos_m - dn.pos_m) / (2 * h)
     fd_drift = (up.clock_s - dn.clock_s) / (2 * h)
     np.testing.assert_allclose(st.vel_mps, fd_vel, atol=2e-5)  # m/s; the h^2 term is ~1e-6
@@ -69,17 +69,17 @@ def test_velocity_and_clock_drift_are_the_derivatives_of_position_and_clock(
     assert np.all((speed > 2500) & (speed < 4000))  # ECEF speed of a GPS satellite
 
 
-def test_transmit_state_closes_the_light_time_equation(real_eph: gnss.Ephemeris) -> None:
+def test_transmit_state_closes_the_light_time_equation(real_eph: ephemeris.Ephemeris) -> None:
     rx = np.array([-2_694_685.473, -4_293_642.366, 3_857_878.924])  # Mountain View, CA
     t_rx = int(real_eph.toe_ns[0]) + 600 * NS_PER_S
     prn = np.unique(real_eph.prn)
-    idx = gnss.select(real_eph, prn, t_rx)
+    idx = ephemeris.select(real_eph, prn, t_rx)
     idx = idx[idx >= 0]
-    ts = gnss.transmit_state(real_eph, idx, t_rx, rx)
-    np.testing.assert_allclose(ts.range_m, gnss.C_MPS * ts.tau_s, rtol=0, atol=1e-4)
+    ts = ephemeris.transmit_state(real_eph, idx, t_rx, rx)
+    np.testing.assert_allclose(ts.range_m, ephemeris.C_MPS * ts.tau_s, rtol=0, atol=1e-4)
     # the state is the orbit at t_rx - tau, rotated by the earth's turn during the flight
-    raw = gnss.orbit(real_eph, idx, t_rx, -ts.tau_s)
-    th = gnss.OMEGA_E_GPS * ts.tau_s
+    raw = ephemeris.orbit(real_eph, idx, t_rx, -ts.tau_s)
+    th = ephemeris.OMEGA_E_GPS * ts.tau_s
     expect_x = np.cos(th) * raw.pos_m[:, 0] + np.sin(th) * raw.pos_m[:, 1]
     np.testing.assert_allclose(ts.sat.pos_m[:, 0], expect_x, atol=1e-6)
     np.testing.assert_allclose(ts.sat.pos_m[:, 2], raw.pos_m[:, 2], atol=1e-9)
@@ -89,21 +89,23 @@ def test_transmit_state_closes_the_light_time_equation(real_eph: gnss.Ephemeris)
     assert np.all((ts.tau_s > 0.064) & (ts.tau_s < 0.110))  # all satellites, also far side
 
 
-def test_select_picks_the_nearest_healthy_valid_record(real_eph: gnss.Ephemeris) -> None:
+def test_select_picks_the_nearest_healthy_valid_record(real_eph: ephemeris.Ephemeris) -> None:
     healthy = np.flatnonzero(real_eph.health == 0)
     for k in healthy[[0, 50, 200]]:
         prn, toe = int(real_eph.prn[k]), int(real_eph.toe_ns[k])
-        (got,) = gnss.select(real_eph, prn, toe + 60 * NS_PER_S)
+        (got,) = ephemeris.select(real_eph, prn, toe + 60 * NS_PER_S)
         assert real_eph.prn[got] == prn
         assert abs(int(real_eph.toe_ns[got]) - toe) <= 7200 * NS_PER_S
         assert real_eph.health[got] == 0
     # a week later nothing is valid
-    (none,) = gnss.select(real_eph, int(real_eph.prn[0]), int(real_eph.toe_ns[0]) + NS_PER_WEEK)
+    (none,) = ephemeris.select(
+        real_eph, int(real_eph.prn[0]), int(real_eph.toe_ns[0]) + NS_PER_WEEK
+    )
     assert none == -1
     # PRN 4 was flagged unhealthy (63) all day in this file: never selected
     sick = np.flatnonzero(real_eph.prn == 4)
     assert np.all(real_eph.health[sick] == 63)
-    assert np.all(gnss.select(real_eph, 4, real_eph.toe_ns[sick]) == -1)
+    assert np.all(ephemeris.select(real_eph, 4, real_eph.toe_ns[sick]) == -1)
 
 
 def test_elevation_and_azimuth_of_known_directions() -> None:
@@ -113,10 +115,10 @@ def test_elevation_and_azimuth_of_known_directions() -> None:
     north = np.cross(up, east)
     rx = 6_371_000.0 * up
     # a geocentric "up" is not the ellipsoid normal at 37 deg: the difference is ~0.19 deg
-    el, _ = gnss.elevation_azimuth(rx, rx + 2e7 * up)
+    el, _ = ephemeris.elevation_azimuth(rx, rx + 2e7 * up)
     assert abs(math.degrees(el[0]) - 90.0) < 0.2
     sats = rx + 2e7 * np.array([east + 0.01 * up, north + 0.01 * up, -north + up])
-    el, az = gnss.elevation_azimuth(rx, sats)
+    el, az = ephemeris.elevation_azimuth(rx, sats)
     np.testing.assert_allclose(np.degrees(az[:2]), [90.0, 0.0], atol=0.3)
     assert math.degrees(az[2]) == pytest.approx(180.0, abs=0.3)
     assert math.degrees(el[2]) == pytest.approx(45.0, abs=0.3)
@@ -124,4 +126,4 @@ def test_elevation_and_azimuth_of_known_directions() -> None:
 
 def test_ephemeris_columns_are_checked() -> None:
     with pytest.raises(ValueError, match="missing"):
-        gnss.Ephemeris.from_columns(prn=[1])
+        ephemeris.Ephemeris.from_columns(prn=[1])

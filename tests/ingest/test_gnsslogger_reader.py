@@ -13,10 +13,10 @@ import pyarrow.parquet as pq
 import pymap3d
 import pytest
 
-from navreplay.ingest import spp
 from navreplay.ingest.api import IngestOptions, ingest
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.gnss import C_MPS, orbit, rotate_earth, select
+from navreplay.ingest.gnss import spp
+from navreplay.ingest.gnss.ephemeris import C_MPS, orbit, rotate_earth, select
 from navreplay.ingest.writers import rinex
 
 from .gnssfiles import assert_obs_match, short_drive

@@ -12,11 +12,11 @@ import pyarrow.parquet as pq
 import pymap3d
 import pytest
 
-from navreplay.ingest import gnsscheck
 from navreplay.ingest.api import IngestOptions, ingest
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.gnss import C_MPS, OMEGA_E_GPS
-from navreplay.ingest.gsdc import sv_ids
+from navreplay.ingest.gnss import fixcheck
+from navreplay.ingest.gnss.ephemeris import C_MPS, OMEGA_E_GPS
+from navreplay.ingest.gnss.gsdc import sv_ids
 
 GSDC = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "gnss_lib_py_gsdc_android"
 
@@ -53,7 +53,7 @@ def test_the_2021_derived_pair_solves_onto_its_ground_truth(tmp_path: Path) -> N
     assert {s[0] for s in obs["sv"].to_pylist()} == {"G", "R", "E"}
     # every epoch now falls on a ground-truth epoch
     assert np.isin(obs["t_ns"].to_numpy(), truth["t_ns"].to_numpy()).all()
-    t, pos = gnsscheck.solved_positions(obs)
+    t, pos = fixcheck.solved_positions(obs)
     rows = np.searchsorted(truth["t_ns"].to_numpy(), t)
     lla = (truth[c].to_numpy()[rows] for c in ("lat_deg", "lon_deg", "alt_m"))
     err = _enu(pos, *lla)
@@ -127,7 +127,7 @@ def test_the_2021_excerpt_with_skipped_epochs_is_restamped_per_epoch(tmp_path: P
     assert result.tables["gnss_obs"] == 6966 - 446 - 421 - 14  # less E5a, L5 and J5 signals
     obs = pq.read_table(tmp_path / "out" / "gnss_obs.parquet")
     assert np.unique(obs["t_ns"].to_numpy()).size == 286
-    t, pos = gnsscheck.solved_positions(obs)
+    t, pos = fixcheck.solved_positions(obs)
     assert t.size > 280
     # consecutive solutions of a car moving at road speed: no epoch re-stamped by the
     # wrong amount (a second off would show as a jump of the car's speed times a second)

@@ -17,8 +17,8 @@ import pytest
 from navreplay.ingest.api import IngestOptions, IngestResult, ingest, inspect
 from navreplay.ingest.detect import Format, detect
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.gnss import C_MPS, rotate_earth
-from navreplay.ingest.readers.librsf import coarse_positions
+from navreplay.ingest.gnss.ephemeris import C_MPS, rotate_earth
+from navreplay.ingest.readers.gnss.librsf import coarse_positions
 
 SMARTLOC = (
     Path(__file__).resolve().parents[3] / "shared" / "data" / "smartloc_berlin_potsdamer_platz"

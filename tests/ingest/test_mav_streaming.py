@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from navreplay.ingest.readers.asof import AsofJoin, Left
-from navreplay.ingest.readers.mavclock import (
+from navreplay.ingest.readers.mavlink.mavclock import (
     RESET_DROP_NS,
     ROLLOVER_WEEKS,
     BootTracker,

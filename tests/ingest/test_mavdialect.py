@@ -14,11 +14,11 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as apm
 from pymavlink.generator.mavcrc import x25crc
 
-from navreplay.ingest.readers._mavscan import VALID, x25_crc
-from navreplay.ingest.readers.dfformat import FormatError, make_format
-from navreplay.ingest.readers.mavdialect import load_dialect
-from navreplay.ingest.readers.tlogclock import decode
-from navreplay.ingest.readers.tlogscan import ScanStats, scan_blocks
+from navreplay.ingest.readers.mavlink._mavscan import VALID, x25_crc
+from navreplay.ingest.readers.mavlink.dfformat import FormatError, make_format
+from navreplay.ingest.readers.mavlink.mavdialect import load_dialect
+from navreplay.ingest.readers.mavlink.tlogclock import decode
+from navreplay.ingest.readers.mavlink.tlogscan import ScanStats, scan_blocks
 
 _RANGES = {
     "int8_t": (-128, 127),

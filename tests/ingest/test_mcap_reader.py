@@ -15,33 +15,23 @@ from navreplay.ingest.api import ingest
 from navreplay.ingest.damage import Completeness, DamageLog
 from navreplay.ingest.detect import detect
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.readers.base import ReadContext, Selection
-from navreplay.ingest.readers.mcap import McapReader
-from navreplay.ingest.readers.rosmsg import DefinitionError
+from navreplay.ingest.readers.base import ReadContext
+from navreplay.ingest.readers.ros.mcap import McapReader
 from navreplay.ingest.schema import TableName
 
 from .roslogs import (
     ImuData,
     Stream,
+    assert_definition_mismatch_is_fatal,
     fix_stream,
     imu_data,
     imu_stream,
     msgdef,
     odom_stream,
+    read_imu,
+    read_truncated,
     write_mcap,
 )
-
-
-def read_imu(path: Path, *, strict: bool = False) -> tuple[dict[str, np.ndarray], DamageLog]:
-    damage = DamageLog(path, strict=strict)
-    reader = McapReader(detect(path), ReadContext(damage))
-    parts = list(reader.read([Selection("/imu/data", TableName.IMU)]))
-    cols = (
-        {k: np.concatenate([b.columns[k] for b in parts]) for k in parts[0].columns}
-        if parts
-        else {}
-    )
-    return cols, damage
 
 
 def _nonseeking_count(path: Path) -> int:
@@ -99,15 +89,7 @@ def _truncated(tmp_path: Path, compression: CompressionType) -> tuple[Path, ImuD
 def test_truncated_uncompressed_mcap_keeps_exactly_the_complete_messages(tmp_path: Path) -> None:
     # Case 1 with an exact oracle: a message is recoverable iff its bytes precede the cut.
     path, data, original = _truncated(tmp_path, CompressionType.NONE)
-    cut = path.stat().st_size
-    stream = imu_stream(data)
-    complete = sum(original.find(p) + len(p) <= cut for _, p in stream.messages)
-    cols, damage = read_imu(path)
-    assert len(cols["t_ns"]) == complete
-    np.testing.assert_array_equal(cols["t_ns"], data.t_ns[:complete])
-    (defect,) = damage.defects
-    assert defect.kind == Completeness.TRUNCATED
-    assert 0 < defect.offset < cut  # type: ignore[operator]
+    complete, defect = read_truncated(path, original, data, imu_stream(data))
     # Every message of complete chunks, plus the readable prefix of the cut chunk.
     assert complete == _nonseeking_count(path) + (defect.messages_recovered or 0)
 
@@ -227,14 +209,7 @@ def test_ros2_definition_with_a_field_removed_is_fatal_for_the_topic(tmp_path: P
     stream = imu_stream(imu_data(40))
     broken = Stream(stream.topic, stream.msgtype, stream.messages, text)
     path = write_mcap(tmp_path / "a.mcap", [broken, fix_stream(5)])
-    with pytest.raises(DefinitionError) as err:
-        ingest([path], tmp_path / "out")
-    text_err = str(err.value)
-    assert "definition mismatch" in text_err
-    assert str(path) in text_err
-    assert "/imu/data" in text_err
-    assert err.value.offset is not None
-    assert not (tmp_path / "out").exists()
+    assert_definition_mismatch_is_fatal(path, tmp_path / "out")
 
 
 def test_inventory_lists_counts_rates_and_tables_from_the_summary(tmp_path: Path) -> None:

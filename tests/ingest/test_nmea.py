@@ -106,36 +106,23 @@ def epoch_sentences(k: int, *, rmc: bool = True, talker: str = "GN") -> list[byt
             diffStation=2000,
         )
     )
-    gps = {f"svid_{i + 1:02d}": s for i, s in enumerate([2, 6, 12, 17, 19, 24, 28])}
-    out.append(
-        NMEAMessage(
-            talker,
-            "GSA",
-            GET,
-            opMode="A",
-            navMode=3,
-            **gps,
-            PDOP=1.5,
-            HDOP=0.7,
-            VDOP=1.3,
-            systemId=1,
+    # one GSA per constellation (NMEA 4.10 systemId): GPS, then GLONASS
+    for system_id, svids in ((1, [2, 6, 12, 17, 19, 24, 28]), (2, [73, 80, 83])):
+        used = {f"svid_{i + 1:02d}": s for i, s in enumerate(svids)}
+        out.append(
+            NMEAMessage(
+                talker,
+                "GSA",
+                GET,
+                opMode="A",
+                navMode=3,
+                **used,
+                PDOP=1.5,
+                HDOP=0.7,
+                VDOP=1.3,
+                systemId=system_id,
+            )
         )
-    )
-    glo = {f"svid_{i + 1:02d}": s for i, s in enumerate([73, 80, 83])}
-    out.append(
-        NMEAMessage(
-            talker,
-            "GSA",
-            GET,
-            opMode="A",
-            navMode=3,
-            **glo,
-            PDOP=1.5,
-            HDOP=0.7,
-            VDOP=1.3,
-            systemId=2,
-        )
-    )
     view = {}
     for i, (sv, el, az, cno) in enumerate([(2, 25, 181, 42), (6, 45, 146, 45), (9, 5, 20, 0)]):
         view.update(

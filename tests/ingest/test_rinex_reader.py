@@ -15,9 +15,9 @@ import pytest
 from navreplay.ingest.api import IngestOptions, ingest
 from navreplay.ingest.damage import DamageLog
 from navreplay.ingest.errors import CorruptLogError, IngestError, UnsupportedFormatError
-from navreplay.ingest.gnss import C_MPS, select, transmit_state
+from navreplay.ingest.gnss.ephemeris import C_MPS, select, transmit_state
+from navreplay.ingest.gnss.rinexobs import from_georinex, read_obs
 from navreplay.ingest.gpstime import NS_PER_WEEK
-from navreplay.ingest.rinexobs import from_georinex, read_obs
 from navreplay.ingest.writers import rinex
 
 from .gnssfiles import (
@@ -118,8 +118,8 @@ def test_obs_and_nav_give_the_synthesizers_satellite_states(synth: Any, tmp_path
 def test_satellite_states_are_the_broadcast_orbits_recomputed_independently(
     synth: Any, tmp_path: Path
 ) -> None:
-    # georinex reads the navigation file; ingest.gnss evaluates it at the receive time less
-    # the receiver clock, seen from the receiver position solved by ingest.
+    # georinex reads the navigation file; ingest.gnss.ephemeris evaluates it at the receive
+    # time less the receiver clock, seen from the receiver position solved by ingest.
     obs, nav = write_pair(tmp_path / "raw", synth)
     ingest([obs, nav], tmp_path / "out")
     got = pq.read_table(tmp_path / "out" / "gnss_obs.parquet")

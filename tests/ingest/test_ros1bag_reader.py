@@ -14,24 +14,23 @@ from navreplay.ingest.api import ingest, inspect
 from navreplay.ingest.damage import Completeness, DamageLog
 from navreplay.ingest.detect import detect
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.readers.base import ReadContext, Selection
-from navreplay.ingest.readers.ros1bag import Ros1BagReader
-from navreplay.ingest.readers.rosmsg import DefinitionError
+from navreplay.ingest.readers.base import ReadContext
+from navreplay.ingest.readers.ros.ros1bag import Ros1BagReader
 from navreplay.ingest.schema import TableName
 
-from .roslogs import ROS1, fix_stream, imu_data, imu_stream, msgdef, serialize, vec3, write_bag1
-
-
-def read_imu(path: Path, *, strict: bool = False) -> tuple[dict[str, np.ndarray], DamageLog]:
-    damage = DamageLog(path, strict=strict)
-    reader = Ros1BagReader(detect(path), ReadContext(damage))
-    parts = list(reader.read([Selection("/imu/data", TableName.IMU)]))
-    cols = (
-        {k: np.concatenate([b.columns[k] for b in parts]) for k in parts[0].columns}
-        if parts
-        else {}
-    )
-    return cols, damage
+from .roslogs import (
+    ROS1,
+    assert_definition_mismatch_is_fatal,
+    fix_stream,
+    imu_data,
+    imu_stream,
+    msgdef,
+    read_imu,
+    read_truncated,
+    serialize,
+    vec3,
+    write_bag1,
+)
 
 
 def _sha(path: Path) -> str:
@@ -105,15 +104,7 @@ def test_truncated_uncompressed_bag_keeps_exactly_the_complete_messages(tmp_path
     path = write_bag1(tmp_path / "a.bag", [stream])
     original = path.read_bytes()
     os.truncate(path, len(original) // 2)
-    cut = path.stat().st_size
-    complete = sum(original.find(p) + len(p) <= cut for _, p in stream.messages)
-    cols, damage = read_imu(path)
-    assert len(cols["t_ns"]) == complete
-    np.testing.assert_array_equal(cols["t_ns"], data.t_ns[:complete])
-    (defect,) = damage.defects
-    assert defect.kind == Completeness.TRUNCATED
-    assert defect.offset is not None
-    assert defect.offset < cut
+    read_truncated(path, original, data, stream)
 
 
 def test_truncated_bz2_bag_recovers_a_prefix(tmp_path: Path) -> None:
@@ -143,14 +134,7 @@ def test_connection_type_that_does_not_match_the_payload_is_fatal(tmp_path: Path
         conn = w.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=ROS1)
         for i in range(30):
             w.write(conn, 10**18 + i * 10**7, serialize(True, vec3(True, (1.0, 2.0, 3.0))))
-    with pytest.raises(DefinitionError) as err:
-        ingest([path], tmp_path / "out")
-    msg = str(err.value)
-    assert "definition mismatch" in msg
-    assert str(path) in msg
-    assert "/imu/data" in msg
-    assert err.value.offset is not None
-    assert not (tmp_path / "out").exists()
+    assert_definition_mismatch_is_fatal(path, tmp_path / "out")
 
 
 def test_definition_whose_md5_disagrees_is_not_decoded(tmp_path: Path) -> None:

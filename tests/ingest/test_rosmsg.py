@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from navreplay.ingest.readers.rosmsg import MessageDecoder, normalize_msgtype, parse_definition
+from navreplay.ingest.readers.ros.rosmsg import MessageDecoder, normalize_msgtype, parse_definition
 
 # Every alignment case of CDR: 1-, 2-, 4- and 8-byte fields after strings and sequences of
 # varying length, empty sequences (no alignment padding), fixed arrays.

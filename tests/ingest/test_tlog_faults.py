@@ -20,9 +20,9 @@ from navreplay.ingest.damage import DamageLog
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import CorruptLogError, PlausibilityError, UnsupportedFormatError
 from navreplay.ingest.readers.base import ReadContext
-from navreplay.ingest.readers.mavclock import ROLLOVER_NS
-from navreplay.ingest.readers.tlog import TlogReader
-from navreplay.ingest.readers.tlogclock import decode
+from navreplay.ingest.readers.mavlink.mavclock import ROLLOVER_NS
+from navreplay.ingest.readers.mavlink.tlog import TlogReader
+from navreplay.ingest.readers.mavlink.tlogclock import decode
 from navreplay.ingest.timebase import utc_to_gps_ns
 
 from .mavlogs import BOOT_US, UTC0_US, DriveSpec, G, Tlog, mav, tlog_drive
@@ -327,7 +327,7 @@ def test_a_failure_mid_read_leaves_the_previous_output_untouched(
             raise RuntimeError("injected failure")
         return decode(*args)
 
-    monkeypatch.setattr("navreplay.ingest.readers.tlog.decode", failing)
+    monkeypatch.setattr("navreplay.ingest.readers.mavlink.tlog.decode", failing)
     with pytest.raises(RuntimeError, match="injected"):
         run(path, out, **HIGHRES)
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before

@@ -12,7 +12,7 @@ import pytest
 
 from navreplay.ingest.api import IngestOptions, ingest
 from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
-from navreplay.ingest.readers.ulogmsgs import euler_from_quaternion, reproject
+from navreplay.ingest.readers.ulog.ulogmsgs import euler_from_quaternion, reproject
 from navreplay.ingest.timebase import utc_to_gps_ns
 
 from .mavlogs import UTC0_US, G, ulog_drive

@@ -10,7 +10,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from navreplay.ingest.gnss import LAMBDA_L1_M, Ephemeris, orbit
+from navreplay.ingest.gnss.ephemeris import LAMBDA_L1_M, Ephemeris, orbit
 from navreplay.ingest.gpstime import NS_PER_S, gps_from_calendar
 from navreplay.ingest.schema import from_columns
 from navreplay.ingest.writers import rinex

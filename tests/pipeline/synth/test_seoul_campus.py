@@ -13,9 +13,10 @@ import pyarrow as pa
 import pytest
 
 from navreplay.ingest.config import load_dataset_config
-from navreplay.ingest.gnss import C_MPS, Ephemeris, select, transmit_state
+from navreplay.ingest.gnss import spp
+from navreplay.ingest.gnss.ephemeris import C_MPS, Ephemeris, select, transmit_state
 from navreplay.ingest.writers import rinex
-from navreplay.pipeline.nav import earth, spp
+from navreplay.pipeline.nav import earth
 from navreplay.pipeline.nav import mechanization as mech
 from navreplay.pipeline.nav.rotations import euler_to_dcm, euler_to_quat
 from navreplay.pipeline.params import Params
@@ -92,8 +93,10 @@ def test_spp_from_noise_free_pseudoranges_lands_on_the_antenna(
     starts = spp.epoch_starts(t)
     sat = _np(obs, "sat_x_m", "sat_y_m", "sat_z_m")
     pr = _np(obs, "pseudorange_m") + _np(obs, "sat_clock_m")
-    x, ok = spp.solve_epochs(starts, sat, pr, np.ones(pr.size), 10, 1e-6)
-    assert ok.all()
+    epoch, _ = spp.epoch_index(t)
+    fix = spp.solve(sat, pr, epoch, starts.size - 1, max_iter=10, tol_m=1e-6, reject_outliers=False)
+    assert fix.solved.all()
+    x = np.column_stack([fix.ecef_m, fix.clock_m])
     rows = np.searchsorted(truth.column("t_ns").to_numpy(), t[starts[:-1]])
     ant = _antenna_ecef(truth.take(pa.array(rows)), seoul.lever_arm_m)
     err = np.linalg.norm(x[:, :3] - ant, axis=1)

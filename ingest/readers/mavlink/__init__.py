@@ -1,0 +1,3 @@
+"""Readers of autopilot logs: MAVLink tlogs and ArduPilot DataFlash, their compiled scans,
+message tables and vehicle clocks.
+"""

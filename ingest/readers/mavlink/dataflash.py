@@ -1,0 +1,288 @@
+"""ArduPilot DataFlash logs (``.bin``): self-describing binary records, decoded column-wise.
+
+Each block of the file is framed by a compiled scan (``ingest.readers.mavlink.dfscan``), records are
+grouped by type, and each group is decoded with one structured-dtype view built from the
+log's own FMT records and pymavlink's format-character table (``ingest.readers.mavlink.dfformat``);
+``ingest.readers.mavlink.dfmsgs`` turns IMU, GPS+GPA, XKF1/NKF1 and SIM into canonical columns.
+
+Streams are keyed ``NAME[i]`` for types with an instance column (``IMU[0]``, ``GPS[1]``,
+``XKF1[2]``: the EKF core) and by name otherwise; ``StreamInfo.instance`` is ``i``.
+
+Time (``ingest.readers.mavlink.dfclock``): ``TimeUS`` (us since boot) is paired with GPS time
+per boot segment; every stream is then on GPS time, GPS fixes at their own GWk/GMS epoch.
+
+Damage (cases 15-17): garbage between records is skipped, resynchronising on a record whose
+successor also frames (DataFlash has no CRC), with runs and bytes counted and their offsets
+listed; a trailing partial record is dropped and reported with its offset; FMT records may
+appear anywhere (a format applies from its offset on); a type whose FMT uses an unknown
+format character is skipped with a note or, when it feeds a selected table, is E-FATAL
+naming the type and the offset of its FMT.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from navreplay.ingest.damage import Completeness, Defect
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers.asof import AsofJoin, Left
+from navreplay.ingest.readers.base import (
+    Batch,
+    Inventory,
+    LogReader,
+    ReadContext,
+    Selection,
+    StreamInfo,
+)
+from navreplay.ingest.readers.mavlink._mavscan import partial_record_defect
+from navreplay.ingest.readers.mavlink.dfclock import DfSurvey, instances, survey
+from navreplay.ingest.readers.mavlink.dfformat import DfFormat
+from navreplay.ingest.readers.mavlink.dfmsgs import (
+    BY_NAME,
+    JOIN_COLUMNS,
+    DfExtras,
+    DfStream,
+    finish_gnss,
+)
+from navreplay.ingest.readers.mavlink.dfscan import Formats, Records, ScanStats, scan_blocks
+from navreplay.ingest.readers.mavlink.mavmsgs import Converted
+from navreplay.ingest.schema import FixType, TableName
+
+JOIN_TOLERANCE_NS = 50_000_000
+
+
+class DataFlashReader(LogReader):
+    """Reader of one ArduPilot DataFlash ``.bin`` log."""
+
+    format = Format.DATAFLASH
+
+    def __init__(self, detected: Detected, ctx: ReadContext) -> None:
+        super().__init__(detected, ctx)
+        self._s: DfSurvey | None = None
+
+    def _survey(self) -> DfSurvey:
+        if self._s is None:
+            cfg = self.ctx.config
+            found = survey(self.file, cfg.utc_date if cfg is not None else None)
+            if not found.data_records:
+                raise CorruptLogError(
+                    "no DataFlash data record found (only format definitions, if any): not a "
+                    "DataFlash log, or damaged throughout",
+                    path=self.file,
+                    offset=0,
+                )
+            self._s = found
+        return self._s
+
+    # ----------------------------------------------------------------------------- inventory
+    def inventory(self) -> Inventory:
+        s = self._survey()
+        streams: list[StreamInfo] = []
+        for (name, inst), count in sorted(s.counts.items()):
+            spec = BY_NAME[name]
+            first, last = s.first_us[(name, inst)], s.last_us[(name, inst)]
+            t = s.to_base(np.array([first, last], np.int64), np.array([0, 0], np.int64))
+            unusable = s.unusable_detail.get(name)
+            streams.append(
+                StreamInfo(
+                    key=f"{name}[{inst}]" if s.instanced.get(name) else name,
+                    msgtype=name,
+                    count=count,
+                    start_ns=int(t[0]),
+                    end_ns=int(t[1]),
+                    table=spec.table,
+                    time_base=s.base,
+                    frame="frd" if spec.table == TableName.IMU else "ned",
+                    instance=inst,
+                    detail=unusable or spec.detail,
+                )
+            )
+        for name, count in s.other_messages().items():
+            detail = "accuracies joined into GPS" if name.startswith("GPA") else "not converted"
+            if name == "ORGN":
+                detail = "EKF origin of XKF1/NKF1"
+            streams.append(StreamInfo(name, name, count, None, None, None, s.base, detail=detail))
+        notes = [s.time_note()]
+        notes += [f"FMT of {u.name} at offset {u.offset}: {u.reason}" for u in s.unusable]
+        return Inventory(self.path, self.format, tuple(streams), tuple(notes))
+
+    # ---------------------------------------------------------------------------------- read
+    def read(self, selections: Sequence[Selection]) -> Iterator[Batch]:
+        s = self._survey()
+        wanted: dict[str, tuple[DfStream, int]] = {}
+        for sel in selections:
+            found = _parse_key(sel.key)
+            if found is not None:
+                wanted[sel.key] = found
+        self._check_usable(s, wanted)
+        extras = s.extras()
+        joins = {
+            key: AsofJoin(JOIN_COLUMNS, JOIN_TOLERANCE_NS)
+            for key, (spec, _) in wanted.items()
+            if spec.join is not None
+        }
+        formats = Formats()
+        stats = ScanStats()
+        for rec in scan_blocks(self.file, formats, stats):
+            for key, (spec, inst) in wanted.items():
+                batches = self._batches(rec, formats, spec, inst, key, extras)
+                join = joins.get(key)
+                if join is None:
+                    yield from batches
+                    continue
+                if spec.join is not None:
+                    self._push_right(rec, formats, spec.join[0], spec, inst, join, extras)
+                for b in batches:
+                    cols = dict(b.columns)
+                    join.push_left(Left(cols.pop("t_ns"), cols, dict(b.nulls), b.offsets))
+                out = join.pop()
+                if out is not None:
+                    yield _gnss_batch(key, out, extras)
+        for key, join in joins.items():
+            out = join.pop(final=True)
+            if out is not None:
+                yield _gnss_batch(key, out, extras)
+        self._record_damage(stats, formats, s)
+
+    def _check_usable(self, s: DfSurvey, wanted: dict[str, tuple[DfStream, int]]) -> None:
+        names = {spec.message for spec, _ in wanted.values()}
+        names |= {spec.join[0] for spec, _ in wanted.values() if spec.join is not None}
+        for u in s.unusable:
+            if u.name in names:
+                raise CorruptLogError(
+                    f"message type {u.name} cannot be decoded: {u.reason}",
+                    path=self.file,
+                    offset=u.offset,
+                    record=f"FMT of {u.name}",
+                    hint="the log was written by a logger whose format characters this "
+                    "pymavlink version does not know; exclude the stream or update pymavlink",
+                )
+
+    def _matching(
+        self, rec: Records, formats: Formats, name: str, fixed: int, inst: int
+    ) -> Iterator[tuple[npt.NDArray[np.intp], np.ndarray, DfFormat]]:
+        """(record indices, decoded records, format) of message ``name``, instance ``inst``
+        in a block (``fixed``: the instance of a type without an instance column)."""
+        for type_ in formats.types_seen(name):
+            idx_all = rec.of_type(type_)
+            if not len(idx_all):
+                continue
+            for fmt, sub in formats.split(type_, rec.offset[idx_all]):
+                if fmt is None or fmt.name != name or not len(sub):
+                    continue
+                idx = idx_all[sub]
+                idx = idx[instances(fixed, fmt, rec, idx) == inst]
+                if len(idx):
+                    yield idx, rec.decode(idx, fmt), fmt
+
+    def _batches(
+        self,
+        rec: Records,
+        formats: Formats,
+        spec: DfStream,
+        inst: int,
+        key: str,
+        extras: DfExtras,
+    ) -> list[Batch]:
+        s = self._survey()
+        out: list[Batch] = []
+        for idx, data, fmt in self._matching(rec, formats, spec.message, spec.instance, inst):
+            conv = spec.convert(data, fmt, extras)
+            t = s.to_base(np.asarray(data["TimeUS"], np.int64), rec.offset[idx])
+            if spec.table == TableName.GNSS:
+                conv.columns["t_fix_ns"] = s.fix_times(data, t)
+            cols = {"t_ns": t, **conv.columns}
+            out.append(
+                Batch(
+                    key,
+                    spec.table,
+                    cols,
+                    rec.offset[idx],
+                    conv.nulls,
+                    None,
+                    conv.counters,
+                    conv.info,
+                )
+            )
+        return out
+
+    def _push_right(
+        self,
+        rec: Records,
+        formats: Formats,
+        name: str,
+        spec: DfStream,
+        inst: int,
+        join: AsofJoin,
+        extras: DfExtras,
+    ) -> None:
+        assert spec.join is not None
+        convert = spec.join[1]
+        s = self._survey()
+        for idx, data, fmt in self._matching(rec, formats, name, spec.instance, inst):
+            t = s.to_base(np.asarray(data["TimeUS"], np.int64), rec.offset[idx])
+            join.push_right(t, convert(data, fmt, extras).columns)
+
+    # -------------------------------------------------------------------------------- damage
+    def _record_damage(self, stats: ScanStats, formats: Formats, s: DfSurvey) -> None:
+        dmg = self.damage
+        dmg.note(s.time_note())
+        dmg.count("records_framed", stats.records)
+        s.tracker.note_resets(dmg, reboot="reboot", clock="TimeUS")
+        if s.week_shift:
+            dmg.count("gps_week_rollover_corrected", s.gps_rows)
+            dmg.note(
+                f"GPS week rollover: {s.gps_rows} GPS records corrected by +{s.week_shift} "
+                f"weeks, snapped to the epoch nearest {s.reference}"
+            )
+        for u in s.unusable:
+            dmg.note(f"message type {u.name} skipped: its FMT at offset {u.offset}: {u.reason}")
+        for offset, name in formats.redefined:
+            dmg.note(f"FMT at offset {offset} redefines {name}: later records use the new layout")
+        if stats.garbage_runs:
+            dmg.count("garbage_runs", stats.garbage_runs)
+            dmg.count("garbage_bytes", stats.garbage_bytes)
+            listed = ", ".join(f"{at} (+{n})" for at, n in stats.garbage_listed)
+            dmg.record(
+                Defect(
+                    Completeness.BAD_DATA_SKIPPED,
+                    f"{stats.garbage_runs} runs of bytes that are not DataFlash records "
+                    f"({stats.garbage_bytes} bytes) skipped; at offsets {listed}",
+                    offset=stats.garbage_listed[0][0],
+                    bytes_skipped=stats.garbage_bytes,
+                )
+            )
+        if stats.partial_offset is not None:
+            dmg.record(partial_record_defect(stats.partial_offset, stats.partial_bytes))
+
+
+def _parse_key(key: str) -> tuple[DfStream, int] | None:
+    name, _, rest = key.partition("[")
+    spec = BY_NAME.get(name)
+    if spec is None:
+        return None
+    return spec, int(rest.rstrip("]")) if rest else spec.instance
+
+
+def _gnss_batch(key: str, out: Left, extras: DfExtras) -> Batch:
+    """A GPS batch after its GPA join: fix epochs as t_ns, heights and accuracies finished."""
+    cols = out.columns
+    t = cols.pop("t_fix_ns")
+    conv = Converted(cols, out.nulls)
+    finish_gnss(conv, extras)
+    conv.counters["no_fix"] = int((cols["fix_type"] < FixType.FIX_2D).sum())
+    info = {"time": "GPS week and ms of week of each fix", "accuracy": "from GPA (same instance)"}
+    return Batch(
+        key,
+        TableName.GNSS,
+        {"t_ns": t, **conv.columns},
+        out.offsets,
+        conv.nulls,
+        None,
+        conv.counters,
+        info,
+    )

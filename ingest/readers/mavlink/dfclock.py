@@ -1,0 +1,242 @@
+"""The survey pass over a DataFlash log: streams, boot segments, and TimeUS -> GPS time.
+
+``survey(path)`` scans the log once and learns:
+
+- message counts per stream and instance, first/last TimeUS;
+- boot segments from TimeUS of every record that starts with it (``BootTracker``: a drop by
+  more than 10 s is a reboot, catalogue case 37);
+- per segment, ``GPS - boot``: the median over GPS records with a 2-D fix or better of
+  ``GWk * 604800 s + GMS - TimeUS`` (ArduPilot stamps a GPS record with the boot time of the
+  fix, so the spread is sub-millisecond on real logs);
+- GPS week rollover (case 35): the first GPS time is compared with a reference date
+  (``utc_date`` in dataset.yaml, else the file's modification time: a DataFlash log has no
+  other clock) and moved by multiples of 1024 weeks to the epoch nearest it;
+- the EKF origins (``ORGN`` type 0) and the geoid undulation (median ``GPA.Und``).
+
+The file's base is GPS when every boot segment is paired, else the recorder clock (TimeUS).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from navreplay.ingest.arrays import I64
+from navreplay.ingest.readers.mavlink._mavscan import gather
+from navreplay.ingest.readers.mavlink.dfformat import FMT_TYPE, DfFormat
+from navreplay.ingest.readers.mavlink.dfmsgs import BY_NAME, DfExtras, Origin
+from navreplay.ingest.readers.mavlink.dfscan import (
+    Formats,
+    Records,
+    ScanStats,
+    Unusable,
+    scan_blocks,
+)
+from navreplay.ingest.readers.mavlink.mavclock import (
+    BootTracker,
+    OffsetAccumulator,
+    unroll_gps_week,
+)
+from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
+
+WEEK_NS = SECONDS_PER_WEEK * NS_PER_S
+
+
+def instances(fixed: int, fmt: DfFormat, rec: Records, idx: npt.NDArray[np.intp]) -> I64:
+    """Instance of records ``idx``: their ``I``/``C`` column, else ``fixed`` (legacy
+    ``IMU2``); read without decoding the records."""
+    col = fmt.instance_column
+    if col is None:
+        return np.full(len(idx), fixed, dtype=np.int64)
+    return np.asarray(rec.column(idx, fmt, col), dtype=np.int64)
+
+
+@dataclass
+class DfSurvey:
+    """What the survey learns (see the module docstring)."""
+
+    formats: Formats = field(default_factory=Formats)
+    stats: ScanStats = field(default_factory=ScanStats)
+    tracker: BootTracker = field(default_factory=BootTracker)
+    counts: Counter[tuple[str, int]] = field(default_factory=Counter)
+    first_us: dict[tuple[str, int], int] = field(default_factory=dict)
+    last_us: dict[tuple[str, int], int] = field(default_factory=dict)
+    instanced: dict[str, bool] = field(default_factory=dict)
+    unusable_detail: dict[str, str] = field(default_factory=dict)
+    pairs: OffsetAccumulator = field(default_factory=OffsetAccumulator)
+    undulation_mm: OffsetAccumulator = field(default_factory=OffsetAccumulator)
+    origins: list[tuple[int, float, float, float]] = field(default_factory=list)
+    gps_first: tuple[int, int] | None = None
+    gps_rows: int = 0
+    data_records: int = 0
+    per_type: Counter[int] = field(default_factory=Counter)
+    week_shift: int = 0
+    reference: str = ""
+    offsets_ns: list[int | None] = field(default_factory=list)
+    base: TimeBase = TimeBase.RECORDER
+
+    @property
+    def unusable(self) -> list[Unusable]:
+        return list(self.formats.unusable.values())
+
+    def extras(self) -> DfExtras:
+        und = self.undulation_mm.median(0)
+        o = sorted(self.origins)
+        origin = Origin(
+            np.array([x[0] for x in o], np.int64),
+            np.array([x[1] for x in o]),
+            np.array([x[2] for x in o]),
+            np.array([x[3] for x in o]),
+        )
+        return DfExtras(None if und is None else -und * 1e-3, origin)
+
+    def to_base(self, time_us: I64, offsets: I64) -> I64:
+        """``t_ns`` of records with ``time_us`` at file ``offsets``, on the file's base."""
+        t = np.asarray(time_us, np.int64) * 1000
+        if self.base == TimeBase.RECORDER:
+            return t
+        segs = self.tracker.segment_of(np.asarray(offsets, np.int64))
+        return t + np.array([o or 0 for o in self.offsets_ns], np.int64)[segs]
+
+    def fix_times(self, data: np.ndarray, t: I64) -> I64:
+        """GPS fixes at their own epoch (GWk/GMS, rollover undone) where the receiver gave one."""
+        if self.base != TimeBase.GPS or "GWk" not in (data.dtype.names or ()):
+            return t
+        week = np.asarray(data["GWk"], np.int64)
+        epoch = (week + self.week_shift) * WEEK_NS + np.asarray(data["GMS"], np.int64) * 10**6
+        return np.where(week > 0, epoch, t)
+
+    def other_messages(self) -> dict[str, int]:
+        """Record counts of the message types that feed no table, by name."""
+        out: dict[str, int] = {}
+        for type_, n in sorted(self.per_type.items()):
+            fmt = self.formats.current.get(type_)
+            name = fmt.name if fmt is not None else f"type {type_}"
+            if name not in BY_NAME:
+                out[name] = out.get(name, 0) + n
+        return out
+
+    def time_note(self) -> str:
+        if self.base == TimeBase.RECORDER:
+            return "no GPS time in the log: TimeUS (time since boot) kept as the recorder clock"
+        offs = ", ".join(f"{o / 1e9:.6f} s" for o in self.offsets_ns if o is not None)
+        return (
+            f"TimeUS paired with GPS week/ms per boot segment (GPS - boot = {offs}, from "
+            f"{sum(self.pairs.count(i) for i in range(len(self.offsets_ns)))} GPS records)"
+        )
+
+
+def survey(path: Path, utc_date: str | None = None) -> DfSurvey:
+    """One scan of ``path`` (see the module docstring); ``utc_date`` (``YYYY-MM-DD``, from
+    dataset.yaml) is the rollover reference when given, else the file's modification time."""
+    s = DfSurvey()
+    for rec in scan_blocks(path, s.formats, s.stats):
+        _block(s, rec)
+    if utc_date is not None:
+        ref_utc = int(np.datetime64(utc_date, "ns").astype(np.int64))
+        s.reference = f"utc_date {utc_date} from dataset.yaml"
+    else:
+        ref_utc = path.stat().st_mtime_ns
+        s.reference = "the file's modification time"
+    ref_gps = int(utc_to_gps_ns(np.array([ref_utc], np.int64))[0])
+    if s.gps_first is not None:
+        _, s.week_shift = unroll_gps_week(
+            np.array([s.gps_first[0]], np.int64), np.array([s.gps_first[1]], np.int64), ref_gps
+        )
+    for seg in range(len(s.tracker.starts)):
+        med = s.pairs.median(seg)
+        s.offsets_ns.append(None if med is None else med + s.week_shift * WEEK_NS)
+    if s.offsets_ns and all(o is not None for o in s.offsets_ns):
+        s.base = TimeBase.GPS
+    return s
+
+
+def _time_us(formats: Formats, rec: Records) -> tuple[I64, npt.NDArray[np.bool_]]:
+    """TimeUS of every record whose format starts with it (others 0), and that mask."""
+    timed = [
+        t
+        for t, f in formats.current.items()
+        if f.columns[:1] == ("TimeUS",) and f.format[:1] == "Q"
+    ]
+    is_timed = np.zeros(256, bool)
+    is_timed[timed] = True
+    has = is_timed[rec.type]
+    raw = np.empty((int(has.sum()), 8), np.uint8)
+    gather(rec.buf, rec.pos[has] + 3, np.full(len(raw), 8, np.int64), raw)
+    out = np.zeros(len(rec), np.int64)
+    out[has] = raw.view("<u8")[:, 0].astype(np.int64)
+    return out, has
+
+
+def _block(s: DfSurvey, rec: Records) -> None:
+    s.data_records += int((rec.type != FMT_TYPE).sum())
+    for type_, n in enumerate(np.bincount(rec.type, minlength=256).tolist()):
+        if n:
+            s.per_type[type_] += n
+    time_us, has_time = _time_us(s.formats, rec)
+    s.tracker.push(rec.offset[has_time], time_us[has_time] * 1000)
+    for type_ in rec.types():
+        idx_all = rec.of_type(type_)
+        for fmt, sub in s.formats.split(type_, rec.offset[idx_all]):
+            idx = idx_all[sub]
+            if fmt is not None:
+                _records(s, rec, idx, fmt, time_us[idx])
+                continue
+            bad = s.formats.unusable.get(type_)
+            if bad is not None and bad.name in BY_NAME:
+                key = (bad.name, 0)
+                s.counts[key] += len(idx)
+                s.first_us.setdefault(key, 0)
+                s.last_us[key] = 0
+                s.instanced[bad.name] = "I" in bad.columns or "C" in bad.columns
+                s.unusable_detail[bad.name] = f"FMT unusable: {bad.reason}"
+
+
+def _records(
+    s: DfSurvey, rec: Records, idx: npt.NDArray[np.intp], fmt: DfFormat, t_us: I64
+) -> None:
+    name = fmt.name
+    spec = BY_NAME.get(name)
+    if spec is not None:
+        inst = instances(spec.instance, fmt, rec, idx)
+        s.instanced[name] = fmt.instance_column is not None
+        for i in np.flatnonzero(np.bincount(inst)).tolist():
+            sel = inst == i
+            key = (name, int(i))
+            s.counts[key] += int(sel.sum())
+            s.first_us.setdefault(key, int(t_us[sel][0]))
+            s.last_us[key] = int(t_us[sel][-1])
+    if name not in ("GPS", "GPS2", "GPA", "GPA2", "ORGN"):
+        return
+    data = rec.decode(idx, fmt)
+    if name in ("GPS", "GPS2") and "GWk" in fmt.columns:
+        _gps(s, rec, idx, data, t_us)
+    elif name in ("GPA", "GPA2") and "Und" in fmt.columns:
+        und = fmt.scaled(data, "Und")
+        have = und != 0.0
+        if have.any():
+            mm = np.rint(und[have] * 1e3).astype(np.int64)
+            s.undulation_mm.add(np.zeros(len(mm), np.int64), mm)
+    elif name == "ORGN":
+        for i in np.flatnonzero(np.asarray(data["Type"]) == 0).tolist():
+            one = data[i : i + 1]
+            lat, lon, alt = (float(fmt.scaled(one, c)[0]) for c in ("Lat", "Lng", "Alt"))
+            s.origins.append((int(t_us[i]), lat, lon, alt))
+
+
+def _gps(s: DfSurvey, rec: Records, idx: npt.NDArray[np.intp], data: np.ndarray, t_us: I64) -> None:
+    week = np.asarray(data["GWk"], np.int64)
+    tow_ns = np.asarray(data["GMS"], np.int64) * 1_000_000
+    ok = (week > 0) & (np.asarray(data["Status"]) >= 2)
+    s.gps_rows += int((week > 0).sum())
+    if not ok.any():
+        return
+    if s.gps_first is None:
+        s.gps_first = (int(week[ok][0]), int(tow_ns[ok][0]))
+    gps_ns = week[ok] * WEEK_NS + tow_ns[ok]
+    segs = s.tracker.segment_of(rec.offset[idx][ok])
+    s.pairs.add(segs, gps_ns - t_us[ok] * 1000)

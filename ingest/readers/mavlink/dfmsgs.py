@@ -1,0 +1,214 @@
+"""DataFlash messages that feed canonical tables, and their conversion to canonical columns.
+
+Column units are the logged ones after the format-character multipliers (``DfFormat.scaled``):
+
+==========  ===========================================================================
+IMU[I]      ``GyrX/Y/Z`` rad/s, ``AccX/Y/Z`` m/s^2, body FRD (also legacy IMU2, IMU3)
+GPS[I]      ``Status`` (the MAVLink GPS_FIX_TYPE values), ``GWk``/``GMS`` GPS week and ms of
+ + GPA[I]   week (-> t_ns of the fix, GPS time), ``NSats``, ``Lat``/``Lng`` deg, ``Alt`` m
+            above MSL, ``Spd`` m/s and ``GCrs`` deg (ground track), ``VZ`` m/s down; GPA of
+            the same instance (nearest in time): ``HAcc``/``VAcc`` m, ``SAcc`` m/s (0 =
+            unknown: null) and ``Und`` (MSL - ellipsoid, m: ellipsoidal = Alt - Und)
+XKF1[C]     EKF3 (NKF1: EKF2) core C: ``Roll``/``Pitch``/``Yaw`` deg, ``VN/VE/VD`` m/s,
+            ``PN/PE/PD`` m from the EKF origin (``ORGN`` type 0, MSL height), placed on the
+            earth with ArduPilot's own flat-earth offset (``Location::offset``), so the
+            result matches the autopilot's ``POS`` message
+SIM         SITL truth: ``Roll/Pitch/Yaw`` deg, ``Lat/Lng`` deg, ``Alt`` m; no velocity
+==========  ===========================================================================
+
+MSL heights become ellipsoidal with the log's undulation (per row from GPA, else the log's
+median) or stay MSL, counted as ``alt_msl_no_geoid``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from navreplay.ingest.arrays import F64
+from navreplay.ingest.readers.mavlink.dfformat import DfFormat
+from navreplay.ingest.readers.mavlink.mavmsgs import Converted
+from navreplay.ingest.schema import FixType, TableName
+
+#: ArduPilot's LOCATION_SCALING_FACTOR_INV: 1e-7 degree units per metre (sphere 6378100 m).
+LOCATION_SCALING_FACTOR_INV = 89.83204953368922
+
+
+@dataclass(frozen=True)
+class Origin:
+    """EKF origins (``ORGN`` type 0) in log order: TimeUS, lat/lon deg, MSL height m."""
+
+    time_us: npt.NDArray[np.int64] = field(default_factory=lambda: np.empty(0, np.int64))
+    lat_deg: F64 = field(default_factory=lambda: np.empty(0))
+    lon_deg: F64 = field(default_factory=lambda: np.empty(0))
+    alt_msl_m: F64 = field(default_factory=lambda: np.empty(0))
+
+
+@dataclass(frozen=True)
+class DfExtras:
+    """Per-file facts conversions need: undulation N (ellipsoid = MSL + N) and EKF origins."""
+
+    undulation_m: float | None = None
+    origin: Origin = field(default_factory=Origin)
+
+
+Convert = Callable[[np.ndarray, DfFormat, DfExtras], Converted]
+
+
+@dataclass(frozen=True)
+class DfStream:
+    """A DataFlash message that feeds a canonical table.
+
+    Attributes:
+        message: message name.
+        table: canonical table.
+        convert: decoded records -> canonical columns.
+        instance: the instance when the name implies it (legacy ``IMU2``); else the
+            ``I``/``C`` column gives it.
+        join: a message of the same instance joined by nearest time, with its conversion.
+        detail: what ``--list`` shows.
+    """
+
+    message: str
+    table: TableName
+    convert: Convert
+    instance: int = 0
+    join: tuple[str, Convert] | None = None
+    detail: str = ""
+
+    def key(self, fmt: DfFormat, instance: int) -> str:
+        return f"{self.message}[{instance}]" if fmt.instance_column else self.message
+
+
+def _imu(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras) -> Converted:
+    cols = {f"acc_{a}_mps2": fmt.scaled(rec, f"Acc{a.upper()}") for a in "xyz"}
+    cols |= {f"gyro_{a}_radps": fmt.scaled(rec, f"Gyr{a.upper()}") for a in "xyz"}
+    return Converted(cols)
+
+
+def _msl_to_ellipsoid(alt_msl: F64, und: F64 | None, ex: DfExtras) -> tuple[F64, dict[str, int]]:
+    """Ellipsoidal height: per-row undulation where logged (``Und``: MSL - ellipsoid)."""
+    n_file = ex.undulation_m
+    per_row = (und != 0.0) if und is not None else np.zeros(len(alt_msl), bool)
+    n = np.where(per_row, -und if und is not None else 0.0, n_file or 0.0)
+    counters: dict[str, int] = {}
+    missing = int((~per_row).sum())
+    if missing and n_file is None:
+        counters["alt_msl_no_geoid"] = missing
+    return alt_msl + n, counters
+
+
+def _gps(rec: np.ndarray, fmt: DfFormat, ex: DfExtras) -> Converted:
+    speed = fmt.scaled(rec, "Spd")
+    course = np.radians(fmt.scaled(rec, "GCrs"))
+    fix = np.asarray(rec["Status"], dtype=np.int8)
+    cols = {
+        "lat_deg": fmt.scaled(rec, "Lat"),
+        "lon_deg": fmt.scaled(rec, "Lng"),
+        "alt_msl": fmt.scaled(rec, "Alt"),
+        "vel_n_mps": speed * np.cos(course),
+        "vel_e_mps": speed * np.sin(course),
+        "vel_d_mps": fmt.scaled(rec, "VZ"),
+        "fix_type": fix,
+        "num_sats": np.asarray(rec["NSats"], dtype=np.int16),
+    }
+    return Converted(cols, counters={"no_fix": int((fix < FixType.FIX_2D).sum())})
+
+
+def _gpa(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras) -> Converted:
+    cols = {
+        "h_acc_m": fmt.scaled(rec, "HAcc"),
+        "v_acc_m": fmt.scaled(rec, "VAcc"),
+        "speed_acc_mps": fmt.scaled(rec, "SAcc"),
+        "und": fmt.scaled(rec, "Und") if "Und" in fmt.columns else np.zeros(len(rec)),
+    }
+    return Converted(cols)
+
+
+def finish_gnss(c: Converted, ex: DfExtras) -> None:
+    """After the GPA join: heights to ellipsoidal, accuracies of 0 to null."""
+    cols, nulls = c.columns, c.nulls
+    und = cols.pop("und")
+    und = np.where(nulls.pop("und", np.zeros(len(und), bool)), 0.0, und)
+    alt, counters = _msl_to_ellipsoid(cols.pop("alt_msl"), und, ex)
+    cols["alt_m"] = alt
+    for name, n in counters.items():
+        c.counters[name] = c.counters.get(name, 0) + n
+    for name in ("h_acc_m", "v_acc_m", "speed_acc_mps"):
+        nulls[name] = nulls.get(name, np.zeros(len(alt), bool)) | (cols[name] <= 0.0)
+        cols[name] = np.where(nulls[name], 0.0, cols[name])
+
+
+def _wrap(angle: F64) -> F64:
+    return np.asarray((angle + math.pi) % (2 * math.pi) - math.pi, dtype=np.float64)
+
+
+def _attitude(rec: np.ndarray, fmt: DfFormat) -> dict[str, F64]:
+    return {
+        "roll_rad": np.radians(fmt.scaled(rec, "Roll")),
+        "pitch_rad": np.radians(fmt.scaled(rec, "Pitch")),
+        "yaw_rad": _wrap(np.radians(fmt.scaled(rec, "Yaw"))),
+    }
+
+
+def _ekf(rec: np.ndarray, fmt: DfFormat, ex: DfExtras) -> Converted:
+    o = ex.origin
+    n = len(rec)
+    if not len(o.time_us):
+        nan = np.full(n, np.nan)
+        lat, lon, alt_msl = nan, nan, nan
+        counters = {"no_ekf_origin": n}
+    else:
+        t = np.asarray(rec["TimeUS"], dtype=np.int64)
+        k = np.maximum(np.searchsorted(o.time_us, t, side="right") - 1, 0)
+        pn, pe = fmt.scaled(rec, "PN"), fmt.scaled(rec, "PE")
+        dlat = pn * LOCATION_SCALING_FACTOR_INV * 1e-7
+        lat = o.lat_deg[k] + dlat
+        scale = np.maximum(np.cos(np.radians(o.lat_deg[k] + dlat / 2)), 0.01)
+        lon = o.lon_deg[k] + pe * LOCATION_SCALING_FACTOR_INV * 1e-7 / scale
+        alt_msl = o.alt_msl_m[k] - fmt.scaled(rec, "PD")
+        counters = {}
+    alt, more = _msl_to_ellipsoid(alt_msl, None, ex)
+    cols = {
+        "lat_deg": lat,
+        "lon_deg": lon,
+        "alt_m": alt,
+        "vel_n_mps": fmt.scaled(rec, "VN"),
+        "vel_e_mps": fmt.scaled(rec, "VE"),
+        "vel_d_mps": fmt.scaled(rec, "VD"),
+        **_attitude(rec, fmt),
+    }
+    return Converted(cols, counters=counters | more)
+
+
+def _sim(rec: np.ndarray, fmt: DfFormat, ex: DfExtras) -> Converted:
+    alt, counters = _msl_to_ellipsoid(fmt.scaled(rec, "Alt"), None, ex)
+    cols = {
+        "lat_deg": fmt.scaled(rec, "Lat"),
+        "lon_deg": fmt.scaled(rec, "Lng"),
+        "alt_m": alt,
+        **_attitude(rec, fmt),
+    }
+    return Converted(cols, counters=counters)
+
+
+_IMU = TableName.IMU
+_EST = TableName.ESTIMATOR
+STREAMS: tuple[DfStream, ...] = (
+    DfStream("IMU", _IMU, _imu, detail="rad/s, m/s^2"),
+    DfStream("IMU2", _IMU, _imu, instance=1, detail="rad/s, m/s^2 (legacy second IMU)"),
+    DfStream("IMU3", _IMU, _imu, instance=2, detail="rad/s, m/s^2 (legacy third IMU)"),
+    DfStream("GPS", TableName.GNSS, _gps, join=("GPA", _gpa), detail="GWk/GMS -> GPS time"),
+    DfStream(
+        "GPS2", TableName.GNSS, _gps, instance=1, join=("GPA2", _gpa), detail="legacy 2nd GPS"
+    ),
+    DfStream("XKF1", _EST, _ekf, detail="EKF3 core output, position from ORGN"),
+    DfStream("NKF1", _EST, _ekf, detail="EKF2 core output, position from ORGN"),
+    DfStream("SIM", TableName.TRUTH, _sim, detail="SITL truth (no velocity)"),
+)
+BY_NAME = {s.message: s for s in STREAMS}
+JOIN_COLUMNS = ("h_acc_m", "v_acc_m", "speed_acc_mps", "und")

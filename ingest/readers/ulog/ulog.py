@@ -1,0 +1,248 @@
+"""PX4 ULog (``.ulg``) through pyulog, which already decodes each topic into column arrays.
+
+Streams (``topic[multi_id]``), all on the boot clock ``timestamp`` (us) until paired:
+
+=============================  ============================================================
+sensor_combined[i]             ``gyro_rad[0..2]`` rad/s, ``accelerometer_m_s2[0..2]`` m/s^2,
+                               body FRD -> imu
+vehicle_gps_position[i],       ``lat/lon`` 1e-7 deg (or ``latitude_deg``...), ``alt`` mm MSL,
+sensor_gps[i]                  ``alt_ellipsoid`` mm, ``eph/epv`` m (PX4's accuracies),
+                               ``s_variance_m_s`` m/s, ``vel_n/e/d_m_s``, ``fix_type``,
+                               ``satellites_used`` -> gnss
+vehicle_global_position[i]     ``lat/lon`` deg, ``alt`` m MSL (``alt_ellipsoid`` when logged),
+ + vehicle_attitude            ``vel_n/e/d`` when logged; attitude from the quaternion ``q``
+                               (Hamilton, body FRD -> NED) nearest in time -> estimator
+vehicle_local_position[i]      ``x/y/z``, ``vx/vy/vz`` NED from ``ref_lat/ref_lon/ref_alt``
+ + vehicle_attitude            (PX4's azimuthal-equidistant projection, valid where
+                               ``xy_global``/``z_global``; NaN otherwise) -> estimator
+=============================  ============================================================
+
+Time: when a GPS topic carries ``time_utc_usec``, the boot clock is paired with it (median of
+``time_utc_usec - timestamp`` over the fixes), converted to GPS time with the leap-second table
+and declared GPS; otherwise the boot clock stays the recorder clock.
+
+Damage: pyulog stops at a message cut by the end of the file and resynchronises on sync
+markers after corrupt bytes, silently; this reader walks the message headers itself to report
+a trailing partial message with its offset, reports pyulog's corruption flag, and counts the
+logger's own dropouts. pyulog loads the file whole (ULog files are seldom above a few hundred
+MB); unreadable headers are E-FATAL naming the file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+import struct
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+import numpy as np
+
+from navreplay.ingest.arrays import I64
+from navreplay.ingest.damage import Completeness, Defect
+from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.readers.asof import AsofJoin, Left
+from navreplay.ingest.readers.base import (
+    Batch,
+    Inventory,
+    LogReader,
+    ReadContext,
+    Selection,
+    StreamInfo,
+)
+from navreplay.ingest.readers.ulog.ulogmsgs import GPS_TOPICS, TOPICS, UlogTopic, attitude_columns
+from navreplay.ingest.schema import TableName
+from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
+
+log = logging.getLogger(__name__)
+
+JOIN_TOLERANCE_NS = 50_000_000
+_HEADER = 16
+
+
+class UlogReader(LogReader):
+    """Reader of one PX4 ULog file."""
+
+    format = Format.ULOG
+
+    def __init__(self, detected: Detected, ctx: ReadContext) -> None:
+        super().__init__(detected, ctx)
+        self._ulog: Any = None
+        self._offset_ns: int | None = None
+        self._pairs = 0
+
+    def _load(self) -> Any:
+        if self._ulog is not None:
+            return self._ulog
+        from pyulog import ULog
+        from pyulog.core import ULogException
+
+        names = [*(t.name for t in TOPICS), "vehicle_attitude"]
+        printed = io.StringIO()
+        try:
+            with contextlib.redirect_stdout(printed):  # pyulog prints its warnings
+                self._ulog = ULog(str(self.file), names, True)
+        except (ULogException, struct.error, ValueError, IndexError, OSError) as err:
+            raise CorruptLogError(
+                f"ULog cannot be parsed: {err}", path=self.file, offset=0
+            ) from err
+        finally:
+            for line in printed.getvalue().splitlines():
+                log.info("%s: pyulog: %s", self.file, line)
+        if not self._ulog.data_list:
+            corrupt = " and reports the file corrupt" if self._ulog.file_corruption else ""
+            raise CorruptLogError(
+                f"pyulog finds no data message of the topics navreplay converts{corrupt}",
+                path=self.file,
+                offset=_HEADER,
+                hint=f"topics read: {', '.join(names)}",
+            )
+        self._pair_clock()
+        return self._ulog
+
+    def _pair_clock(self) -> None:
+        diffs: list[I64] = []
+        for d in self._ulog.data_list:
+            if d.name in GPS_TOPICS and "time_utc_usec" in d.data:
+                utc = d.data["time_utc_usec"].astype(np.int64)
+                ok = utc > 0
+                diffs.append((utc[ok] - d.data["timestamp"].astype(np.int64)[ok]) * 1000)
+        both = np.concatenate(diffs) if diffs else np.empty(0, np.int64)
+        if len(both):
+            self._offset_ns = int(np.sort(both)[len(both) // 2])
+            self._pairs = len(both)
+
+    @property
+    def base(self) -> TimeBase:
+        self._load()
+        return TimeBase.GPS if self._offset_ns is not None else TimeBase.RECORDER
+
+    def to_base(self, timestamp_us: np.ndarray) -> I64:
+        t = np.asarray(timestamp_us, dtype=np.int64) * 1000
+        if self._offset_ns is None:
+            return t
+        return utc_to_gps_ns(t + self._offset_ns)
+
+    # ----------------------------------------------------------------------------- inventory
+    def _datasets(self) -> Iterator[tuple[UlogTopic, Any]]:
+        by_name = {t.name: t for t in TOPICS}
+        for d in sorted(self._load().data_list, key=lambda d: (d.name, d.multi_id)):
+            topic = by_name.get(d.name)
+            if topic is not None and len(d.data["timestamp"]):
+                yield topic, d
+
+    def inventory(self) -> Inventory:
+        streams = []
+        for topic, d in self._datasets():
+            ts = d.data["timestamp"]
+            first, last = self.to_base(np.array([ts[0], ts[-1]]))
+            streams.append(
+                StreamInfo(
+                    key=f"{d.name}[{d.multi_id}]",
+                    msgtype=d.name,
+                    count=len(ts),
+                    start_ns=int(first),
+                    end_ns=int(last),
+                    table=topic.table,
+                    time_base=self.base,
+                    frame="frd" if topic.table == TableName.IMU else "ned",
+                    instance=int(d.multi_id),
+                    detail=topic.detail,
+                )
+            )
+        return Inventory(self.path, self.format, tuple(streams), (self._time_note(),))
+
+    def _time_note(self) -> str:
+        if self._offset_ns is None:
+            return "no GPS UTC time in the log: timestamp (time since boot) kept as recorder clock"
+        return (
+            f"timestamp paired with GPS time_utc_usec ({self._pairs} fixes, UTC - boot = "
+            f"{self._offset_ns / 1e9:.6f} s), converted to GPS time"
+        )
+
+    # ---------------------------------------------------------------------------------- read
+    def read(self, selections: Sequence[Selection]) -> Iterator[Batch]:
+        keys = {s.key for s in selections}
+        ulog = self._load()
+        extras = self._undulation()
+        for topic, d in self._datasets():
+            key = f"{d.name}[{d.multi_id}]"
+            if key not in keys:
+                continue
+            conv = topic.convert(d.data, extras)
+            t = self.to_base(d.data["timestamp"])
+            offsets = np.zeros(len(t), np.int64)  # pyulog does not expose record offsets
+            if topic.join_attitude:
+                yield self._with_attitude(key, topic, t, conv, offsets, ulog)
+                continue
+            cols = {"t_ns": t, **conv.columns}
+            yield Batch(key, topic.table, cols, offsets, conv.nulls, None, conv.counters, conv.info)
+        self._record_damage(ulog)
+
+    def _undulation(self) -> float | None:
+        for d in self._ulog.data_list:
+            if d.name in GPS_TOPICS and "alt_ellipsoid" in d.data and "alt" in d.data:
+                diff = d.data["alt_ellipsoid"].astype(np.int64) - d.data["alt"].astype(np.int64)
+                diff = diff[d.data["alt_ellipsoid"] != 0]
+                if len(diff):
+                    return float(np.median(diff)) / 1000.0
+        return None
+
+    def _with_attitude(
+        self, key: str, topic: UlogTopic, t: I64, conv: Any, offsets: I64, ulog: Any
+    ) -> Batch:
+        join = AsofJoin(("roll_rad", "pitch_rad", "yaw_rad"), JOIN_TOLERANCE_NS)
+        for d in ulog.data_list:
+            if d.name == "vehicle_attitude" and d.multi_id == 0:
+                join.push_right(self.to_base(d.data["timestamp"]), attitude_columns(d.data))
+        join.push_left(Left(t, conv.columns, conv.nulls, offsets))
+        out = join.pop(final=True)
+        assert out is not None
+        info = {**conv.info, "attitude": "vehicle_attitude[0] q, nearest in time"}
+        cols = {"t_ns": out.t, **out.columns}
+        return Batch(key, topic.table, cols, out.offsets, out.nulls, None, conv.counters, info)
+
+    # -------------------------------------------------------------------------------- damage
+    def _record_damage(self, ulog: Any) -> None:
+        self.damage.note(self._time_note())
+        drops = list(ulog.dropouts)
+        if drops:
+            self.damage.count("logger_dropouts", len(drops))
+            total = sum(int(x.duration) for x in drops)
+            self.damage.note(f"{len(drops)} logger dropouts (buffer overruns), {total} ms in all")
+        if ulog.file_corruption:
+            self.damage.record(
+                Defect(
+                    Completeness.CORRUPT_CHUNKS_SKIPPED,
+                    "pyulog detected corrupt bytes and resynchronised on the next sync marker: "
+                    "the messages in between are lost (count unknown)",
+                )
+            )
+        partial = _trailing_partial(self.file)
+        if partial is not None:
+            at, n = partial
+            self.damage.record(
+                Defect(
+                    Completeness.PARTIAL_RECORD_DROPPED,
+                    f"1 trailing partial message dropped at offset {at} ({n} bytes): the file "
+                    "ends inside it",
+                    offset=at,
+                    messages_lost=1,
+                    bytes_skipped=n,
+                )
+            )
+
+
+def _trailing_partial(path: Any) -> tuple[int, int] | None:
+    """(offset, bytes) of a message cut by the end of the file, by walking the headers."""
+    data = np.fromfile(path, np.uint8)
+    size = len(data)
+    pos = _HEADER
+    while pos + 3 <= size:
+        msg_size = int(data[pos]) | (int(data[pos + 1]) << 8)
+        if pos + 3 + msg_size > size:
+            return pos, size - pos
+        pos += 3 + msg_size
+    return (pos, size - pos) if pos < size else None
