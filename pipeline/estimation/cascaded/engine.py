@@ -218,21 +218,20 @@ class CascadeState:
         )
 
 
-class NumbaStepper:
-    """The compiled backend, one ``cascade_sample`` per call (``x`` is live, not a copy).
+class StepperBase:
+    """What both backends' steppers share (``backends.Stepper``): the run's ``state``
+    (``CascadeState``), its status and wall time, ``x``, ``ok``, ``set_command`` and
+    ``result``. On divergence ``_set_status`` raises ``DivergenceError`` unless the section
+    says ``on_divergence: flag``, in which case later samples are ignored and ``result``
+    reports the run as diverged."""
 
-    Raises ``DivergenceError`` from ``sample`` on divergence unless the section says
-    ``on_divergence: flag``, in which case later samples are ignored and ``result`` reports
-    the run as diverged.
-    """
-
-    backend = "numba"
+    backend = ""
 
     def __init__(self, setup: CascadeSetup, capacity: int, n_gps: int = 0) -> None:
+        self.setup = setup
         self.state = CascadeState(setup, capacity, n_gps)
-        self._args = self.state.args()
-        self._status = cm.STATUS_OK
-        self._wall = 0.0
+        self.status = cm.STATUS_OK
+        self.wall = 0.0
 
     @property
     def x(self) -> F64:
@@ -240,7 +239,28 @@ class NumbaStepper:
 
     @property
     def ok(self) -> bool:
-        return self._status == cm.STATUS_OK
+        return self.status == cm.STATUS_OK
+
+    def set_command(self, u: float) -> None:
+        self.state.mem[cs.M_CMD] = u
+
+    def result(self) -> CascadedResult:
+        return self.state.result(self.backend, self.status, self.wall)
+
+    def _set_status(self, status: int) -> None:
+        self.status = status
+        if status != cm.STATUS_OK:
+            raise_if_diverged(self.setup, self.state.result(self.backend, status, 0.0))
+
+
+class NumbaStepper(StepperBase):
+    """The compiled backend, one ``cascade_sample`` per call (``x`` is live, not a copy)."""
+
+    backend = "numba"
+
+    def __init__(self, setup: CascadeSetup, capacity: int, n_gps: int = 0) -> None:
+        super().__init__(setup, capacity, n_gps)
+        self._args = self.state.args()
 
     def sample(self, t_ns: int, veh: F64, gps: F64) -> None:
         self._call(t_ns, veh, gps, False)
@@ -250,21 +270,14 @@ class NumbaStepper:
         self._call(t_ns, _NAN4, gps, True)
 
     def _call(self, t_ns: int, veh: F64, gps: F64, nav_only: bool) -> None:
-        if self._status != cm.STATUS_OK:
+        if self.status != cm.STATUS_OK:
             return
         t0 = time.perf_counter()
         if not nav_only:
             self.state.prepare(t_ns)
-        self._status = int(cs.cascade_sample(t_ns, veh, gps, nav_only, *self._args))
-        self._wall += time.perf_counter() - t0
-        if self._status != cm.STATUS_OK:
-            raise_if_diverged(self.state.setup, self.state.result(self.backend, self._status, 0.0))
-
-    def set_command(self, u: float) -> None:
-        self.state.mem[cs.M_CMD] = u
-
-    def result(self) -> CascadedResult:
-        return self.state.result(self.backend, self._status, self._wall)
+        status = int(cs.cascade_sample(t_ns, veh, gps, nav_only, *self._args))
+        self.wall += time.perf_counter() - t0
+        self._set_status(status)
 
 
 def raise_if_diverged(setup: CascadeSetup, result: CascadedResult) -> None:

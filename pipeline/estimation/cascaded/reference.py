@@ -28,12 +28,7 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from navreplay.pipeline.estimation.cascaded import cascade as cs
-from navreplay.pipeline.estimation.cascaded.engine import (
-    CascadedResult,
-    CascadeSetup,
-    CascadeState,
-    raise_if_diverged,
-)
+from navreplay.pipeline.estimation.cascaded.engine import CascadeSetup, CascadeState, StepperBase
 from navreplay.pipeline.estimation.cascaded.filters import (
     EST_EKF,
     EST_UKF,
@@ -199,35 +194,21 @@ class _SubFilter:
         return True
 
 
-class FilterpyStepper:
+class FilterpyStepper(StepperBase):
     """``engine.NumbaStepper``'s contract on filterpy (see the module docstring)."""
 
     backend = "filterpy"
 
     def __init__(self, setup: CascadeSetup, capacity: int, n_gps: int = 0) -> None:
-        self.setup = setup
-        self.st = CascadeState(setup, capacity, n_gps)
+        super().__init__(setup, capacity, n_gps)
         est = setup.settings.est
-        disc = self.st.mem[cs.M_DISC :]
+        disc = self.state.mem[cs.M_DISC :]
         self.nav = _SubFilter(MODEL_NAV, est, setup, setup.P0[0], disc)
         ctl_est = EST_UKF if est == EST_UKF else EST_EKF
         self.ctl = _SubFilter(MODEL_CTL, ctl_est, setup, setup.P0[1], disc)
-        self.status = cm.STATUS_OK
-        self.wall = 0.0
-
-    @property
-    def x(self) -> F64:
-        return self.st.x
-
-    @property
-    def ok(self) -> bool:
-        return self.status == cm.STATUS_OK
-
-    def set_command(self, u: float) -> None:
-        self.st.mem[cs.M_CMD] = u
 
     def _nav_predict(self, t_ns: int) -> None:
-        st, s = self.st, self.setup.settings
+        st, s = self.state, self.setup.settings
         dt = (t_ns - int(st.imem[cs.I_T_NAV])) * 1e-9
         if dt <= 0.0:
             return
@@ -240,14 +221,14 @@ class FilterpyStepper:
         st.imem[cs.I_T_NAV] = t_ns
 
     def _ctl_predict(self, t_ns: int) -> None:
-        st = self.st
+        st = self.state
         dt = (t_ns - int(st.imem[cs.I_T_CTL])) * 1e-9
         if dt > 0.0:
             self.ctl.predict(st.mem[cs.M_CMD : cs.M_CMD + 1].copy(), dt)
             st.imem[cs.I_T_CTL] = t_ns
 
     def _finish(self, t_ns: int) -> int:
-        st = self.st
+        st = self.state
         st.x[:NX], st.x[NX:] = self.nav.x, self.ctl.x
         st.P[0], st.P[1] = self.nav.cov, self.ctl.cov
         status = int(cs.finish(t_ns, st.x, st.P, self.setup.settings, st.log))
@@ -257,19 +238,14 @@ class FilterpyStepper:
 
     def nav_epoch(self, t_ns: int, gps: F64) -> None:
         """A GPS fix between vehicle samples (``cascade_sample`` with ``nav_only``)."""
-        if self.status != cm.STATUS_OK or not self.st.imem[cs.I_STARTED]:
+        if self.status != cm.STATUS_OK or not self.state.imem[cs.I_STARTED]:
             return
         self._nav_predict(t_ns)
-        ok = self.nav.update(t_ns, gps, self.st)
+        ok = self.nav.update(t_ns, gps, self.state)
         self._set_status(self._finish(t_ns) if ok else self._fail(t_ns))
 
-    def _set_status(self, status: int) -> None:
-        self.status = status
-        if status != cm.STATUS_OK:
-            raise_if_diverged(self.setup, self.st.result(self.backend, status, 0.0))
-
     def _fail(self, t_ns: int) -> int:
-        st = self.st
+        st = self.state
         return int(cm.fail(t_ns, cm.STATUS_INDEFINITE, st.ev_i, st.ev_f, st.counts))
 
     def sample(self, t_ns: int, veh: F64, gps: F64) -> None:
@@ -277,7 +253,7 @@ class FilterpyStepper:
         if self.status != cm.STATUS_OK:
             return
         t0 = time.perf_counter()
-        st = self.st
+        st = self.state
         if st.imem[cs.I_STARTED] == 0:
             st.imem[cs.I_T_NAV] = st.imem[cs.I_T_CTL] = t_ns
             st.imem[cs.I_STARTED] = 1
@@ -302,6 +278,3 @@ class FilterpyStepper:
             st.counts[cm.CNT_OUT] = k + 1
             st.counts[cm.CNT_STOP] += 1
         self.wall += time.perf_counter() - t0
-
-    def result(self) -> CascadedResult:
-        return self.st.result(self.backend, self.status, self.wall)
