@@ -149,7 +149,7 @@ CTL_STREAMS = np.array([S_YAW_RATE, S_SPEED, S_STEER], np.int64)
 NO_EKF_MEAN = np.zeros(NX, np.int64)  # the control filter: every mean unscented
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def filters_of(x: F64, P: F64, est: int) -> tuple[Filter, Filter]:
     """The navigation and control ``Filter`` of a run's state ``x`` (2 NX,) and ``P``
     (2, NX, NX) (views) under estimator ``est``: the control filter is the EKF but for the
@@ -160,7 +160,7 @@ def filters_of(x: F64, P: F64, est: int) -> tuple[Filter, Filter]:
     )
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _nav_predict(t_ns: int, f1: Filter, run: CascadeRun, cset: CascadeSettings, log: RunLog
                  ) -> bool:  # fmt: skip
     """Navigation time update from ``imem[I_T_NAV]`` to ``t_ns`` with the held inputs."""
@@ -182,7 +182,7 @@ def _nav_predict(t_ns: int, f1: Filter, run: CascadeRun, cset: CascadeSettings, 
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _ctl_predict(t_ns: int, f2: Filter, run: CascadeRun, cset: CascadeSettings) -> bool:
     """Control time update from ``imem[I_T_CTL]`` to ``t_ns`` (exact ZOH, held command)."""
     mem, imem = run.mem, run.imem
@@ -216,7 +216,7 @@ def finish(t_ns: int, x: F64, P: F64, cset: CascadeSettings, log: RunLog) -> int
     return STATUS_OK
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _update(t_ns: int, f: Filter, meas: Measurement, gating: Gating, ut: Unscented,
             log: RunLog) -> bool:  # fmt: skip
     """``prepare_update`` then ``apply_update``; False if a UKF prior was not PD."""

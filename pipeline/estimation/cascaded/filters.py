@@ -175,7 +175,7 @@ class UpdateRows(NamedTuple):
     Pxz: F64
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def sigma_points(f: Filter, ut: Unscented) -> tuple[bool, F64]:
     """The sigma points (NSIG, NX) of ``(f.x, f.P)`` (``kernels.unscented.draw_sigmas``);
     False if ``P`` is not positive definite."""
@@ -184,7 +184,7 @@ def sigma_points(f: Filter, ut: Unscented) -> tuple[bool, F64]:
     return draw_sigmas(f.x, f.P, NX, ut.gamma, L, sig), sig
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def ekf_predict(f: Filter, step: Step) -> None:
     """EKF time update (eq. 22-23): ``F`` at the prior, ``x <- f(x)``, ``P <- F P F^T + Q``."""
     model, _, x, P = f
@@ -198,7 +198,7 @@ def ekf_predict(f: Filter, step: Step) -> None:
     propagate_cov(P, F, Q, NX, np.empty((NX, NX)))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def ukf_predict(f: Filter, step: Step, ut: Unscented, ekf_mean: I64) -> bool:
     """Unscented time update (eq. 24-26) with additive ``Q``; states with ``ekf_mean[j]``
     take the EKF mean ``f(x_hat)[j]`` instead of the unscented one (the hybrid).
@@ -224,7 +224,7 @@ def ukf_predict(f: Filter, step: Step, ut: Unscented, ekf_mean: I64) -> bool:
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def predict(f: Filter, step: Step, ut: Unscented, ekf_mean: I64) -> bool:
     """The time update of ``f``'s estimator (``ekf_predict`` or ``ukf_predict``); False if
     an unscented prior was not positive definite."""
@@ -268,7 +268,7 @@ def measurement_layout(z: F64, block_of_row: I64, stream_of_block: I64, rows: I6
     return m, nb_
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _prior_rows(f: Filter, z: F64, ut: Unscented, ur: UpdateRows) -> bool:
     """Innovations ``ur.nu``, their covariance ``ur.S`` (and for the UKF the cross covariance
     ``ur.Pxz``) of the available rows, from the prior; False if a UKF prior is not PD."""
@@ -300,7 +300,7 @@ def _prior_rows(f: Filter, z: F64, ut: Unscented, ur: UpdateRows) -> bool:
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def prepare_update(
     t_ns: int, f: Filter, meas: Measurement, gating: Gating, ut: Unscented, log: RunLog
 ) -> tuple[UpdateRows, I64, int]:
@@ -363,7 +363,7 @@ def prepare_update(
     return ur, acc, ma
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def apply_update(f: Filter, ur: UpdateRows, acc: I64, ma: int) -> None:
     """The update of the accepted rows ``acc[:ma]`` from ``prepare_update``'s outputs:
     Kalman in Joseph form with ``H`` (eq. 21; EKF and hybrid) or unscented (eq. 27)."""

@@ -194,7 +194,7 @@ def gate_work(n_streams: int) -> GateWork:
                     np.empty((3, 6)), -np.ones(n_streams, np.int64))  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def epoch_rows(stop: I64, veh: F64, fix: F64, rows: I64, blocks: I64) -> Layout:
     """Lay out the measurement rows of a stop into ``rows`` and ``blocks`` (``Layout``)."""
     m = 0
@@ -226,7 +226,7 @@ def epoch_rows(stop: I64, veh: F64, fix: F64, rows: I64, blocks: I64) -> Layout:
     return Layout(rows, blocks, m, nb_)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def epoch_values(
     model: int, x: F64, u: F64, lay: Layout, sched: VehicleSchedule, vs: VehicleSettings,
     ms: ModelRows, j: int,
@@ -271,7 +271,7 @@ def innovation_cov(P: F64, H: F64, r: F64, m: int, S: F64) -> None:
         S[k, k] += r[k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def predict(
     model: int, x: F64, P: F64, u: F64, dt: float, vs: VehicleSettings, noise: vm.ProcessNoise
 ) -> None:
@@ -389,7 +389,7 @@ def reset_stream(P: F64, stream: int, nu: F64, blocks: I64, nb_: int) -> float:
     return big
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def gate_with_reset(
     t: int, lay: Layout, Ps: F64, ms: ModelRows, g: int, gw: GateWork, vs: VehicleSettings,
     log: RunLog,

@@ -228,7 +228,7 @@ def input_jac(model: int, x: F64, v_whl: float, delta: float, dt: float, vp: F64
     G[X_E, 1] = dt * v * math.cos(th) * 0.5 * dt * dr_dd
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def process_noise(
     model: int, x: F64, v_whl: float, delta: float, dt: float, vp: F64, noise: ProcessNoise, Q: F64
 ) -> None:
