@@ -42,7 +42,7 @@ variant, reported beside the default.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Any, Literal
+from typing import Literal
 
 from navreplay.ingest.typed import FieldError
 from navreplay.pipeline.control.lqr import YawSteerModel
@@ -59,14 +59,22 @@ CASCADED_KINDS: dict[str, Estimator] = {
 NAV_STATE_NAMES = ("east", "north", "radar_bias", "heading", "gyro_bias", "heading_bias")
 
 
-def _nonnegative(obj: Any) -> None:
-    for f in fields(obj):
-        if not getattr(obj, f.name) >= 0:
-            raise FieldError(f.name, "a variance must be >= 0")
+@dataclass(frozen=True)
+class StateVariances:
+    """One variance (>= 0) per state of a filter, its fields in state order."""
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if not getattr(self, f.name) >= 0:
+                raise FieldError(f.name, "a variance must be >= 0")
+
+    def values(self) -> tuple[float, ...]:
+        """In state order."""
+        return tuple(float(getattr(self, f.name)) for f in fields(self))
 
 
 @dataclass(frozen=True)
-class NavVariances:
+class NavVariances(StateVariances):
     """One variance per navigation state ``X1 = [E, N, r_b, psi, g_b, psi_b]``."""
 
     east_m2: float
@@ -76,16 +84,9 @@ class NavVariances:
     gyro_bias_rad2ps2: float
     heading_bias_rad2: float
 
-    def __post_init__(self) -> None:
-        _nonnegative(self)
-
-    def values(self) -> tuple[float, ...]:
-        """In ``X1`` order."""
-        return tuple(float(getattr(self, f.name)) for f in fields(self))
-
 
 @dataclass(frozen=True)
-class CtlVariances:
+class CtlVariances(StateVariances):
     """One variance per control state ``X2 = [psi_dot, psi_ddot, V_x, delta, delta_dot,
     delta_b]``."""
 
@@ -95,13 +96,6 @@ class CtlVariances:
     steer_rad2: float
     steer_rate_rad2ps2: float
     steer_bias_rad2: float
-
-    def __post_init__(self) -> None:
-        _nonnegative(self)
-
-    def values(self) -> tuple[float, ...]:
-        """In ``X2`` order."""
-        return tuple(float(getattr(self, f.name)) for f in fields(self))
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from filterpy.kalman import ExtendedKalmanFilter, IMMEstimator
 
 from navreplay.pipeline.estimation.kernels import common as cm
 from navreplay.pipeline.estimation.kernels import vehicle as kv
-from navreplay.pipeline.estimation.kernels.records import GatedBlocks, RunLog
+from navreplay.pipeline.estimation.kernels.records import RunLog
 from navreplay.pipeline.estimation.models import vehicle as vm
 from navreplay.pipeline.nav.earth import F64
 
@@ -40,8 +40,8 @@ class _ModelEKF(ExtendedKalmanFilter):  # type: ignore[misc]
         self.model = model
         self.x = x0.copy()
         self.P = P0.copy()
-        self.vp, self.q, self.max_step_s = vs.vp, vs.q, vs.max_step_s
-        self.sig_u = np.array([vs.sig_wheel_speed_mps, vs.sig_steer_rad])
+        self.vp, self.max_step_s = vs.vp, vs.max_step_s
+        self.noise = vm.ProcessNoise(np.array([vs.sig_wheel_speed_mps, vs.sig_steer_rad]), vs.q)
         self.u = np.zeros(kv.VH_COLS)
         self.dt = 0.0
         self.pending: tuple[F64, F64, F64, F64] | None = None
@@ -73,9 +73,8 @@ class _ModelEKF(ExtendedKalmanFilter):  # type: ignore[misc]
             x = np.ascontiguousarray(self.x, dtype=float)
             vm.step_jac(self.model, x, self.u[kv.VH_V], self._delta(), self._h, self.vp, F)
             vm.process_noise(
-                self.model, x, self.u[kv.VH_V], self._delta(), self._h, self.vp, self.sig_u,
-                self.q, Q,
-            )  # fmt: skip
+                self.model, x, self.u[kv.VH_V], self._delta(), self._h, self.vp, self.noise, Q
+            )
             self.F, self.Q = F.copy(), Q.copy()
             super().predict()
         P = np.ascontiguousarray(self.P)
@@ -99,8 +98,7 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
 ) -> int:  # fmt: skip
     """``kernels.vehicle.run_vehicle`` with filterpy's EKF / IMMEstimator doing the arithmetic."""
     t0, u0, stops, veh, fix = sched
-    vp, gate = vs.vp, vs.gate
-    _, _, _, inn_i, inn_f, ev_i, ev_f, counts = log
+    ev_i, ev_f, counts = log.ev_i, log.ev_f, log.counts
     mode = vs.mode
     imm_on = mode == kv.MODE_IMM
     if imm_on:
@@ -119,12 +117,8 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
     L = np.empty((vm.NX, vm.NX))
     rows = np.empty((kv.M_MAX, 2), np.int64)
     blocks = np.empty((kv.M_MAX, 4), np.int64)
-    z, r, nu = np.empty(kv.M_MAX), np.empty(kv.M_MAX), np.empty(kv.M_MAX)
-    H, S = np.empty((kv.M_MAX, vm.NX)), np.empty((kv.M_MAX, kv.M_MAX))
-    nis, accepted = np.empty(kv.M_MAX), np.empty(kv.M_MAX, np.int64)
-    acc = np.empty(kv.M_MAX, np.int64)
-    work = np.empty((3, 6))
-    reject_since = -np.ones(cm.N_STREAMS, np.int64)
+    ms = kv.model_rows(len(filters))
+    gw = kv.gate_work(cm.N_STREAMS)
     x, P = x0.copy(), P0.copy()
     kv._record(t0, x, P, aux, log, out_aux)
     t_cur = t0
@@ -142,48 +136,25 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
             u[:] = veh[vi]
         if mode == kv.MODE_SWITCHED and vi >= 0:
             filters[0].model = int(kv.switch_model(filters[0].model, u[kv.VH_V], vs))
-        m, nb_, _ = kv.epoch_rows(stops[k], veh, fix, rows, blocks)
+        lay = kv.epoch_rows(stops[k], veh, fix, rows, blocks)
         for f in filters:
             f._lik = 1.0
-        if m > 0:
-            per: list[tuple[F64, F64, F64]] = []
-            r_of: list[F64] = []  # the yaw-rate variance depends on the model
-            for f in filters:
+        if lay.m > 0:
+            for j, f in enumerate(filters):
                 xf = np.ascontiguousarray(f.x, dtype=float)
-                kv.epoch_values(f.model, xf, rows, m, veh, fix, u, vp, vs, z, r, nu, H)
-                per.append((nu.copy(), H.copy(), np.empty_like(S)))
-                r_of.append(r.copy())
+                kv.epoch_values(f.model, xf, u, lay, sched, vs, ms, j)
             g = 0 if not imm_on or imm.cbar[0] >= imm.cbar[1] else 1
-            for attempt in range(2):
-                for f, (_, H_f, S_f), r_f in zip(filters, per, r_of, strict=True):
-                    kv.innovation_cov(np.ascontiguousarray(f.P), H_f, r_f, m, S_f)
-                cm.gate_blocks(per[g][0], per[g][2], blocks, nb_, gate, nis, accepted, work)
-                if attempt == 1:
-                    break
-                reset = cm.streams_to_reset(t, blocks, nb_, accepted, reject_since, vs.timeout_s)
-                if reset.sum() == 0:
-                    break
-                for st in np.flatnonzero(reset):
-                    big = 0.0
-                    for f, (nu_f, _, _) in zip(filters, per, strict=True):
-                        Pf = np.ascontiguousarray(f.P, dtype=float)
-                        big = kv.reset_stream(Pf, int(st), nu_f, blocks, nb_)
-                        f.P = Pf
-                    cm.record_event(ev_i, ev_f, counts, t, cm.EV_RESET, int(st), -1, big)
-            cm.update_reject_since(t, blocks, nb_, accepted, reject_since)
-            nu_g, _, S_g = per[g]
-            cm.record_innovations(
-                t, GatedBlocks(nu_g, S_g, blocks, nb_, nis, accepted), gate, inn_i, inn_f, counts,
-                ev_i, ev_f,
-            )  # fmt: skip
-            ma = int(cm.accepted_rows(blocks, nb_, accepted, acc))
-            a = acc[:ma]
-            for f, (nu_f, H_f, S_f), r_f in zip(filters, per, r_of, strict=True):
+            Ps = np.array([np.asarray(f.P, dtype=float) for f in filters])
+            ma = int(kv.gate_with_reset(t, lay, Ps, ms, g, gw, vs, log))
+            a = gw.acc[:ma]
+            for j, f in enumerate(filters):
+                f.P = Ps[j].copy()  # a timeout reset may have changed it
                 if ma == 0:
                     continue
-                hx = z[a] - nu_f[a]
-                f.pending = (z[a].copy(), hx, H_f[a].copy(), np.diag(r_f[a]))
-                ll = kv.log_likelihood(nu_f, S_f, acc, ma)
+                z_f, nu_f = ms.z[j], ms.nu[j]
+                f.pending = (z_f[a].copy(), z_f[a] - nu_f[a], ms.H[j][a].copy(),
+                             np.diag(ms.r[j][a]))  # fmt: skip
+                ll = kv.log_likelihood(nu_f, ms.S[j], gw.acc, ma)
                 f._lik = float(kv.likelihood(ll, vs.likelihood_floor))
         if imm_on:
             imm.update(None)

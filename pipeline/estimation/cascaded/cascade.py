@@ -26,9 +26,10 @@ allocates them):
 - ``x`` (12,): ``X1`` then ``X2``; ``P`` (2, 6, 6): their covariances;
 - ``mem`` (float, ``MEM_DIM``): held inputs and the control discretization cache;
 - ``imem`` (int, ``IMEM_DIM``): filter times (ns), started flag, gate clocks per stream;
-- ``cfg`` (``C_*``), ``q`` (2, 6) Table 1, ``r`` (2, 3) Table 2, ``par`` (model), ``wm``,
-  ``wc`` (unscented weights), ``gate`` (chi-square by dimension), ``ekf_mean`` (hybrid);
-- logs: ``out_t``, ``out_x`` (K, 12), ``out_P`` (K, 2, 6, 6), innovations, events, counts.
+- the settings (``CascadeSettings``): Table 1 and 2, the model, the unscented set-up, gating,
+  step and divergence limits;
+- logs (``records.RunLog``): ``out_t``, ``out_x`` (K, 12), ``out_P`` (K, 2, 6, 6),
+  innovations, events, counts.
 """
 
 from __future__ import annotations
@@ -42,10 +43,14 @@ from navreplay.pipeline._jit import njit
 from navreplay.pipeline.estimation.cascaded.filters import (
     EST_EKF,
     EST_UKF,
+    Filter,
+    Gating,
+    Measurement,
+    Step,
+    Unscented,
     apply_update,
-    ekf_predict,
+    predict,
     prepare_update,
-    ukf_predict,
 )
 from navreplay.pipeline.estimation.cascaded.model import (
     DISC_DIM,
@@ -87,13 +92,11 @@ VEH_COLS = 4
 G_E, G_N, G_PSI = 0, 1, 2
 GPS_COLS = 3
 
-# float memory, int memory, settings
+# float memory, int memory
 M_RADAR, M_GYRO, M_CMD, M_DISC = 0, 1, 2, 3
 MEM_DIM = M_DISC + DISC_DIM
 I_T_NAV, I_T_CTL, I_STARTED, I_REJ = 0, 1, 2, 3
 IMEM_DIM = I_REJ + N_STREAMS
-C_EST, C_GAMMA, C_TIMEOUT, C_NOISE_DT, C_MAX_STEP, C_GAP, C_MAX_POS_SIGMA = 0, 1, 2, 3, 4, 5, 6
-CFG_DIM = 7
 
 
 class CascadeRun(NamedTuple):
@@ -108,108 +111,119 @@ class CascadeRun(NamedTuple):
 
 
 class CascadeSettings(NamedTuple):
-    """A cascaded filter's settings (``engine.make_setup``): ``cfg`` (``C_*``), process
-    noise densities ``q`` (2, NX), measurement variances ``r`` (2, 3), the model
-    parameters ``par``, the unscented weights ``wm``, ``wc``, the chi-square ``gate`` by
-    dimension, and ``ekf_mean`` (the hybrid's states propagated through the mean)."""
+    """A cascaded filter's settings (``engine.make_setup``).
 
-    cfg: F64
+    Attributes:
+        est: the estimator, ``filters.EST_*``.
+        q: process noise (2, NX), Table 1 (navigation, control), accumulating over
+            ``noise_interval_s`` (``model.model_noise``).
+        r: measurement variances (2, 3), Table 2 (navigation, control).
+        par: the model's parameters (``model.model_params``).
+        ut: the sigma points (``filters.Unscented``; UKF and hybrid).
+        gate: chi-square threshold by block dimension; timeout_s: a stream rejected this
+            long is reset, s.
+        ekf_mean: (NX,) the hybrid's navigation states whose mean is the EKF's.
+        max_step_s: longest navigation Euler step, s; gap_s: an input interval longer than
+            this is logged (``EV_GAP``), s.
+        max_pos_sigma_m: divergence limit on the horizontal position 1-sigma, m.
+    """
+
+    est: int
     q: F64
+    noise_interval_s: float
     r: F64
     par: F64
-    wm: F64
-    wc: F64
+    ut: Unscented
     gate: F64
+    timeout_s: float
     ekf_mean: I64
+    max_step_s: float
+    gap_s: float
+    max_pos_sigma_m: float
 
 
 NAV_BLOCK_OF_ROW = np.array([0, 0, 1], np.int64)  # E and N one block, heading another
 NAV_STREAMS = np.array([S_GPS_POS, S_GPS_HEADING], np.int64)
 CTL_BLOCK_OF_ROW = np.array([0, 1, 2], np.int64)  # each vehicle sensor its own block
 CTL_STREAMS = np.array([S_YAW_RATE, S_SPEED, S_STEER], np.int64)
+NO_EKF_MEAN = np.zeros(NX, np.int64)  # the control filter: every mean unscented
 
 
-@njit(cache=True, error_model="numpy")
-def _nav_predict(
-    t_ns: int, x1: F64, P1: F64, mem: F64, imem: I64, cfg: F64, q: F64, par: F64, wm: F64,
-    wc: F64, ekf_mean: I64, ev_i: I64, ev_f: F64, counts: I64,
-) -> bool:  # fmt: skip
+@njit(cache=True, error_model="numpy", inline="always")
+def filters_of(x: F64, P: F64, est: int) -> tuple[Filter, Filter]:
+    """The navigation and control ``Filter`` of a run's state ``x`` (2 NX,) and ``P``
+    (2, NX, NX) (views) under estimator ``est``: the control filter is the EKF but for the
+    UKF (its model is linear: see ``filters``)."""
+    return (
+        Filter(MODEL_NAV, est, x[:NX], P[0]),
+        Filter(MODEL_CTL, EST_UKF if est == EST_UKF else EST_EKF, x[NX:], P[1]),
+    )
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _nav_predict(t_ns: int, f1: Filter, run: CascadeRun, cset: CascadeSettings, log: RunLog
+                 ) -> bool:  # fmt: skip
     """Navigation time update from ``imem[I_T_NAV]`` to ``t_ns`` with the held inputs."""
+    mem, imem = run.mem, run.imem
     dt = (t_ns - imem[I_T_NAV]) * 1e-9
     if dt <= 0.0:
         return True
-    if dt > cfg[C_GAP]:
-        record_event(ev_i, ev_f, counts, t_ns, EV_GAP, -1, -1, dt)
-    n_sub = max(1, math.ceil(dt / cfg[C_MAX_STEP] - 1e-9))
+    if dt > cset.gap_s:
+        record_event(log.ev_i, log.ev_f, log.counts, t_ns, EV_GAP, -1, -1, dt)
+    n_sub = max(1, math.ceil(dt / cset.max_step_s - 1e-9))
     h = dt / n_sub
-    u = mem[M_RADAR : M_GYRO + 1]
-    disc = mem[M_DISC : M_DISC + DISC_DIM]
     Q = np.empty((NX, NX))
-    model_noise(q, h, cfg[C_NOISE_DT], Q)
-    est = int(cfg[C_EST])
+    model_noise(cset.q[0], h, cset.noise_interval_s, Q)
+    step = Step(mem[M_RADAR : M_GYRO + 1], h, cset.par, mem[M_DISC : M_DISC + DISC_DIM], Q)
     for _ in range(n_sub):
-        if est == EST_EKF:
-            ekf_predict(MODEL_NAV, x1, P1, u, h, par, disc, Q)
-        elif not ukf_predict(MODEL_NAV, x1, P1, u, h, par, disc, Q, wm, wc, cfg[C_GAMMA],
-                             ekf_mean):  # fmt: skip
+        if not predict(f1, step, cset.ut, cset.ekf_mean):
             return False
     imem[I_T_NAV] = t_ns
     return True
 
 
-@njit(cache=True, error_model="numpy")
-def _ctl_predict(
-    t_ns: int, x2: F64, P2: F64, mem: F64, imem: I64, cfg: F64, q: F64, par: F64, wm: F64,
-    wc: F64,
-) -> bool:  # fmt: skip
+@njit(cache=True, error_model="numpy", inline="always")
+def _ctl_predict(t_ns: int, f2: Filter, run: CascadeRun, cset: CascadeSettings) -> bool:
     """Control time update from ``imem[I_T_CTL]`` to ``t_ns`` (exact ZOH, held command)."""
+    mem, imem = run.mem, run.imem
     dt = (t_ns - imem[I_T_CTL]) * 1e-9
     if dt <= 0.0:
         return True
     disc = mem[M_DISC : M_DISC + DISC_DIM]
     if disc[0] != dt:
         raise ValueError("cascade: the control discretization was not prepared for this step")
-    u = mem[M_CMD : M_CMD + 1]
     Q = np.empty((NX, NX))
-    model_noise(q, dt, cfg[C_NOISE_DT], Q)
-    if int(cfg[C_EST]) == EST_UKF:
-        none = np.zeros(NX, np.int64)
-        if not ukf_predict(MODEL_CTL, x2, P2, u, dt, par, disc, Q, wm, wc, cfg[C_GAMMA], none):
-            return False
-    else:
-        ekf_predict(MODEL_CTL, x2, P2, u, dt, par, disc, Q)
+    model_noise(cset.q[1], dt, cset.noise_interval_s, Q)
+    if not predict(f2, Step(mem[M_CMD : M_CMD + 1], dt, cset.par, disc, Q), cset.ut,
+                   NO_EKF_MEAN):  # fmt: skip
+        return False
     imem[I_T_CTL] = t_ns
     return True
 
 
 @njit(cache=True, error_model="numpy")
-def finish(t_ns: int, x: F64, P: F64, cfg: F64, ev_i: I64, ev_f: F64, counts: I64) -> int:
+def finish(t_ns: int, x: F64, P: F64, cset: CascadeSettings, log: RunLog) -> int:
     """Positive definiteness of both covariances and the NaN barrier; a status code."""
+    ev_i, ev_f, counts = log.ev_i, log.ev_f, log.counts
     L = np.empty((NX, NX))
     for f in range(2):
         if not keep_pd(P[f], NX, L, t_ns, ev_i, ev_f, counts):
             return fail(t_ns, STATUS_INDEFINITE, ev_i, ev_f, counts)
-    if not check_filter(x[:NX], P[0], NX, NAV_E, NAV_N, cfg[C_MAX_POS_SIGMA]):
+    if not check_filter(x[:NX], P[0], NX, NAV_E, NAV_N, cset.max_pos_sigma_m):
         return fail(t_ns, STATUS_LIMIT, ev_i, ev_f, counts)
-    if not check_filter(x[NX:], P[1], NX, -1, -1, cfg[C_MAX_POS_SIGMA]):
+    if not check_filter(x[NX:], P[1], NX, -1, -1, cset.max_pos_sigma_m):
         return fail(t_ns, STATUS_LIMIT, ev_i, ev_f, counts)
     return STATUS_OK
 
 
-@njit(cache=True, error_model="numpy")
-def _update(
-    model: int, est: int, t_ns: int, x: F64, P: F64, z: F64, r: F64, block_of_row: I64,
-    streams: I64, gate: F64, cfg: F64, rej: I64, wm: F64, wc: F64, inn_i: I64, inn_f: F64,
-    ev_i: I64, ev_f: F64, counts: I64,
-) -> bool:  # fmt: skip
+@njit(cache=True, error_model="numpy", inline="always")
+def _update(t_ns: int, f: Filter, meas: Measurement, gating: Gating, ut: Unscented,
+            log: RunLog) -> bool:  # fmt: skip
     """``prepare_update`` then ``apply_update``; False if a UKF prior was not PD."""
-    m, _, Hm, rm, nu, S, Pxz, acc, ma = prepare_update(
-        model, est, t_ns, x, P, z, r, block_of_row, streams, gate, cfg[C_TIMEOUT], rej, wm,
-        wc, cfg[C_GAMMA], inn_i, inn_f, ev_i, ev_f, counts,
-    )  # fmt: skip
-    if m < 0:
+    ur, acc, ma = prepare_update(t_ns, f, meas, gating, ut, log)
+    if ma < 0:
         return False
-    apply_update(est, x, P, Hm, rm, nu, S, Pxz, acc, ma)
+    apply_update(f, ur, acc, ma)
     return True
 
 
@@ -231,12 +245,8 @@ def cascade_sample(
         a ``kernels.common.STATUS_*`` code.
     """
     x, P, mem, imem = run
-    cfg, q, r, par, wm, wc, gate, ekf_mean = cset
-    out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts = log
-    x1, x2, P1, P2 = x[:NX], x[NX:], P[0], P[1]
-    est = int(cfg[C_EST])
-    upd = EST_UKF if est == EST_UKF else EST_EKF
-    rej = imem[I_REJ:]
+    f1, f2 = filters_of(x, P, cset.est)
+    gating = Gating(cset.gate, cset.timeout_s, imem[I_REJ:])
     if imem[I_STARTED] == 0:
         if nav_only:
             return STATUS_OK
@@ -245,12 +255,11 @@ def cascade_sample(
         imem[I_STARTED] = 1
         ok = True
     else:
-        ok = _nav_predict(t_ns, x1, P1, mem, imem, cfg, q[0], par, wm, wc, ekf_mean, ev_i,
-                          ev_f, counts)  # fmt: skip
+        ok = _nav_predict(t_ns, f1, run, cset, log)
         if ok and not nav_only:
-            ok = _ctl_predict(t_ns, x2, P2, mem, imem, cfg, q[1], par, wm, wc)
-    ok = ok and _update(MODEL_NAV, upd, t_ns, x1, P1, gps, r[0], NAV_BLOCK_OF_ROW, NAV_STREAMS,
-                        gate, cfg, rej, wm, wc, inn_i, inn_f, ev_i, ev_f, counts)  # fmt: skip
+            ok = _ctl_predict(t_ns, f2, run, cset)
+    nav = Measurement(gps, cset.r[0], NAV_BLOCK_OF_ROW, NAV_STREAMS)
+    ok = ok and _update(t_ns, f1, nav, gating, cset.ut, log)
     if ok and not nav_only:
         radar, gyro = veh[V_RADAR], veh[V_GYRO]
         if math.isfinite(radar):
@@ -258,20 +267,21 @@ def cascade_sample(
         if math.isfinite(gyro):
             mem[M_GYRO] = gyro
         z2 = np.empty(3)
-        z2[0], z2[1], z2[2] = gyro - x1[NAV_GB], radar - x1[NAV_RB], veh[V_POT]
-        ok = _update(MODEL_CTL, upd, t_ns, x2, P2, z2, r[1], CTL_BLOCK_OF_ROW, CTL_STREAMS, gate,
-                     cfg, rej, wm, wc, inn_i, inn_f, ev_i, ev_f, counts)  # fmt: skip
+        z2[0], z2[1], z2[2] = gyro - f1.x[NAV_GB], radar - f1.x[NAV_RB], veh[V_POT]
+        ctl = Measurement(z2, cset.r[1], CTL_BLOCK_OF_ROW, CTL_STREAMS)
+        ok = _update(t_ns, f2, ctl, gating, cset.ut, log)
     if not ok:
-        return fail(t_ns, STATUS_INDEFINITE, ev_i, ev_f, counts)
-    status = finish(t_ns, x, P, cfg, ev_i, ev_f, counts)
+        return fail(t_ns, STATUS_INDEFINITE, log.ev_i, log.ev_f, log.counts)
+    status = finish(t_ns, x, P, cset, log)
     if status == STATUS_OK and not nav_only:
-        _record(t_ns, x, P, out_t, out_x, out_P, counts)
+        _record(t_ns, x, P, log)
     return status
 
 
 @njit(cache=True, error_model="numpy")
-def _record(t_ns: int, x: F64, P: F64, out_t: I64, out_x: F64, out_P: F64, counts: I64) -> None:
+def _record(t_ns: int, x: F64, P: F64, log: RunLog) -> None:
     """Append the output row of a sample (counted past the capacity)."""
+    out_t, out_x, out_P, counts = log.out_t, log.out_x, log.out_P, log.counts
     k = counts[CNT_OUT]
     if k < out_t.shape[0]:
         out_t[k] = t_ns

@@ -25,7 +25,7 @@ from scipy.stats import chi2
 
 from navreplay.pipeline.errors import DivergenceError, PipelineError
 from navreplay.pipeline.estimation.cascaded import cascade as cs
-from navreplay.pipeline.estimation.cascaded.filters import EST_EKF, EST_HYBRID, EST_UKF
+from navreplay.pipeline.estimation.cascaded.filters import EST_EKF, EST_HYBRID, EST_UKF, Unscented
 from navreplay.pipeline.estimation.cascaded.model import NX, ctl_discretize, model_params
 from navreplay.pipeline.estimation.cascaded_config import (
     CASCADED_KINDS,
@@ -45,18 +45,13 @@ _NAN4 = np.full(cs.VEH_COLS, math.nan)
 
 @dataclass(frozen=True)
 class CascadeSetup:
-    """Everything a backend needs besides the data (see ``cascade`` for the layouts)."""
+    """Everything a backend needs besides the data: the kernel's ``settings``
+    (``cascade.CascadeSettings``), the initial state ``x0`` (2 NX,) and covariances ``P0``
+    (2, NX, NX), what to do on divergence, and the unscented transform's ``(alpha, beta,
+    kappa)`` (the filterpy backend's sigma points)."""
 
     name: str
-    estimator: str
-    cfg: F64
-    q: F64
-    r: F64
-    par: F64
-    wm: F64
-    wc: F64
-    gate: F64
-    ekf_mean: I64
+    settings: cs.CascadeSettings
     x0: F64
     P0: F64
     on_divergence: str
@@ -65,24 +60,14 @@ class CascadeSetup:
 
 def make_setup(name: str, params: CascadedFilterParams) -> CascadeSetup:
     """Pack filter ``name`` (a key of ``CASCADED_KINDS``) with its section ``params``."""
-    est = CASCADED_KINDS[name]
-    cfg = np.zeros(cs.CFG_DIM)
-    cfg[cs.C_EST] = _EST_CODE[est]
-    cfg[cs.C_TIMEOUT] = params.gating.timeout_s
-    cfg[cs.C_NOISE_DT] = params.process_noise.interval_s
-    cfg[cs.C_MAX_STEP] = params.step.max_step_s
-    cfg[cs.C_GAP] = params.step.gap_s
-    cfg[cs.C_MAX_POS_SIGMA] = params.divergence.max_pos_sigma_m
     wm = wc = np.ones(2 * NX + 1)
+    gamma = 0.0
     ut = (1.0, 2.0, 0.0)
     if params.ukf is not None:
         ut = (params.ukf.alpha, params.ukf.beta, params.ukf.kappa)
         wm, wc, gamma = ukf_weights(NX, *ut)
-        cfg[cs.C_GAMMA] = gamma
     pn = params.process_noise
-    q = np.array([pn.navigation.values(), pn.control.values()])
     sn = params.sensor_noise
-    r = np.array([sn.nav(), sn.ctl()])
     lin = params.linearization
     m = params.model
     par = model_params(
@@ -99,13 +84,24 @@ def make_setup(name: str, params: CascadedFilterParams) -> CascadeSetup:
         for s in params.hybrid.ekf_mean:
             ekf_mean[NAV_STATE_NAMES.index(s)] = 1
     gate = np.array([math.inf] + [float(chi2.ppf(params.gating.probability, d)) for d in (1, 2, 3)])
+    settings = cs.CascadeSettings(
+        est=_EST_CODE[CASCADED_KINDS[name]],
+        q=np.array([pn.navigation.values(), pn.control.values()]),
+        noise_interval_s=float(pn.interval_s),
+        r=np.array([sn.nav(), sn.ctl()]),
+        par=par,
+        ut=Unscented(wm, wc, float(gamma)),
+        gate=gate,
+        timeout_s=float(params.gating.timeout_s),
+        ekf_mean=ekf_mean,
+        max_step_s=float(params.step.max_step_s),
+        gap_s=float(params.step.gap_s),
+        max_pos_sigma_m=float(params.divergence.max_pos_sigma_m),
+    )
     P0 = np.zeros((2, NX, NX))
     P0[0] = np.diag(params.initial.navigation.values())
     P0[1] = np.diag(params.initial.control.values())
-    return CascadeSetup(
-        name, est, cfg, q, r, par, wm, wc, gate, ekf_mean, np.zeros(2 * NX), P0,
-        params.divergence.on_divergence, ut,
-    )  # fmt: skip
+    return CascadeSetup(name, settings, np.zeros(2 * NX), P0, params.divergence.on_divergence, ut)
 
 
 @dataclass
@@ -157,6 +153,8 @@ class CascadeState:
         self.ev_i = np.zeros((n_ev, 4), np.int64)
         self.ev_f = np.zeros(n_ev)
         self.counts = np.zeros(cm.CNT_DIM, np.int64)
+        self.log = RunLog(self.out_t, self.out_x, self.out_P, self.inn_i, self.inn_f, self.ev_i,
+                          self.ev_f, self.counts)  # fmt: skip
 
     def prepare(self, t_ns: int) -> None:
         """Place the control discretization (eq. 14) of the step to ``t_ns`` in ``mem``,
@@ -168,19 +166,13 @@ class CascadeState:
             return
         disc = self._discs.get(dt_ns)
         if disc is None:
-            disc = self._discs[dt_ns] = ctl_discretize(self.setup.par, dt_ns * 1e-9)
+            disc = self._discs[dt_ns] = ctl_discretize(self.setup.settings.par, dt_ns * 1e-9)
         self.mem[cs.M_DISC :] = disc
 
     def args(self) -> tuple[cs.CascadeRun, cs.CascadeSettings, RunLog]:
         """The records ``cascade_sample`` takes after ``(t, veh, gps, nav_only)``: they hold
         this state's arrays themselves (the kernel updates them in place)."""
-        s = self.setup
-        return (
-            cs.CascadeRun(self.x, self.P, self.mem, self.imem),
-            cs.CascadeSettings(s.cfg, s.q, s.r, s.par, s.wm, s.wc, s.gate, s.ekf_mean),
-            RunLog(self.out_t, self.out_x, self.out_P, self.inn_i, self.inn_f, self.ev_i,
-                   self.ev_f, self.counts),
-        )  # fmt: skip
+        return cs.CascadeRun(self.x, self.P, self.mem, self.imem), self.setup.settings, self.log
 
     def result(self, backend: str, status: int, runtime_s: float) -> CascadedResult:
         """Collect the logs into a ``CascadedResult``.
@@ -226,21 +218,20 @@ class CascadeState:
         )
 
 
-class NumbaStepper:
-    """The compiled backend, one ``cascade_sample`` per call (``x`` is live, not a copy).
+class StepperBase:
+    """What both backends' steppers share (``backends.Stepper``): the run's ``state``
+    (``CascadeState``), its status and wall time, ``x``, ``ok``, ``set_command`` and
+    ``result``. On divergence ``_set_status`` raises ``DivergenceError`` unless the section
+    says ``on_divergence: flag``, in which case later samples are ignored and ``result``
+    reports the run as diverged."""
 
-    Raises ``DivergenceError`` from ``sample`` on divergence unless the section says
-    ``on_divergence: flag``, in which case later samples are ignored and ``result`` reports
-    the run as diverged.
-    """
-
-    backend = "numba"
+    backend = ""
 
     def __init__(self, setup: CascadeSetup, capacity: int, n_gps: int = 0) -> None:
+        self.setup = setup
         self.state = CascadeState(setup, capacity, n_gps)
-        self._args = self.state.args()
-        self._status = cm.STATUS_OK
-        self._wall = 0.0
+        self.status = cm.STATUS_OK
+        self.wall = 0.0
 
     @property
     def x(self) -> F64:
@@ -248,7 +239,28 @@ class NumbaStepper:
 
     @property
     def ok(self) -> bool:
-        return self._status == cm.STATUS_OK
+        return self.status == cm.STATUS_OK
+
+    def set_command(self, u: float) -> None:
+        self.state.mem[cs.M_CMD] = u
+
+    def result(self) -> CascadedResult:
+        return self.state.result(self.backend, self.status, self.wall)
+
+    def _set_status(self, status: int) -> None:
+        self.status = status
+        if status != cm.STATUS_OK:
+            raise_if_diverged(self.setup, self.state.result(self.backend, status, 0.0))
+
+
+class NumbaStepper(StepperBase):
+    """The compiled backend, one ``cascade_sample`` per call (``x`` is live, not a copy)."""
+
+    backend = "numba"
+
+    def __init__(self, setup: CascadeSetup, capacity: int, n_gps: int = 0) -> None:
+        super().__init__(setup, capacity, n_gps)
+        self._args = self.state.args()
 
     def sample(self, t_ns: int, veh: F64, gps: F64) -> None:
         self._call(t_ns, veh, gps, False)
@@ -258,21 +270,14 @@ class NumbaStepper:
         self._call(t_ns, _NAN4, gps, True)
 
     def _call(self, t_ns: int, veh: F64, gps: F64, nav_only: bool) -> None:
-        if self._status != cm.STATUS_OK:
+        if self.status != cm.STATUS_OK:
             return
         t0 = time.perf_counter()
         if not nav_only:
             self.state.prepare(t_ns)
-        self._status = int(cs.cascade_sample(t_ns, veh, gps, nav_only, *self._args))
-        self._wall += time.perf_counter() - t0
-        if self._status != cm.STATUS_OK:
-            raise_if_diverged(self.state.setup, self.state.result(self.backend, self._status, 0.0))
-
-    def set_command(self, u: float) -> None:
-        self.state.mem[cs.M_CMD] = u
-
-    def result(self) -> CascadedResult:
-        return self.state.result(self.backend, self._status, self._wall)
+        status = int(cs.cascade_sample(t_ns, veh, gps, nav_only, *self._args))
+        self.wall += time.perf_counter() - t0
+        self._set_status(status)
 
 
 def raise_if_diverged(setup: CascadeSetup, result: CascadedResult) -> None:

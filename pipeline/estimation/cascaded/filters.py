@@ -47,11 +47,16 @@ to inherit.
 An update is ``prepare_update`` (rows, innovations, gating per block with
 ``kernels.common.gate_blocks``, the timeout reset of a stream rejected for too long, logs with
 the shared recorders; also the filterpy backend's front end) then ``apply_update``.
+
+The functions take records (``typing.NamedTuple``, compiled by numba as tuples with named
+fields): the ``Filter`` at work, a time ``Step``, the ``Unscented`` set-up, an update's
+``Measurement`` and ``Gating``, the ``UpdateRows`` it found, and the run's ``RunLog``.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -84,7 +89,7 @@ from navreplay.pipeline.estimation.kernels.common import (
     record_innovations,
 )
 from navreplay.pipeline.estimation.kernels.ekf import joseph_update
-from navreplay.pipeline.estimation.kernels.records import GatedBlocks
+from navreplay.pipeline.estimation.kernels.records import GatedBlocks, RunLog
 from navreplay.pipeline.estimation.kernels.unscented import cross_cov, draw_sigmas
 from navreplay.pipeline.nav.earth import F64, I64
 
@@ -92,9 +97,98 @@ EST_EKF, EST_UKF, EST_HYBRID = 0, 1, 2
 NSIG = 2 * NX + 1
 
 
-@njit(cache=True, error_model="numpy")
-def ekf_predict(model: int, x: F64, P: F64, u: F64, dt: float, par: F64, disc: F64, Q: F64) -> None:
+class Filter(NamedTuple):
+    """One of the cascade's two filters at work.
+
+    Attributes:
+        model: ``MODEL_NAV`` or ``MODEL_CTL``.
+        est: its estimator, ``EST_*``: the time update is the EKF's for ``EST_EKF``, the
+            unscented one otherwise; the measurement update the unscented one for
+            ``EST_UKF``, the EKF's otherwise (the hybrid's).
+        x, P: its state (NX,) and covariance (NX, NX), updated in place.
+    """
+
+    model: int
+    est: int
+    x: F64
+    P: F64
+
+
+class Step(NamedTuple):
+    """One time update: the input ``u`` held over ``dt`` seconds, the model parameters
+    ``par``, the control discretization ``disc`` of this step (``model.ctl_discretize``) and
+    the process noise ``Q`` (NX, NX)."""
+
+    u: F64
+    dt: float
+    par: F64
+    disc: F64
+    Q: F64
+
+
+class Unscented(NamedTuple):
+    """The sigma points: mean and covariance weights ``wm``, ``wc`` (2 NX + 1,) and the
+    spread ``gamma`` (``kernels.unscented.ukf_weights``; unused by the EKF)."""
+
+    wm: F64
+    wc: F64
+    gamma: float
+
+
+class Measurement(NamedTuple):
+    """One update's measurement: the three rows ``z`` (NaN = not available), their
+    variances ``r`` (Table 2), the gating block of each row ``block_of_row`` (rows of one
+    block adjacent) and the stream code of each block ``stream_of_block``."""
+
+    z: F64
+    r: F64
+    block_of_row: I64
+    stream_of_block: I64
+
+
+class Gating(NamedTuple):
+    """The chi-square ``gate`` by block dimension, the gate ``timeout_s`` and the
+    per-stream rejection clocks ``reject_since`` (ns, -1 = none; updated)."""
+
+    gate: F64
+    timeout_s: float
+    reject_since: I64
+
+
+class UpdateRows(NamedTuple):
+    """The available rows of an update and their prior innovations (``prepare_update``).
+
+    Attributes:
+        rows: ``rows[:m]``, the available rows (indices into the three).
+        m: how many.
+        H: their ``H`` rows (m, NX); r: their variances (m,).
+        nu: innovations (m,), heading wrapped; S: prior innovation covariance (m, m).
+        Pxz: cross covariance (NX, m), UKF only.
+    """
+
+    rows: I64
+    m: int
+    H: F64
+    r: F64
+    nu: F64
+    S: F64
+    Pxz: F64
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def sigma_points(f: Filter, ut: Unscented) -> tuple[bool, F64]:
+    """The sigma points (NSIG, NX) of ``(f.x, f.P)`` (``kernels.unscented.draw_sigmas``);
+    False if ``P`` is not positive definite."""
+    L = np.empty((NX, NX))
+    sig = np.empty((NSIG, NX))
+    return draw_sigmas(f.x, f.P, NX, ut.gamma, L, sig), sig
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def ekf_predict(f: Filter, step: Step) -> None:
     """EKF time update (eq. 22-23): ``F`` at the prior, ``x <- f(x)``, ``P <- F P F^T + Q``."""
+    model, _, x, P = f
+    u, dt, par, disc, Q = step
     F = np.empty((NX, NX))
     xn = np.empty(NX)
     model_jacobian(model, x, u, dt, par, disc, F)
@@ -104,42 +198,40 @@ def ekf_predict(model: int, x: F64, P: F64, u: F64, dt: float, par: F64, disc: F
     propagate_cov(P, F, Q, NX, np.empty((NX, NX)))
 
 
-@njit(cache=True, error_model="numpy")
-def ukf_predict(
-    model: int,
-    x: F64,
-    P: F64,
-    u: F64,
-    dt: float,
-    par: F64,
-    disc: F64,
-    Q: F64,
-    wm: F64,
-    wc: F64,
-    gamma: float,
-    ekf_mean: I64,
-) -> bool:
+@njit(cache=True, error_model="numpy", inline="always")
+def ukf_predict(f: Filter, step: Step, ut: Unscented, ekf_mean: I64) -> bool:
     """Unscented time update (eq. 24-26) with additive ``Q``; states with ``ekf_mean[j]``
     take the EKF mean ``f(x_hat)[j]`` instead of the unscented one (the hybrid).
 
     Returns:
         False (nothing changed) if ``P`` is not positive definite.
     """
-    L = np.empty((NX, NX))
-    sig = np.empty((NSIG, NX))
-    if not draw_sigmas(x, P, NX, gamma, L, sig):
+    model, _, x, P = f
+    u, dt, par, disc, Q = step
+    ok, sig = sigma_points(f, ut)
+    if not ok:
         return False
     Y = np.empty((NSIG, NX))
     for i in range(NSIG):
         model_f(model, sig[i], u, dt, par, disc, Y[i])
     mean = np.empty(NX)
     cov = np.empty((NX, NX))
-    centered_mean_cov(Y, wm, wc, NX, mean, cov)
+    centered_mean_cov(Y, ut.wm, ut.wc, NX, mean, cov)
     for j in range(NX):
         x[j] = Y[0, j] if ekf_mean[j] else mean[j]
         for k in range(NX):
             P[j, k] = cov[j, k] + Q[j, k]
     return True
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def predict(f: Filter, step: Step, ut: Unscented, ekf_mean: I64) -> bool:
+    """The time update of ``f``'s estimator (``ekf_predict`` or ``ukf_predict``); False if
+    an unscented prior was not positive definite."""
+    if f.est == EST_EKF:
+        ekf_predict(f, step)
+        return True
+    return ukf_predict(f, step, ut, ekf_mean)
 
 
 @njit(cache=True, error_model="numpy")
@@ -176,28 +268,25 @@ def measurement_layout(z: F64, block_of_row: I64, stream_of_block: I64, rows: I6
     return m, nb_
 
 
-@njit(cache=True, error_model="numpy")
-def _prior_rows(
-    model: int, est: int, x: F64, P: F64, z: F64, rows: I64, m: int, Hm: F64, rm: F64, wm: F64,
-    wc: F64, gamma: float, nu: F64, S: F64, Pxz: F64,
-) -> bool:  # fmt: skip
-    """Innovations ``nu``, their covariance ``S`` (and for the UKF the cross covariance
-    ``Pxz``) of the available rows (``Hm``, variances ``rm``), from the prior; False if a
-    UKF prior is not PD."""
+@njit(cache=True, error_model="numpy", inline="always")
+def _prior_rows(f: Filter, z: F64, ut: Unscented, ur: UpdateRows) -> bool:
+    """Innovations ``ur.nu``, their covariance ``ur.S`` (and for the UKF the cross covariance
+    ``ur.Pxz``) of the available rows, from the prior; False if a UKF prior is not PD."""
+    model, est, x, P = f
+    rows, m, Hm, rm, nu, S, Pxz = ur
     hx = np.empty(NZ)
     zp = np.empty(m)
     if est == EST_UKF:
-        L = np.empty((NX, NX))
-        sig = np.empty((NSIG, NX))
-        if not draw_sigmas(x, P, NX, gamma, L, sig):
+        ok, sig = sigma_points(f, ut)
+        if not ok:
             return False
         Z = np.empty((NSIG, m))
         for i in range(NSIG):
             model_h(model, sig[i], hx)
             for k in range(m):
                 Z[i, k] = hx[rows[k]]
-        centered_mean_cov(Z, wm, wc, m, zp, S)
-        cross_cov(sig, x, Z, zp, wc, NX, m, Pxz)
+        centered_mean_cov(Z, ut.wm, ut.wc, m, zp, S)
+        cross_cov(sig, x, Z, zp, ut.wc, NX, m, Pxz)
         for k in range(m):
             S[k, k] += rm[k]
     else:
@@ -211,77 +300,53 @@ def _prior_rows(
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def prepare_update(
-    model: int,
-    est: int,
-    t_ns: int,
-    x: F64,
-    P: F64,
-    z: F64,
-    r: F64,
-    block_of_row: I64,
-    stream_of_block: I64,
-    gate: F64,
-    timeout_s: float,
-    reject_since: I64,
-    wm: F64,
-    wc: F64,
-    gamma: float,
-    inn_i: I64,
-    inn_f: F64,
-    ev_i: I64,
-    ev_f: F64,
-    counts: I64,
-) -> tuple[int, I64, F64, F64, F64, F64, F64, I64, int]:
+    t_ns: int, f: Filter, meas: Measurement, gating: Gating, ut: Unscented, log: RunLog
+) -> tuple[UpdateRows, I64, int]:
     """Measurement front end: available rows, innovations, gating, timeout resets, logs.
 
     Shared by both backends (the filterpy backend lets filterpy do the update itself with
     the accepted rows). A stream rejected for the timeout has the states it observes
-    inflated in ``P`` (``numerics.reset_observed``) and is gated again.
+    inflated in ``f.P`` (``numerics.reset_observed``) and is gated again.
 
     Args:
-        model: ``MODEL_NAV`` or ``MODEL_CTL``; est: ``EST_UKF`` computes ``nu``, ``S`` and
-            ``P_xz`` from sigma points, otherwise from ``h(x)`` and ``H``.
-        x, P: prior (``P`` may be inflated by a reset).
-        z: the three rows (NaN = not available); r: their variances (Table 2).
-        block_of_row, stream_of_block: the gating blocks (``measurement_layout``).
-        gate: chi-square thresholds by block dimension; timeout_s: gate timeout;
-            reject_since: per-stream rejection clocks (ns, -1 = none).
-        wm, wc, gamma: unscented weights and spread (UKF only).
-        inn_i, inn_f, ev_i, ev_f, counts: innovation and event logs (``kernels.common``).
+        t_ns: the update's time.
+        f: the filter at its prior (``P`` may be inflated by a reset); ``f.est == EST_UKF``
+            computes ``nu``, ``S`` and ``P_xz`` from sigma points, otherwise from ``h(x)``
+            and ``H``.
+        meas: the rows and their gating blocks (``measurement_layout``).
+        gating: gates, timeout and the stream clocks; ut: sigma points (UKF only).
+        log: where innovations and events are recorded (``kernels.common``).
 
     Returns:
-        ``(m, rows, Hm, rm, nu, S, Pxz, acc, ma)``: ``m`` available rows (indices into the
-        three) with their ``H`` rows (m, 6), variances, innovations (heading wrapped), prior
-        innovation covariance (m, m) and cross covariance (6, m, UKF only); ``acc[:ma]`` the
-        accepted ones (indices into the m). ``m == -1``: a UKF prior was not positive
-        definite (nothing was logged).
+        ``(rows, acc, ma)``: the available rows with their prior innovations
+        (``UpdateRows``), and ``acc[:ma]`` the accepted ones (indices into ``rows.rows``).
+        ``ma == -1``: a UKF prior was not positive definite (nothing was logged).
     """
+    inn_i, inn_f, ev_i, ev_f, counts = log.inn_i, log.inn_f, log.ev_i, log.ev_f, log.counts
+    gate, timeout_s, reject_since = gating
     rows = np.empty(NZ, np.int64)
     blocks = np.empty((NZ, 4), np.int64)
-    m, nb_ = measurement_layout(z, block_of_row, stream_of_block, rows, blocks)
-    nu = np.empty(m)
-    S = np.empty((m, m))
-    Pxz = np.zeros((NX, m))
+    m, nb_ = measurement_layout(meas.z, meas.block_of_row, meas.stream_of_block, rows, blocks)
     H = np.empty((NZ, NX))
-    model_meas_jacobian(model, H)
-    Hm = np.empty((m, NX))
-    rm = np.empty(m)
+    model_meas_jacobian(f.model, H)
+    ur = UpdateRows(rows, m, np.empty((m, NX)), np.empty(m), np.empty(m), np.empty((m, m)),
+                    np.zeros((NX, m)))  # fmt: skip
     acc = np.empty(m, np.int64)
     for k in range(m):
         for j in range(NX):
-            Hm[k, j] = H[rows[k], j]
-        rm[k] = r[rows[k]]
+            ur.H[k, j] = H[rows[k], j]
+        ur.r[k] = meas.r[rows[k]]
     if m == 0:
-        return 0, rows, Hm, rm, nu, S, Pxz, acc, 0
+        return ur, acc, 0
     nis = np.empty(nb_)
     accepted = np.empty(nb_, np.int64)
     gwork = np.empty((3, 6))
     for attempt in range(2):
-        if not _prior_rows(model, est, x, P, z, rows, m, Hm, rm, wm, wc, gamma, nu, S, Pxz):
-            return -1, rows, Hm, rm, nu, S, Pxz, acc, 0
-        gate_blocks(nu, S, blocks, nb_, gate, nis, accepted, gwork)
+        if not _prior_rows(f, meas.z, ut, ur):
+            return ur, acc, -1
+        gate_blocks(ur.nu, ur.S, blocks, nb_, gate, nis, accepted, gwork)
         if attempt == 1:
             break
         reset = stream_resets(t_ns, blocks, nb_, accepted, reject_since, timeout_s)
@@ -289,30 +354,29 @@ def prepare_update(
             break
         for s in range(reset.shape[0]):
             if reset[s]:
-                big = reset_observed(P, NX, Hm, blocks, nb_, s, nu)
+                big = reset_observed(f.P, NX, ur.H, blocks, nb_, s, ur.nu)
                 record_event(ev_i, ev_f, counts, t_ns, EV_RESET, s, -1, big)
-    record_innovations(t_ns, GatedBlocks(nu, S, blocks, nb_, nis, accepted), gate, inn_i, inn_f,
-                       counts, ev_i, ev_f)  # fmt: skip
+    record_innovations(t_ns, GatedBlocks(ur.nu, ur.S, blocks, nb_, nis, accepted), gate, inn_i,
+                       inn_f, counts, ev_i, ev_f)  # fmt: skip
     advance_stream_clocks(t_ns, blocks, nb_, accepted, reject_since)
     ma = accepted_rows(blocks, nb_, accepted, acc)
-    return m, rows, Hm, rm, nu, S, Pxz, acc, ma
+    return ur, acc, ma
 
 
-@njit(cache=True, error_model="numpy")
-def apply_update(
-    est: int, x: F64, P: F64, Hm: F64, rm: F64, nu: F64, S: F64, Pxz: F64, acc: I64, ma: int
-) -> None:
+@njit(cache=True, error_model="numpy", inline="always")
+def apply_update(f: Filter, ur: UpdateRows, acc: I64, ma: int) -> None:
     """The update of the accepted rows ``acc[:ma]`` from ``prepare_update``'s outputs:
     Kalman in Joseph form with ``H`` (eq. 21; EKF and hybrid) or unscented (eq. 27)."""
-    if ma == 0:
+    if ma <= 0:
         return
-    if est != EST_UKF:
-        dx, ok = joseph_update(P, NX, Hm, S, rm, nu, acc, ma)
+    x, P = f.x, f.P
+    if f.est != EST_UKF:
+        dx, ok = joseph_update(P, NX, ur.H, ur.S, ur.r, ur.nu, acc, ma)
         if ok:
             for j in range(NX):
                 x[j] += dx[j]
         return
-    _ukf_apply(x, P, Pxz, S, nu, acc, ma)
+    _ukf_apply(x, P, ur.Pxz, ur.S, ur.nu, acc, ma)
 
 
 @njit(cache=True, error_model="numpy")

@@ -144,24 +144,6 @@ def nav_jacobian(x: F64, u: F64, dt: float, par: F64, F: F64) -> None:
     F[NAV_PSI, NAV_GB] = -dt
 
 
-@njit(cache=True, error_model="numpy")
-def nav_h(x: F64, out: F64) -> None:
-    """``Y1 = C1 X1`` (3,): East, North, and the GPS heading ``psi + psi_b`` (unwrapped)."""
-    out[Z_E] = x[NAV_E]
-    out[Z_N] = x[NAV_N]
-    out[Z_PSI] = x[NAV_PSI] + x[NAV_PSIB]
-
-
-@njit(cache=True, error_model="numpy")
-def nav_meas_jacobian(H: F64) -> None:
-    """``C1`` (3, 6), the Jacobian of ``nav_h`` (constant)."""
-    _zero(H)
-    H[Z_E, NAV_E] = 1.0
-    H[Z_N, NAV_N] = 1.0
-    H[Z_PSI, NAV_PSI] = 1.0
-    H[Z_PSI, NAV_PSIB] = 1.0
-
-
 # --- control filter (eq. 18-19) ----------------------------------------------------------
 
 
@@ -216,24 +198,6 @@ def ctl_jacobian(disc: F64, F: F64) -> None:
             F[i, j] = disc[1 + i * NX + j]
 
 
-@njit(cache=True, error_model="numpy")
-def ctl_h(x: F64, out: F64) -> None:
-    """``Y2 = C2 X2`` (3,): yaw rate, speed, potentiometer ``delta + delta_b``."""
-    out[Z_RATE] = x[CTL_PD]
-    out[Z_SPEED] = x[CTL_VX]
-    out[Z_STEER] = x[CTL_DEL] + x[CTL_DELB]
-
-
-@njit(cache=True, error_model="numpy")
-def ctl_meas_jacobian(H: F64) -> None:
-    """``C2`` (3, 6), the Jacobian of ``ctl_h`` (constant)."""
-    _zero(H)
-    H[Z_RATE, CTL_PD] = 1.0
-    H[Z_SPEED, CTL_VX] = 1.0
-    H[Z_STEER, CTL_DEL] = 1.0
-    H[Z_STEER, CTL_DELB] = 1.0
-
-
 # --- one interface over both models ------------------------------------------------------
 
 
@@ -256,22 +220,33 @@ def model_jacobian(model: int, x: F64, u: F64, dt: float, par: F64, disc: F64, F
         ctl_jacobian(disc, F)
 
 
+#: ``C1`` and ``C2`` by their unit entries (row, state), all others zero: ``Y1`` is East,
+#: North and the GPS heading ``psi + psi_b`` (unwrapped), ``Y2`` the yaw rate, the speed and
+#: the potentiometer ``delta + delta_b``
+NAV_C = np.array([[Z_E, NAV_E], [Z_N, NAV_N], [Z_PSI, NAV_PSI], [Z_PSI, NAV_PSIB]], np.int64)
+CTL_C = np.array(
+    [[Z_RATE, CTL_PD], [Z_SPEED, CTL_VX], [Z_STEER, CTL_DEL], [Z_STEER, CTL_DELB]], np.int64
+)
+
+
 @njit(cache=True, error_model="numpy")
 def model_h(model: int, x: F64, out: F64) -> None:
-    """All three measurement rows ``h(x)`` of ``model``."""
-    if model == MODEL_NAV:
-        nav_h(x, out)
-    else:
-        ctl_h(x, out)
+    """All three measurement rows ``h(x) = C x`` of ``model`` (``Y1 = C1 X1``,
+    ``Y2 = C2 X2``; ``NAV_C``, ``CTL_C``)."""
+    unit = NAV_C if model == MODEL_NAV else CTL_C
+    for i in range(NZ):
+        out[i] = 0.0
+    for k in range(unit.shape[0]):
+        out[unit[k, 0]] += x[unit[k, 1]]
 
 
 @njit(cache=True, error_model="numpy")
 def model_meas_jacobian(model: int, H: F64) -> None:
-    """Measurement Jacobian ``H`` (3, 6) of ``model``."""
-    if model == MODEL_NAV:
-        nav_meas_jacobian(H)
-    else:
-        ctl_meas_jacobian(H)
+    """Measurement Jacobian ``H = C`` (3, 6) of ``model`` (constant)."""
+    unit = NAV_C if model == MODEL_NAV else CTL_C
+    _zero(H)
+    for k in range(unit.shape[0]):
+        H[unit[k, 0], unit[k, 1]] = 1.0
 
 
 @njit(cache=True, error_model="numpy")

@@ -55,12 +55,8 @@ def centered_mean_cov(Y: F64, wm: F64, wc: F64, n: int, mean: F64, cov: F64) -> 
 
 
 @njit(cache=True, error_model="numpy")
-def stream_resets(
-    t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64, timeout_s: float
-) -> I64:
-    """Flags (len(reject_since),) of the streams whose blocks, all rejected now, have been
-    rejected without interruption for ``timeout_s`` or longer."""
-    ns = reject_since.shape[0]
+def _streams_seen(blocks: I64, nb_: int, accepted: I64, ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per stream of ``ns``: (has a block in this update, has an accepted block) flags."""
     seen = np.zeros(ns, np.bool_)
     ok = np.zeros(ns, np.bool_)
     for b in range(nb_):
@@ -68,6 +64,17 @@ def stream_resets(
         seen[s] = True
         if accepted[b]:
             ok[s] = True
+    return seen, ok
+
+
+@njit(cache=True, error_model="numpy")
+def stream_resets(
+    t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64, timeout_s: float
+) -> I64:
+    """Flags (len(reject_since),) of the streams whose blocks, all rejected now, have been
+    rejected without interruption for ``timeout_s`` or longer."""
+    ns = reject_since.shape[0]
+    seen, ok = _streams_seen(blocks, nb_, accepted, ns)
     out = np.zeros(ns, np.int64)
     for s in range(ns):
         running = seen[s] and not ok[s] and reject_since[s] >= 0
@@ -83,13 +90,7 @@ def advance_stream_clocks(
     """After an update's final gating: a stream with an accepted block clears its clock, a
     stream whose blocks were all rejected starts it (if not running)."""
     ns = reject_since.shape[0]
-    seen = np.zeros(ns, np.bool_)
-    ok = np.zeros(ns, np.bool_)
-    for b in range(nb_):
-        s = blocks[b, 2]
-        seen[s] = True
-        if accepted[b]:
-            ok[s] = True
+    seen, ok = _streams_seen(blocks, nb_, accepted, ns)
     for s in range(ns):
         if not seen[s]:
             continue

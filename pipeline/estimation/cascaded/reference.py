@@ -28,13 +28,15 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from navreplay.pipeline.estimation.cascaded import cascade as cs
-from navreplay.pipeline.estimation.cascaded.engine import (
-    CascadedResult,
-    CascadeSetup,
-    CascadeState,
-    raise_if_diverged,
+from navreplay.pipeline.estimation.cascaded.engine import CascadeSetup, CascadeState, StepperBase
+from navreplay.pipeline.estimation.cascaded.filters import (
+    EST_EKF,
+    EST_UKF,
+    Filter,
+    Gating,
+    Measurement,
+    prepare_update,
 )
-from navreplay.pipeline.estimation.cascaded.filters import EST_EKF, EST_UKF, prepare_update
 from navreplay.pipeline.estimation.cascaded.model import (
     MODEL_CTL,
     MODEL_NAV,
@@ -100,7 +102,7 @@ class _SubFilter:
         if est != EST_EKF:
             a, b, k = setup.ut_params
             self.points = MerweScaledSigmaPoints(NX, alpha=a, beta=b, kappa=k)
-            if not (np.allclose(self.points.Wm, setup.wm, rtol=1e-12, atol=0.0)):
+            if not (np.allclose(self.points.Wm, setup.settings.ut.wm, rtol=1e-12, atol=0.0)):
                 raise ValueError("filterpy's sigma-point weights differ from the kernel's")
             self.ukf = UnscentedKalmanFilter(
                 dim_x=NX, dim_z=1, dt=1.0, hx=None, fx=None, points=self.points,
@@ -127,9 +129,9 @@ class _SubFilter:
                 f.P = np.array(P, dtype=float)
 
     def predict(self, u: F64, dt: float) -> None:
-        s = self.setup
+        s = self.setup.settings
         Q = np.empty((NX, NX))
-        model_noise(s.q[self.model], dt, s.cfg[cs.C_NOISE_DT], Q)
+        model_noise(s.q[self.model], dt, s.noise_interval_s, Q)
 
         def fx(x: F64, _dt: float = dt) -> F64:
             out = np.empty(NX)
@@ -152,7 +154,7 @@ class _SubFilter:
 
     def update(self, t_ns: int, z: F64, st: CascadeState) -> bool:
         """Gate with the shared front end, then let filterpy update with the accepted rows."""
-        s = self.setup
+        s = self.setup.settings
         ukf = self.est == EST_UKF
         x, P = self.x.copy(), np.ascontiguousarray(self.cov)
         block_of_row, streams = (
@@ -160,13 +162,13 @@ class _SubFilter:
             if self.model == MODEL_NAV
             else (cs.CTL_BLOCK_OF_ROW, cs.CTL_STREAMS)
         )
-        m, rows, Hm, rm, _, _, _, acc, ma = prepare_update(
-            self.model, EST_UKF if ukf else EST_EKF, t_ns, x, P, z, s.r[self.model],
-            block_of_row, streams, s.gate, s.cfg[cs.C_TIMEOUT], st.imem[cs.I_REJ :], s.wm,
-            s.wc, s.cfg[cs.C_GAMMA], st.inn_i, st.inn_f, st.ev_i, st.ev_f, st.counts,
-        )  # fmt: skip
-        if m < 0:
+        meas = Measurement(z, s.r[self.model], block_of_row, streams)
+        gating = Gating(s.gate, s.timeout_s, st.imem[cs.I_REJ :])
+        ur, acc, ma = prepare_update(t_ns, Filter(self.model, self.est, x, P), meas, gating, s.ut,
+                                     st.log)  # fmt: skip
+        if ma < 0:
             return False
+        m, rows, Hm, rm = ur.m, ur.rows, ur.H, ur.r
         self.set(x, P)  # a timeout reset may have inflated P
         if ma == 0:
             return True
@@ -192,77 +194,58 @@ class _SubFilter:
         return True
 
 
-class FilterpyStepper:
+class FilterpyStepper(StepperBase):
     """``engine.NumbaStepper``'s contract on filterpy (see the module docstring)."""
 
     backend = "filterpy"
 
     def __init__(self, setup: CascadeSetup, capacity: int, n_gps: int = 0) -> None:
-        self.setup = setup
-        self.st = CascadeState(setup, capacity, n_gps)
-        est = int(setup.cfg[cs.C_EST])
-        disc = self.st.mem[cs.M_DISC :]
+        super().__init__(setup, capacity, n_gps)
+        est = setup.settings.est
+        disc = self.state.mem[cs.M_DISC :]
         self.nav = _SubFilter(MODEL_NAV, est, setup, setup.P0[0], disc)
         ctl_est = EST_UKF if est == EST_UKF else EST_EKF
         self.ctl = _SubFilter(MODEL_CTL, ctl_est, setup, setup.P0[1], disc)
-        self.status = cm.STATUS_OK
-        self.wall = 0.0
-
-    @property
-    def x(self) -> F64:
-        return self.st.x
-
-    @property
-    def ok(self) -> bool:
-        return self.status == cm.STATUS_OK
-
-    def set_command(self, u: float) -> None:
-        self.st.mem[cs.M_CMD] = u
 
     def _nav_predict(self, t_ns: int) -> None:
-        st, cfg = self.st, self.setup.cfg
+        st, s = self.state, self.setup.settings
         dt = (t_ns - int(st.imem[cs.I_T_NAV])) * 1e-9
         if dt <= 0.0:
             return
-        if dt > cfg[cs.C_GAP]:
+        if dt > s.gap_s:
             cm.record_event(st.ev_i, st.ev_f, st.counts, t_ns, cs.EV_GAP, -1, -1, dt)
-        n_sub = max(1, math.ceil(dt / cfg[cs.C_MAX_STEP] - 1e-9))
+        n_sub = max(1, math.ceil(dt / s.max_step_s - 1e-9))
         u = st.mem[cs.M_RADAR : cs.M_GYRO + 1].copy()
         for _ in range(n_sub):
             self.nav.predict(u, dt / n_sub)
         st.imem[cs.I_T_NAV] = t_ns
 
     def _ctl_predict(self, t_ns: int) -> None:
-        st = self.st
+        st = self.state
         dt = (t_ns - int(st.imem[cs.I_T_CTL])) * 1e-9
         if dt > 0.0:
             self.ctl.predict(st.mem[cs.M_CMD : cs.M_CMD + 1].copy(), dt)
             st.imem[cs.I_T_CTL] = t_ns
 
     def _finish(self, t_ns: int) -> int:
-        st = self.st
+        st = self.state
         st.x[:NX], st.x[NX:] = self.nav.x, self.ctl.x
         st.P[0], st.P[1] = self.nav.cov, self.ctl.cov
-        status = int(cs.finish(t_ns, st.x, st.P, self.setup.cfg, st.ev_i, st.ev_f, st.counts))
+        status = int(cs.finish(t_ns, st.x, st.P, self.setup.settings, st.log))
         self.nav.set(st.x[:NX], st.P[0])
         self.ctl.set(st.x[NX:], st.P[1])
         return status
 
     def nav_epoch(self, t_ns: int, gps: F64) -> None:
         """A GPS fix between vehicle samples (``cascade_sample`` with ``nav_only``)."""
-        if self.status != cm.STATUS_OK or not self.st.imem[cs.I_STARTED]:
+        if self.status != cm.STATUS_OK or not self.state.imem[cs.I_STARTED]:
             return
         self._nav_predict(t_ns)
-        ok = self.nav.update(t_ns, gps, self.st)
+        ok = self.nav.update(t_ns, gps, self.state)
         self._set_status(self._finish(t_ns) if ok else self._fail(t_ns))
 
-    def _set_status(self, status: int) -> None:
-        self.status = status
-        if status != cm.STATUS_OK:
-            raise_if_diverged(self.setup, self.st.result(self.backend, status, 0.0))
-
     def _fail(self, t_ns: int) -> int:
-        st = self.st
+        st = self.state
         return int(cm.fail(t_ns, cm.STATUS_INDEFINITE, st.ev_i, st.ev_f, st.counts))
 
     def sample(self, t_ns: int, veh: F64, gps: F64) -> None:
@@ -270,7 +253,7 @@ class FilterpyStepper:
         if self.status != cm.STATUS_OK:
             return
         t0 = time.perf_counter()
-        st = self.st
+        st = self.state
         if st.imem[cs.I_STARTED] == 0:
             st.imem[cs.I_T_NAV] = st.imem[cs.I_T_CTL] = t_ns
             st.imem[cs.I_STARTED] = 1
@@ -295,6 +278,3 @@ class FilterpyStepper:
             st.counts[cm.CNT_OUT] = k + 1
             st.counts[cm.CNT_STOP] += 1
         self.wall += time.perf_counter() - t0
-
-    def result(self) -> CascadedResult:
-        return self.st.result(self.backend, self.status, self.wall)

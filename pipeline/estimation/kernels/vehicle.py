@@ -131,12 +131,72 @@ STREAM_NAMES = ("gnss_pos", "gnss_speed", "gnss_course", "yaw_rate")
 M_MAX = 5
 
 
-@njit(cache=True)
-def epoch_rows(stop: I64, veh: F64, fix: F64, rows: I64, blocks: I64) -> tuple[int, int, int]:
-    """Lay out the measurement rows of a stop: ``rows[k]`` = (``Z_*`` kind, source row).
+class Layout(NamedTuple):
+    """A stop's measurement rows (``epoch_rows``).
 
-    Returns (rows, blocks, vehicle row of the steering used by the yaw-rate model or -1).
+    Attributes:
+        rows: (M_MAX, 2), ``rows[k]`` = (``Z_*`` kind, source row: fix or vehicle sample).
+        blocks: (M_MAX, 4), the gating blocks (``kernels.common.gate_blocks``).
+        m, nb: how many rows and blocks the stop has.
     """
+
+    rows: I64
+    blocks: I64
+    m: int
+    nb: int
+
+
+class ModelRows(NamedTuple):
+    """Each model's measurement rows of a stop (``epoch_values``), model slot first (one
+    slot, or the IMM's two).
+
+    Attributes:
+        z, r: measured values and their variances (k, M_MAX) (``r`` depends on the model).
+        nu: innovations (k, M_MAX); H: Jacobian rows (k, M_MAX, NX).
+        S: innovation covariances (k, M_MAX, M_MAX).
+    """
+
+    z: F64
+    r: F64
+    nu: F64
+    H: F64
+    S: F64
+
+
+class GateWork(NamedTuple):
+    """The gating's scratch and clocks, allocated once per run.
+
+    Attributes:
+        nis, accepted: per block, its NIS and whether it passed the gate.
+        acc: the accepted rows (indices into the stop's rows).
+        work: ``kernels.common.gate_blocks``'s scratch (3, 6).
+        reject_since: per stream, when its current run of rejections began, ns (-1: none).
+    """
+
+    nis: F64
+    accepted: I64
+    acc: I64
+    work: F64
+    reject_since: I64
+
+
+@njit(cache=True)
+def model_rows(k: int) -> ModelRows:
+    """``ModelRows`` for ``k`` models."""
+    return ModelRows(np.empty((k, M_MAX)), np.empty((k, M_MAX)), np.empty((k, M_MAX)),
+                     np.empty((k, M_MAX, vm.NX)), np.empty((k, M_MAX, M_MAX)))  # fmt: skip
+
+
+@njit(cache=True)
+def gate_work(n_streams: int) -> GateWork:
+    """``GateWork`` with every stream's clock stopped."""
+    return GateWork(np.empty(M_MAX), np.empty(M_MAX, np.int64), np.empty(M_MAX, np.int64),
+                    np.empty((3, 6)), -np.ones(n_streams, np.int64))  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def epoch_rows(stop: I64, veh: F64, fix: F64, rows: I64, blocks: I64) -> Layout:
+    """Lay out the measurement rows of a stop into ``rows`` and ``blocks`` (``Layout``)."""
     m = 0
     nb_ = 0
     fi = stop[VS_FIX]
@@ -163,35 +223,27 @@ def epoch_rows(stop: I64, veh: F64, fix: F64, rows: I64, blocks: I64) -> tuple[i
         nb_ += 1
         rows[m, 0], rows[m, 1] = vm.Z_YAW_RATE, vi
         m += 1
-    return m, nb_, vi
+    return Layout(rows, blocks, m, nb_)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def epoch_values(
-    model: int,
-    x: F64,
-    rows: I64,
-    m: int,
-    veh: F64,
-    fix: F64,
-    u: F64,
-    vp: F64,
-    vs: VehicleSettings,
-    z: F64,
-    r: F64,
-    nu: F64,
-    H: F64,
-) -> None:
+    model: int, x: F64, u: F64, lay: Layout, sched: VehicleSchedule, vs: VehicleSettings,
+    ms: ModelRows, j: int,
+) -> None:  # fmt: skip
     """Measured values ``z``, variances ``r``, innovations ``nu`` (course wrapped) and
-    Jacobian rows ``H`` of one model at its predicted state ``x``; ``u`` is the held input.
+    Jacobian rows ``H`` of ``model`` at its predicted state ``x``, into slot ``j`` of ``ms``;
+    ``u`` is the held input.
 
     ``r`` depends on the model: a yaw-rate row adds the steering noise carried by the
     prediction, ``(d r / d delta)^2 sigma_delta^2`` (``models.vehicle.yaw_rate_steer_sens``;
     without it the dynamic model's yaw-rate NIS is 2-5 at 10-35 m/s on car_speed_ramp).
     """
+    z, r, nu, H = ms.z[j], ms.r[j], ms.nu[j], ms.H[j]
+    veh, fix, vp = sched.veh, sched.fix, vs.vp
     delta = u[VH_D_KIN] if model == vm.KINEMATIC else u[VH_D_DYN]
-    for k in range(m):
-        kind, src = rows[k, 0], rows[k, 1]
+    for k in range(lay.m):
+        kind, src = lay.rows[k, 0], lay.rows[k, 1]
         if kind == vm.Z_N:
             z[k], sig = fix[src, FX_N], fix[src, FX_SIG_POS]
         elif kind == vm.Z_E:
@@ -219,22 +271,24 @@ def innovation_cov(P: F64, H: F64, r: F64, m: int, S: F64) -> None:
         S[k, k] += r[k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def predict(
-    model: int, x: F64, P: F64, u: F64, dt: float, vp: F64, sig_u: F64, q: F64, max_step: float
+    model: int, x: F64, P: F64, u: F64, dt: float, vs: VehicleSettings, noise: vm.ProcessNoise
 ) -> None:
-    """Propagate ``x, P`` over ``dt`` seconds with input ``u`` held (sub-steps <= max_step)."""
+    """Propagate ``x, P`` over ``dt`` seconds with input ``u`` held (sub-steps of at most
+    ``vs.max_step_s``)."""
     if dt <= 0.0:
         return
-    n_sub = max(1, math.ceil(dt / max_step - 1e-9))
+    n_sub = max(1, math.ceil(dt / vs.max_step_s - 1e-9))
     h = dt / n_sub
     delta = u[VH_D_KIN] if model == vm.KINEMATIC else u[VH_D_DYN]
+    vp = vs.vp
     F = np.empty((vm.NX, vm.NX))
     Q = np.empty((vm.NX, vm.NX))
     xn = np.empty(vm.NX)
     for _ in range(n_sub):
         vm.step_jac(model, x, u[VH_V], delta, h, vp, F)
-        vm.process_noise(model, x, u[VH_V], delta, h, vp, sig_u, q, Q)
+        vm.process_noise(model, x, u[VH_V], delta, h, vp, noise, Q)
         vm.step(model, x, u[VH_V], delta, h, vp, xn)
         x[:] = xn
         P[:, :] = F @ P @ F.T + Q
@@ -335,27 +389,43 @@ def reset_stream(P: F64, stream: int, nu: F64, blocks: I64, nb_: int) -> float:
     return big
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def gate_with_reset(
-    t: int, x: F64, P: F64, H: F64, r: F64, nu: F64, m: int, S: F64, blocks: I64, nb_: int,
-    vs: VehicleSettings, reject_since: I64, nis: F64, accepted: I64, gwork: F64, ev_i: I64,
-    ev_f: F64, counts: I64,
-) -> None:  # fmt: skip
-    """Gate every block; a stream rejected for longer than ``vs.timeout_s`` has its states'
-    covariance reset (``reset_stream``, event ``gate_reset``) and is gated again."""
+    t: int, lay: Layout, Ps: F64, ms: ModelRows, g: int, gw: GateWork, vs: VehicleSettings,
+    log: RunLog,
+) -> int:  # fmt: skip
+    """Gate every block on model ``g``'s innovations (``S`` of every model computed from its
+    ``Ps[j]``); a stream rejected for longer than ``vs.timeout_s`` has its states' covariance
+    reset in every model (``reset_stream``, event ``gate_reset``) and is gated again. Then
+    the stream clocks move on, model ``g``'s innovations are recorded and the accepted rows
+    are listed in ``gw.acc``.
+
+    Returns:
+        the number of accepted rows.
+    """
+    m, nb_, blocks = lay.m, lay.nb, lay.blocks
+    nmod = Ps.shape[0]
+    for j in range(nmod):
+        innovation_cov(Ps[j], ms.H[j], ms.r[j], m, ms.S[j])
     for attempt in range(2):
-        innovation_cov(P, H, r, m, S)
-        gate_blocks(nu, S, blocks, nb_, vs.gate, nis, accepted, gwork)
+        gate_blocks(ms.nu[g], ms.S[g], blocks, nb_, vs.gate, gw.nis, gw.accepted, gw.work)
         if attempt == 1:
             break
-        reset = streams_to_reset(t, blocks, nb_, accepted, reject_since, vs.timeout_s)
+        reset = streams_to_reset(t, blocks, nb_, gw.accepted, gw.reject_since, vs.timeout_s)
         if reset.sum() == 0:
             break
         for s in range(reset.size):
             if reset[s]:
-                big = reset_stream(P, s, nu, blocks, nb_)
-                record_event(ev_i, ev_f, counts, t, EV_RESET, s, -1, big)
-    update_reject_since(t, blocks, nb_, accepted, reject_since)
+                big = 0.0
+                for j in range(nmod):
+                    big = reset_stream(Ps[j], s, ms.nu[j], blocks, nb_)
+                record_event(log.ev_i, log.ev_f, log.counts, t, EV_RESET, s, -1, big)
+        for j in range(nmod):
+            innovation_cov(Ps[j], ms.H[j], ms.r[j], m, ms.S[j])
+    update_reject_since(t, blocks, nb_, gw.accepted, gw.reject_since)
+    gated = GatedBlocks(ms.nu[g], ms.S[g], blocks, nb_, gw.nis, gw.accepted)
+    record_innovations(t, gated, vs.gate, log.inn_i, log.inn_f, log.counts, log.ev_i, log.ev_f)
+    return accepted_rows(blocks, nb_, gw.accepted, gw.acc)
 
 
 @njit(cache=True)
@@ -388,6 +458,10 @@ def run_vehicle(
 ) -> int:
     """Replay a vehicle-model filter from ``x0, P0`` at ``sched.t0`` over every stop.
 
+    One model slot (``xs[0]``, ``Ps[0]``: the estimate itself) or the IMM's two (combined
+    into ``x``, ``P``); every slot is predicted, updated with the same accepted rows and
+    kept positive definite.
+
     Args:
         x0: initial state (5,); P0: its covariance (5, 5).
         sched: start, schedule and data; vs: the model and settings.
@@ -399,12 +473,11 @@ def run_vehicle(
         a ``common.STATUS_*`` code.
     """
     t0, u0, stops, veh, fix = sched
-    vp, q, gate = vs.vp, vs.q, vs.gate
-    _, _, _, inn_i, inn_f, ev_i, ev_f, counts = log
+    ev_i, ev_f, counts = log.ev_i, log.ev_f, log.counts
     mode = vs.mode
-    sig_u = np.array([vs.sig_wheel_speed_mps, vs.sig_steer_rad])
-    max_step = vs.max_step_s
-    nmod = 2 if mode == MODE_IMM else 1
+    imm = mode == MODE_IMM
+    noise = vm.ProcessNoise(np.array([vs.sig_wheel_speed_mps, vs.sig_steer_rad]), vs.q)
+    nmod = 2 if imm else 1
     xs = np.empty((nmod, vm.NX))
     Ps = np.empty((nmod, vm.NX, vm.NX))
     for i in range(nmod):
@@ -418,31 +491,24 @@ def run_vehicle(
     if mode == MODE_SWITCHED:
         model = switch_model(vm.KINEMATIC, u0[VH_V], vs)
     u = u0.copy()
-    x = x0.copy()
-    P = P0.copy()
+    if imm:
+        x, P = x0.copy(), P0.copy()
+    else:
+        x, P = xs[0], Ps[0]
     L = np.empty((vm.NX, vm.NX))
     rows = np.empty((M_MAX, 2), np.int64)
     blocks = np.empty((M_MAX, 4), np.int64)
-    z, r, nu = np.empty(M_MAX), np.empty(M_MAX), np.empty(M_MAX)
-    H = np.empty((M_MAX, vm.NX))
-    S = np.empty((M_MAX, M_MAX))
-    nis = np.empty(M_MAX)
-    accepted = np.empty(M_MAX, np.int64)
-    acc = np.empty(M_MAX, np.int64)
-    gwork = np.empty((3, 6))
-    reject_since = -np.ones(4, np.int64)
-    nus = np.empty((nmod, M_MAX))
-    rs = np.empty((nmod, M_MAX))
-    Hs = np.empty((nmod, M_MAX, vm.NX))
-    Ss = np.empty((nmod, M_MAX, M_MAX))
-    aux = mu[1] if mode == MODE_IMM else float(model)
+    ms = model_rows(nmod)
+    gw = gate_work(4)
+    lik = np.ones(2)
+    aux = mu[1] if imm else float(model)
     _record(t0, x, P, aux, log, out_aux)
     t_cur = t0
     for k in range(stops.shape[0]):
         t = stops[k, VS_T]
         dt = (t - t_cur) * 1e-9
         t_cur = t
-        if mode == MODE_IMM:
+        if imm:
             xm = np.zeros((2, vm.NX))
             Pm = np.zeros((2, vm.NX, vm.NX))
             for j in range(2):
@@ -450,75 +516,41 @@ def run_vehicle(
             for j in range(2):
                 xs[j] = xm[j]
                 Ps[j] = Pm[j]
-                predict(j, xs[j], Ps[j], u, dt, vp, sig_u, q, max_step)
-        else:
-            predict(model, x, P, u, dt, vp, sig_u, q, max_step)
+        for j in range(nmod):
+            predict(j if imm else model, xs[j], Ps[j], u, dt, vs, noise)
         vi = stops[k, VS_VEH]
         if vi >= 0:
             u[:] = veh[vi]
         if mode == MODE_SWITCHED and vi >= 0:
             model = switch_model(model, u[VH_V], vs)
-        m, nb_, _ = epoch_rows(stops[k], veh, fix, rows, blocks)
-        if mode == MODE_IMM:
-            lik = np.ones(2)
-            if m > 0:
-                for j in range(2):
-                    epoch_values(j, xs[j], rows, m, veh, fix, u, vp, vs, z, rs[j], nus[j], Hs[j])
-                    innovation_cov(Ps[j], Hs[j], rs[j], m, Ss[j])
-                g = 0 if cbar[0] >= cbar[1] else 1
-                for attempt in range(2):
-                    gate_blocks(nus[g], Ss[g], blocks, nb_, gate, nis, accepted, gwork)
-                    if attempt == 1:
-                        break
-                    reset = streams_to_reset(t, blocks, nb_, accepted, reject_since, vs.timeout_s)
-                    if reset.sum() == 0:
-                        break
-                    for s in range(reset.size):
-                        if reset[s]:
-                            big = 0.0
-                            for j in range(2):
-                                big = reset_stream(Ps[j], s, nus[j], blocks, nb_)
-                            record_event(ev_i, ev_f, counts, t, EV_RESET, s, -1, big)
-                    for j in range(2):
-                        innovation_cov(Ps[j], Hs[j], rs[j], m, Ss[j])
-                update_reject_since(t, blocks, nb_, accepted, reject_since)
-                record_innovations(
-                    t, GatedBlocks(nus[g], Ss[g], blocks, nb_, nis, accepted), gate, inn_i, inn_f,
-                    counts, ev_i, ev_f,
-                )  # fmt: skip
-                ma = accepted_rows(blocks, nb_, accepted, acc)
-                for j in range(2):
-                    if ma > 0:
-                        ll = log_likelihood(nus[j], Ss[j], acc, ma)
+        lay = epoch_rows(stops[k], veh, fix, rows, blocks)
+        lik[0], lik[1] = 1.0, 1.0
+        if lay.m > 0:
+            for j in range(nmod):
+                epoch_values(j if imm else model, xs[j], u, lay, sched, vs, ms, j)
+            g = 0 if not imm or cbar[0] >= cbar[1] else 1
+            ma = gate_with_reset(t, lay, Ps, ms, g, gw, vs, log)
+            for j in range(nmod):
+                if ma > 0:
+                    if imm:
+                        ll = log_likelihood(ms.nu[j], ms.S[j], gw.acc, ma)
                         lik[j] = likelihood(ll, vs.likelihood_floor)
-                        dx, ok = joseph_update(Ps[j], vm.NX, Hs[j], Ss[j], rs[j], nus[j], acc, ma)
-                        if ok:
-                            xs[j] += dx
+                    dx, ok = joseph_update(Ps[j], vm.NX, ms.H[j], ms.S[j], ms.r[j], ms.nu[j],
+                                           gw.acc, ma)  # fmt: skip
+                    if ok:
+                        xs[j] += dx
+        if imm:
             for j in range(2):
                 mu[j] = cbar[j] * lik[j]
             mu /= mu.sum()
             cbar, omega = imm_mixing(mu, M)
             imm_combine(xs, Ps, mu, x, P)
-            ok_all = True
-            for j in range(2):
-                ok_all = ok_all and keep_pd(Ps[j], vm.NX, L, t, ev_i, ev_f, counts)
             aux = mu[1]
         else:
-            if m > 0:
-                epoch_values(model, x, rows, m, veh, fix, u, vp, vs, z, r, nu, H)
-                gate_with_reset(t, x, P, H, r, nu, m, S, blocks, nb_, vs, reject_since,
-                                nis, accepted, gwork, ev_i, ev_f, counts)  # fmt: skip
-                record_innovations(
-                    t, GatedBlocks(nu, S, blocks, nb_, nis, accepted), gate, inn_i, inn_f, counts,
-                    ev_i, ev_f,
-                )  # fmt: skip
-                ma = accepted_rows(blocks, nb_, accepted, acc)
-                if ma > 0:
-                    dx, ok = joseph_update(P, vm.NX, H, S, r, nu, acc, ma)
-                    if ok:
-                        x += dx
-            ok_all = keep_pd(P, vm.NX, L, t, ev_i, ev_f, counts)
             aux = float(model)
+        ok_all = True
+        for j in range(nmod):
+            ok_all = ok_all and keep_pd(Ps[j], vm.NX, L, t, ev_i, ev_f, counts)
         status = check(x, P, vs) if ok_all else STATUS_INDEFINITE
         if status != STATUS_OK:
             return fail(t, status, ev_i, ev_f, counts)

@@ -48,6 +48,7 @@ input Jacobian (paper 003's ``G Q G^T``) and ``q`` white model-error densities.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -64,6 +65,14 @@ V_MIN = 0.5  # m/s: floor of the speed in the dynamic model's coefficients (v ->
 
 # measurement kinds (rows of an update)
 Z_SPEED, Z_YAW_RATE, Z_COURSE, Z_N, Z_E = 0, 1, 2, 3, 4
+
+
+class ProcessNoise(NamedTuple):
+    """What ``process_noise`` is made of: the input 1-sigma ``sig_u`` (2,), wheel speed (m/s)
+    and steering (rad), and the white model-error densities ``q`` (5,), one per state."""
+
+    sig_u: F64
+    q: F64
 
 
 @njit(cache=True)
@@ -219,11 +228,12 @@ def input_jac(model: int, x: F64, v_whl: float, delta: float, dt: float, vp: F64
     G[X_E, 1] = dt * v * math.cos(th) * 0.5 * dt * dr_dd
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def process_noise(
-    model: int, x: F64, v_whl: float, delta: float, dt: float, vp: F64, sig_u: F64, q: F64, Q: F64
+    model: int, x: F64, v_whl: float, delta: float, dt: float, vp: F64, noise: ProcessNoise, Q: F64
 ) -> None:
-    """``Q = G diag(sig_u^2) G^T + diag(q) dt`` (5, 5); ``sig_u`` (2,), ``q`` (5,) densities."""
+    """``Q = G diag(sig_u^2) G^T + diag(q) dt`` (5, 5) of ``noise`` (``ProcessNoise``)."""
+    sig_u, q = noise
     G = np.empty((NX, 2))
     input_jac(model, x, v_whl, delta, dt, vp, G)
     for i in range(NX):

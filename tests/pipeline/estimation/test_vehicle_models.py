@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pytest
@@ -22,44 +24,45 @@ STATES = [
 EPS = np.array([1e-5, 1e-7, 1e-7, 1e-4, 1e-4])
 
 
-@pytest.mark.parametrize("model", [vm.KINEMATIC, vm.DYNAMIC])
-@pytest.mark.parametrize(("x", "v_whl", "delta"), STATES)
-def test_step_jacobian_matches_finite_differences(
-    model: int, x: np.ndarray, v_whl: float, delta: float
-) -> None:
-    F = np.empty((5, 5))
-    vm.step_jac(model, x, v_whl, delta, 0.02, VP, F)
-    num = np.empty((5, 5))
-    for j in range(5):
+def central_difference(fn: Callable[[np.ndarray], Any], x: np.ndarray, eps: np.ndarray
+                       ) -> np.ndarray:  # fmt: skip
+    """``d fn / d x`` by central differences with steps ``eps``, one column per element of
+    ``x`` (a row for a scalar ``fn``)."""
+    cols = []
+    for j in range(x.size):
         xp, xm = x.copy(), x.copy()
-        xp[j] += EPS[j]
-        xm[j] -= EPS[j]
-        fp, fm = np.empty(5), np.empty(5)
-        vm.step(model, xp, v_whl, delta, 0.02, VP, fp)
-        vm.step(model, xm, v_whl, delta, 0.02, VP, fm)
-        num[:, j] = (fp - fm) / (2 * EPS[j])
-    np.testing.assert_allclose(F, num, rtol=1e-6, atol=1e-8)
+        xp[j] += eps[j]
+        xm[j] -= eps[j]
+        cols.append((np.asarray(fn(xp)) - np.asarray(fn(xm))) / (2 * eps[j]))
+    return np.stack(cols, axis=-1)
 
 
+def stepped(model: int, x: np.ndarray, v_whl: float, delta: float) -> np.ndarray:
+    """``models.vehicle.step`` over 0.02 s as a function."""
+    out = np.empty(5)
+    vm.step(model, x, v_whl, delta, 0.02, VP, out)
+    return out
+
+
+@pytest.mark.parametrize("wrt", ["state", "input"])
 @pytest.mark.parametrize("model", [vm.KINEMATIC, vm.DYNAMIC])
 @pytest.mark.parametrize(("x", "v_whl", "delta"), STATES)
-def test_input_jacobian_matches_finite_differences(
-    model: int, x: np.ndarray, v_whl: float, delta: float
+def test_step_jacobians_match_finite_differences(
+    wrt: str, model: int, x: np.ndarray, v_whl: float, delta: float
 ) -> None:
-    G = np.empty((5, 2))
-    vm.input_jac(model, x, v_whl, delta, 0.02, VP, G)
-    num = np.empty((5, 2))
-    for j, h in enumerate((1e-5, 1e-7)):
-        u = np.array([v_whl, delta])
-        outs = []
-        for sgn in (1.0, -1.0):
-            uu = u.copy()
-            uu[j] += sgn * h
-            f = np.empty(5)
-            vm.step(model, x, uu[0], uu[1], 0.02, VP, f)
-            outs.append(f)
-        num[:, j] = (outs[0] - outs[1]) / (2 * h)
-    np.testing.assert_allclose(G, num, rtol=1e-5, atol=2e-8)
+    """``step_jac`` (d step / dx) and ``input_jac`` (d step / d(v_whl, delta))."""
+    if wrt == "state":
+        J = np.empty((5, 5))
+        vm.step_jac(model, x, v_whl, delta, 0.02, VP, J)
+        num = central_difference(lambda xx: stepped(model, xx, v_whl, delta), x, EPS)
+        rtol, atol = 1e-6, 1e-8
+    else:
+        J = np.empty((5, 2))
+        vm.input_jac(model, x, v_whl, delta, 0.02, VP, J)
+        u, h = np.array([v_whl, delta]), np.array([1e-5, 1e-7])
+        num = central_difference(lambda uu: stepped(model, x, uu[0], uu[1]), u, h)
+        rtol, atol = 1e-5, 2e-8
+    np.testing.assert_allclose(J, num, rtol=rtol, atol=atol)
 
 
 @pytest.mark.parametrize("model", [vm.KINEMATIC, vm.DYNAMIC])
@@ -68,25 +71,25 @@ def test_measurement_jacobians_match_finite_differences(model: int, kind: int) -
     x, _, delta = STATES[1]
     row = np.empty(5)
     vm.measure_jac(model, x, delta, kind, VP, row)
-    num = np.empty(5)
-    for j in range(5):
-        xp, xm = x.copy(), x.copy()
-        xp[j] += EPS[j]
-        xm[j] -= EPS[j]
-        num[j] = (
-            vm.measure(model, xp, delta, kind, VP) - vm.measure(model, xm, delta, kind, VP)
-        ) / (2 * EPS[j])
+    num = central_difference(lambda xx: vm.measure(model, xx, delta, kind, VP), x, EPS)
     np.testing.assert_allclose(row, num, rtol=1e-6, atol=1e-9)
+
+
+def settled(v: float, delta: float, n: int) -> np.ndarray:
+    """The dynamic model's state after ``n`` steps of 0.01 s at wheel speed ``v`` and
+    steering ``delta``, from straight ahead at that speed."""
+    x = np.array([v, 0.0, 0.0, 0.0, 0.0])
+    out = np.empty(5)
+    for _ in range(n):
+        vm.step(vm.DYNAMIC, x, v, delta, 0.01, VP, out)
+        x = out.copy()
+    return x
 
 
 def test_dynamic_model_tends_to_the_kinematic_one_at_walking_pace() -> None:
     """Small steering at 0.5 m/s: same steady sideslip and yaw rate (l_r delta / L, v delta / L)."""
     delta, v = 0.02, 0.5
-    x = np.array([v, 0.0, 0.0, 0.0, 0.0])
-    out = np.empty(5)
-    for _ in range(500):
-        vm.step(vm.DYNAMIC, x, v, delta, 0.01, VP, out)
-        x = out.copy()
+    x = settled(v, delta, 500)
     wheelbase = VP[0] + VP[1]
     assert x[vm.X_BETA] == pytest.approx(VP[1] * delta / wheelbase, rel=2e-3)
     assert vm.yaw_rate(vm.DYNAMIC, x, delta, VP) == pytest.approx(v * delta / wheelbase, rel=2e-3)
@@ -95,11 +98,7 @@ def test_dynamic_model_tends_to_the_kinematic_one_at_walking_pace() -> None:
 def test_dynamic_model_understeers_and_reverses_the_sideslip_at_speed() -> None:
     """At 30 m/s the steady yaw rate is u delta / (L + K u^2) and the sideslip is negative."""
     delta, v = 0.01, 30.0
-    x = np.array([v, 0.0, 0.0, 0.0, 0.0])
-    out = np.empty(5)
-    for _ in range(1000):
-        vm.step(vm.DYNAMIC, x, v, delta, 0.01, VP, out)
-        x = out.copy()
+    x = settled(v, delta, 1000)
     expected = _V.steady_state_yaw_rate(v, delta)
     assert vm.yaw_rate(vm.DYNAMIC, x, delta, VP) == pytest.approx(expected, rel=1e-3)
     assert x[vm.X_BETA] < 0.0
@@ -112,11 +111,7 @@ def test_virtual_steering_reproduces_the_measured_yaw_rate_in_each_model() -> No
         xk = np.zeros(5)
         vm.step(vm.KINEMATIC, np.array([v[k], 0, 0, 0, 0.0]), v[k], d_kin[k], 0.01, VP, xk)
         assert vm.yaw_rate(vm.KINEMATIC, xk, d_kin[k], VP) == pytest.approx(r[k], rel=1e-9)
-        x = np.array([v[k], 0.0, 0.0, 0.0, 0.0])
-        out = np.empty(5)
-        for _ in range(2000):
-            vm.step(vm.DYNAMIC, x, v[k], d_dyn[k], 0.01, VP, out)
-            x = out.copy()
+        x = settled(v[k], d_dyn[k], 2000)
         assert vm.yaw_rate(vm.DYNAMIC, x, d_dyn[k], VP) == pytest.approx(r[k], rel=1e-6)
 
 

@@ -12,6 +12,11 @@ from navreplay.pipeline.estimation.cascaded.cascade import NAV_BLOCK_OF_ROW, NAV
 from navreplay.pipeline.estimation.cascaded.filters import (
     EST_EKF,
     EST_UKF,
+    Filter,
+    Gating,
+    Measurement,
+    Step,
+    Unscented,
     apply_update,
     ekf_predict,
     prepare_update,
@@ -30,9 +35,10 @@ from navreplay.pipeline.estimation.cascaded.model import (
     model_params,
 )
 from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.estimation.kernels.records import RunLog
 from navreplay.pipeline.estimation.kernels.unscented import ukf_weights
 
-WM, WC, GAMMA = ukf_weights(NX, 1e-3, 2.0, 0.0)
+UT = Unscented(*ukf_weights(NX, 1e-3, 2.0, 0.0))
 GATE = np.array([math.inf, 15.13, 18.42, 21.11])  # chi2(0.9999) by dimension
 PAR = model_params(6.4, 0.35, 1.0, 1.0, 0.1053)
 DISC = ctl_discretize(PAR, 0.02)
@@ -53,6 +59,9 @@ class Logs:
         self.ev_f = np.zeros(n)
         self.counts = np.zeros(cm.CNT_DIM, np.int64)
         self.reject_since = -np.ones(5, np.int64)
+        none = np.zeros(0, np.int64)
+        self.log = RunLog(none, np.zeros((0, 2 * NX)), np.zeros((0, 2, NX, NX)), self.inn_i,
+                          self.inn_f, self.ev_i, self.ev_f, self.counts)  # fmt: skip
 
     def kinds(self) -> list[int]:
         return [int(k) for k in self.ev_i[: self.counts[cm.CNT_EV], 1]]
@@ -63,11 +72,11 @@ def update(model: int, est: int, t_ns: int, x: np.ndarray, P: np.ndarray, z: np.
     """``prepare_update`` then ``apply_update``, as ``cascade_sample`` does."""
     rows, streams = (NAV_BLOCK_OF_ROW, NAV_STREAMS) if model == MODEL_NAV else (
         np.array([0, 1, 2]), np.array([2, 3, 4]))  # fmt: skip
-    m, _, Hm, rm, nu, S, Pxz, acc, ma = prepare_update(
-        model, est, t_ns, x, P, z, r, rows, streams, GATE, timeout_s, logs.reject_since, WM,
-        WC, GAMMA, logs.inn_i, logs.inn_f, logs.ev_i, logs.ev_f, logs.counts)  # fmt: skip
-    assert m >= 0
-    apply_update(est, x, P, Hm, rm, nu, S, Pxz, acc, ma)
+    f = Filter(model, est, x, P)
+    meas, gating = Measurement(z, r, rows, streams), Gating(GATE, timeout_s, logs.reject_since)
+    ur, acc, ma = prepare_update(t_ns, f, meas, gating, UT, logs.log)
+    assert ma >= 0
+    apply_update(f, ur, acc, ma)
 
 
 def nav_update(est: int, t_ns: int, x: np.ndarray, P: np.ndarray, z: np.ndarray,
@@ -82,9 +91,9 @@ def test_ukf_equals_ekf_on_the_linear_control_filter() -> None:
     disc = DISC
     Q = np.diag([0.1, 0.1, 0.01, 0.01, 0.01, 1e-3])
     xs, Ps = [x0.copy(), x0.copy()], [P0.copy(), P0.copy()]
-    ekf_predict(MODEL_CTL, xs[0], Ps[0], np.array([0.4]), 0.02, PAR, disc, Q)
-    assert ukf_predict(MODEL_CTL, xs[1], Ps[1], np.array([0.4]), 0.02, PAR, disc, Q, WM, WC,
-                       GAMMA, NONE)  # fmt: skip
+    step = Step(np.array([0.4]), 0.02, PAR, disc, Q)
+    ekf_predict(Filter(MODEL_CTL, EST_EKF, xs[0], Ps[0]), step)
+    assert ukf_predict(Filter(MODEL_CTL, EST_UKF, xs[1], Ps[1]), step, UT, NONE)
     np.testing.assert_allclose(xs[1], xs[0], rtol=0, atol=1e-9)
     np.testing.assert_allclose(Ps[1], Ps[0], rtol=1e-6, atol=1e-9)
     z = xs[0][[0, 2, 3]] + np.array([0.01, -0.05, 0.02])
@@ -108,8 +117,8 @@ def test_unscented_mean_adds_the_second_order_term_to_the_navigation_step() -> N
     f = np.empty(NX)
     model_f(MODEL_NAV, x, u, dt, PAR, DISC, f)
     xu, Pu = x.copy(), P.copy()
-    assert ukf_predict(MODEL_NAV, xu, Pu, u, dt, PAR, DISC, np.zeros((NX, NX)), WM, WC,
-                       GAMMA, NONE)  # fmt: skip
+    step = Step(u, dt, PAR, DISC, np.zeros((NX, NX)))
+    assert ukf_predict(Filter(MODEL_NAV, EST_UKF, xu, Pu), step, UT, NONE)
     v, psi = u[0] - x[NAV_RB], x[NAV_PSI]
     second_n = -0.5 * dt * v * math.cos(psi) * P[3, 3] + dt * math.sin(psi) * P[3, 2]
     second_e = -0.5 * dt * v * math.sin(psi) * P[3, 3] - dt * math.cos(psi) * P[3, 2]
@@ -127,8 +136,9 @@ def test_hybrid_takes_the_ekf_mean_for_east_north_and_the_unscented_covariance()
     model_f(MODEL_NAV, x, u, 0.02, PAR, DISC, f)
     xu, Pu, xh, Ph = x.copy(), P.copy(), x.copy(), P.copy()
     mask = np.array([1, 1, 0, 0, 0, 0], np.int64)
-    ukf_predict(MODEL_NAV, xu, Pu, u, 0.02, PAR, DISC, Q, WM, WC, GAMMA, NONE)
-    ukf_predict(MODEL_NAV, xh, Ph, u, 0.02, PAR, DISC, Q, WM, WC, GAMMA, mask)
+    step = Step(u, 0.02, PAR, DISC, Q)
+    ukf_predict(Filter(MODEL_NAV, EST_UKF, xu, Pu), step, UT, NONE)
+    ukf_predict(Filter(MODEL_NAV, EST_UKF, xh, Ph), step, UT, mask)
     np.testing.assert_array_equal(xh[:2], f[:2])
     assert abs(xu[NAV_N] - f[NAV_N]) > 1e-5  # the unscented mean differs there
     np.testing.assert_allclose(xh[2:], xu[2:], atol=1e-12)

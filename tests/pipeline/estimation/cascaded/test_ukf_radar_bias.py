@@ -55,9 +55,9 @@ def setup_with(name: str, section: CascadedFilterParams, interval_s: float,
     random walk scaled by ``psib_scale``."""
     pn = dataclasses.replace(section.process_noise, interval_s=interval_s)
     setup = make_setup(name, dataclasses.replace(section, process_noise=pn))
-    q = setup.q.copy()
+    q = setup.settings.q.copy()
     q[0, NAV_PSIB] *= psib_scale
-    return dataclasses.replace(setup, q=q)
+    return dataclasses.replace(setup, settings=setup.settings._replace(q=q))
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +76,9 @@ def test_the_ukf_with_the_central_point_mean_is_the_ekf(
     """Everything but the unscented mean equals the EKF's (Table 1 per 0.02 s step, where
     the UKF's radar bias settles 0.25 m/s off): radar bias within 1e-3 m/s at every sample
     (the EKF's moves by 0.4 m/s), every navigation variance within 1e-3."""
-    central = dataclasses.replace(ukf, ekf_mean=np.ones(NX, np.int64))
+    central = dataclasses.replace(
+        ukf, settings=ukf.settings._replace(ekf_mean=np.ones(NX, np.int64))
+    )
     run = noise_free_replay(central)
     assert run.status == ekf_run.status == "ok"
     np.testing.assert_allclose(run.x[:, NAV_RB], ekf_run.x[:, NAV_RB], rtol=0, atol=1e-3)
