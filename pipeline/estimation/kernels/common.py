@@ -302,12 +302,13 @@ def stream_health(blocks: I64, nb_: int, accepted: I64) -> tuple[I64, I64]:
 
 @njit(cache=True, error_model="numpy")
 def streams_to_reset(
-    t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64, timeout_s: float
+    t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64, timeout_s: float, keep: int
 ) -> I64:
     """Streams that have been rejected (``stream_health``) for the timeout or longer (F2).
 
     ``reject_since[stream]`` holds the time (ns) of the first rejection of the current run of
-    rejections, -1 if the stream was last accepted. The NHC stream is never reset.
+    rejections, -1 if the stream was last accepted. Stream ``keep`` is never reset (the INS
+    filters' NHC pseudo-measurement, the vehicle filters' yaw rate; -1: none).
 
     Returns:
         (N_STREAMS,) flags, 1 = reset that stream's states now.
@@ -315,7 +316,7 @@ def streams_to_reset(
     seen, ok = stream_health(blocks, nb_, accepted)
     out = np.zeros(N_STREAMS, np.int64)
     for s in range(N_STREAMS):
-        if s == S_NHC or not seen[s] or ok[s] or reject_since[s] < 0:
+        if s == keep or not seen[s] or ok[s] or reject_since[s] < 0:
             continue
         if (t_ns - reject_since[s]) * 1e-9 >= timeout_s:
             out[s] = 1
@@ -463,7 +464,7 @@ def reset_timed_out(
     """Reset the covariance of every stream rejected for the timeout or longer
     (``streams_to_reset``, ``inflate_for_stream`` with ``scale``), each with a ``gate_reset``
     event; True if any was."""
-    reset = streams_to_reset(t_ns, g.blocks, g.nb, g.accepted, reject_since, cfg.timeout_s)
+    reset = streams_to_reset(t_ns, g.blocks, g.nb, g.accepted, reject_since, cfg.timeout_s, S_NHC)
     for st in range(N_STREAMS):
         if reset[st]:
             big = inflate_for_stream(P, st, g.nu, g.blocks, g.nb, scale, cfg)

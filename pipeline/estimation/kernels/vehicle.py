@@ -411,7 +411,7 @@ def gate_with_reset(
         gate_blocks(ms.nu[g], ms.S[g], blocks, nb_, vs.gate, gw.nis, gw.accepted, gw.work)
         if attempt == 1:
             break
-        reset = streams_to_reset(t, blocks, nb_, gw.accepted, gw.reject_since, vs.timeout_s)
+        reset = streams_to_reset(t, blocks, nb_, gw.accepted, gw.reject_since, vs.timeout_s, S_YAW)
         if reset.sum() == 0:
             break
         for s in range(reset.size):

@@ -37,6 +37,6 @@ def test_a_step_rejected_on_most_satellites_resets_after_the_timeout() -> None:
     since = np.full(len(stream_health(blocks, 8, accepted)[0]), -1, dtype=np.int64)
     for k in range(6):  # 1 Hz epochs, timeout 5 s
         t = k * NS
-        reset = streams_to_reset(t, blocks, 8, accepted, since, 5.0)
+        reset = streams_to_reset(t, blocks, 8, accepted, since, 5.0, -1)
         assert reset[S_OBS] == (1 if k == 5 else 0)
         update_reject_since(t, blocks, 8, accepted, since)
