@@ -15,28 +15,16 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 import pyarrow as pa
 
 from navreplay.ingest.schema import FixType
 from navreplay.pipeline.estimation.config import GnssNoiseParams, StepParams
+from navreplay.pipeline.estimation.core.tables import B8, Event, _is_null, float_column
 from navreplay.pipeline.estimation.models import measurement as me
 from navreplay.pipeline.nav.earth import F64, I64
 
-B8 = npt.NDArray[np.bool_]
 _IMU_COLS = ("acc_x_mps2", "acc_y_mps2", "acc_z_mps2", "gyro_x_radps", "gyro_y_radps")
 IMU_COLUMNS = (*_IMU_COLS, "gyro_z_radps")
-
-
-@dataclass(frozen=True)
-class Event:
-    """A data or filter event of a run (see ``outputs.events_table``)."""
-
-    t_ns: int
-    kind: str
-    stream: str = ""
-    sv: str = ""
-    value: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -69,25 +57,6 @@ class ObsData:
     obs: F64
     events: tuple[Event, ...] = ()
     masked: int = 0
-
-
-def float_column(table: pa.Table, name: str, default: float = math.nan) -> F64:
-    """A float column as float64 numpy (null -> ``default``; absent -> all ``default``)."""
-    if name not in table.column_names:
-        return np.full(table.num_rows, default)
-    arr = table.column(name).to_numpy(zero_copy_only=False)
-    out = np.asarray(arr, dtype=np.float64)
-    nulls = table.column(name).is_null().to_numpy(zero_copy_only=False)
-    if nulls.any():
-        out = out.copy()
-        out[nulls] = default
-    return out
-
-
-def _is_null(table: pa.Table, name: str) -> B8:
-    if name not in table.column_names:
-        return np.ones(table.num_rows, dtype=bool)
-    return np.asarray(table.column(name).is_null().to_numpy(zero_copy_only=False), dtype=bool)
 
 
 def prepare_imu(table: pa.Table, step: StepParams) -> ImuData:

@@ -20,11 +20,10 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 import pyarrow as pa
-from scipy.stats import chi2
 
 from navreplay.pipeline.estimation.contract import RunMetrics
+from navreplay.pipeline.estimation.core.consistency import nees, nis_by_stream
 from navreplay.pipeline.estimation.models import measurement as me
 from navreplay.pipeline.estimation.outage_metrics import outage_windows
 from navreplay.pipeline.estimation.replay import RunResult
@@ -35,41 +34,6 @@ from navreplay.pipeline.nav.earth import F64
 
 def _rms(a: F64) -> float | None:
     return float(np.sqrt(np.mean(np.square(a)))) if a.size else None
-
-
-def nees(err: F64, P: F64) -> F64:
-    """Per-row NEES ``e^T P^-1 e`` for errors (K, k) and covariances (K, k, k)."""
-    sol = np.linalg.solve(P, err[:, :, None])[:, :, 0]
-    return np.asarray(np.sum(err * sol, axis=1))
-
-
-def nis_by_stream(
-    inn_i: npt.NDArray[np.int64], inn_f: F64, stream_names: Sequence[str]
-) -> dict[str, dict[str, Any]]:
-    """Per stream of an innovation log (columns t_ns, stream, sv, dim, accepted / nis, ...):
-    count, mean NIS, mean dof, the 95 % interval of the mean, rejections.
-
-    Shared by every filter family (INS, vehicle, cascaded): stream codes index
-    ``stream_names``; streams without a block are left out.
-    """
-    out: dict[str, dict[str, Any]] = {}
-    for code, name in enumerate(stream_names):
-        sel = inn_i[:, 1] == code
-        k = int(sel.sum())
-        if k == 0:
-            continue
-        dof = int(inn_i[sel, 3].sum())
-        mean = float(inn_f[sel, 0].mean())
-        lo, hi = chi2.ppf(0.025, dof) / k, chi2.ppf(0.975, dof) / k
-        out[name] = {
-            "count": k,
-            "nis_mean": mean,
-            "dof_mean": dof / k,
-            "nis_bounds_95": [float(lo), float(hi)],
-            "consistent": bool(lo <= mean <= hi),
-            "rejected": int((inn_i[sel, 4] == 0).sum()),
-        }
-    return out
 
 
 def nis_summary(result: RunResult) -> dict[str, dict[str, Any]]:

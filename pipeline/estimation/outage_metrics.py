@@ -13,9 +13,10 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from navreplay.pipeline.estimation.core.tables import truth_at
 from navreplay.pipeline.estimation.models import ins
 from navreplay.pipeline.estimation.replay import RunResult
-from navreplay.pipeline.estimation.truth import error_states, truth_at
+from navreplay.pipeline.estimation.truth import error_states
 from navreplay.pipeline.estimation.windows import (
     ErrorTrack,
     Origin,

@@ -25,16 +25,13 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 
+from navreplay.pipeline.estimation.core import gating as gt
+from navreplay.pipeline.estimation.core import linalg as la
+from navreplay.pipeline.estimation.core import runlog as rl
+from navreplay.pipeline.estimation.core.runlog import GatedBlocks, RunLog
 from navreplay.pipeline.estimation.kernels import common as cm
 from navreplay.pipeline.estimation.kernels.ekf import ekf_prepare
-from navreplay.pipeline.estimation.kernels.records import (
-    Epoch,
-    GatedBlocks,
-    RowPrediction,
-    RunLog,
-    Schedule,
-    Settings,
-)
+from navreplay.pipeline.estimation.kernels.records import Epoch, RowPrediction, Schedule, Settings
 from navreplay.pipeline.estimation.kernels.unscented import sigma_h
 from navreplay.pipeline.estimation.models import ins, ins_errors
 from navreplay.pipeline.estimation.models import measurement as me
@@ -123,8 +120,8 @@ class _Run:
         P = np.ascontiguousarray(kf.P)
         status = self.finish(int(stop[me.ST_T]), stop, X, P, P, np.ones(self.cfg.n))
         kf.P = P
-        if status == cm.STATUS_OK:
-            self.log.counts[cm.CNT_STOP] = k + 1
+        if status == gt.STATUS_OK:
+            self.log.counts[rl.CNT_STOP] = k + 1
         return status
 
     def layout(self, stop: I64) -> tuple[int, int]:
@@ -137,13 +134,13 @@ class _Run:
     def finish(self, t: int, stop: I64, X: F64, P: F64, P_err: F64, scale: F64) -> int:
         """Positive definiteness, the NaN barrier and the output of one stop."""
         log = self.log
-        ok = cm.keep_pd(P, self.cfg.n, self.L, t, log.ev_i, log.ev_f, log.counts)
+        ok = gt.keep_pd(P, self.cfg.n, self.L, t, log.ev_i, log.ev_f, log.counts)
         status = int(cm.check_state(X, P, scale, self.cfg)) if ok else 3
-        if status != cm.STATUS_OK:
-            return int(cm.fail(t, status, log.ev_i, log.ev_f, log.counts))
+        if status != gt.STATUS_OK:
+            return int(gt.fail(t, status, log.ev_i, log.ev_f, log.counts))
         if stop[me.ST_OUT] > 0:
-            cm.record_output(t, X, P_err, log)
-        return cm.STATUS_OK
+            gt.record_output(t, X, P_err, log)
+        return gt.STATUS_OK
 
 
 def run_ekf_filterpy(
@@ -154,7 +151,7 @@ def run_ekf_filterpy(
     n, buf = cfg.n, run.buf
     ekf = run.error_filter(ExtendedKalmanFilter, P0)
     X = x0.copy()
-    cm.record_output(sched.t0, X, ekf.P, log)
+    gt.record_output(sched.t0, X, ekf.P, log)
     for k, stop, t in run.stops():
         run.predict_nominal(X, t)
         ekf.F, ekf.Q = run.Phi, run.Qd
@@ -169,9 +166,9 @@ def run_ekf_filterpy(
             )
             run.inject(ekf, X)
         status = run.finish_kf(ekf, k, stop, X)
-        if status != cm.STATUS_OK:
+        if status != gt.STATUS_OK:
             return status
-    return cm.STATUS_OK
+    return gt.STATUS_OK
 
 
 def run_ukf_filterpy(
@@ -194,7 +191,7 @@ def run_ukf_filterpy(
     ukf.P = P0 * np.outer(sc, sc)
     Phi, Qd = np.empty((n, n)), np.empty((n, n))
     X = np.empty(ins.FULL_DIM)
-    cm.record_output(sched.t0, x0, P0, log)
+    gt.record_output(sched.t0, x0, P0, log)
 
     def fx(s: F64, dt: float, t_end: int, q_old: F64, q_new: F64) -> F64:
         Xs = np.empty(ins.FULL_DIM)
@@ -216,7 +213,7 @@ def run_ukf_filterpy(
         q_ref = q_new
         run.advance(i_next, t)
         P = np.ascontiguousarray(ukf.P)
-        ok = cm.keep_pd(P, n, run.L, t, log.ev_i, log.ev_f, log.counts)
+        ok = gt.keep_pd(P, n, run.L, t, log.ev_i, log.ev_f, log.counts)
         ukf.P = P
         m, nb_ = run.layout(stop)
         if ok and m > 0:
@@ -226,10 +223,10 @@ def run_ukf_filterpy(
         P = np.ascontiguousarray(ukf.P)
         status = run.finish(t, stop, X, P, P / np.outer(sc, sc), sc) if ok else 3
         ukf.P = P
-        if status != cm.STATUS_OK:
-            return status if ok else int(cm.fail(t, status, log.ev_i, log.ev_f, log.counts))
-        log.counts[cm.CNT_STOP] = k + 1
-    return cm.STATUS_OK
+        if status != gt.STATUS_OK:
+            return status if ok else int(gt.fail(t, status, log.ev_i, log.ev_f, log.counts))
+        log.counts[rl.CNT_STOP] = k + 1
+    return gt.STATUS_OK
 
 
 def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb_: int) -> None:
@@ -259,8 +256,8 @@ def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb
         dz = Z - zp
         S = np.ascontiguousarray(dz.T @ (wc[:, None] * dz) + np.diag(r))
         nu = z - zp
-        g = GatedBlocks(nu, cm.gating_cov(S, dr, m), blocks, nb_, nis, accepted)
-        cm.gate_blocks(nu, g.S, blocks, nb_, cfg.gate, nis, accepted, np.empty((3, 6)))
+        g = GatedBlocks(nu, gt.gating_cov(S, dr, m), blocks, nb_, nis, accepted)
+        gt.gate_blocks(nu, g.S, blocks, nb_, cfg.gate, nis, accepted, np.empty((3, 6)))
         if attempt == 1:
             break
         P = np.ascontiguousarray(ukf.P)
@@ -282,5 +279,5 @@ def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb
 
     ukf.update(z[a], R=np.diag(r[a]), hx=hx)
     P = np.ascontiguousarray(ukf.P)
-    cm.symmetrize(P, n)
+    la.symmetrize(P, n)
     ukf.P = P

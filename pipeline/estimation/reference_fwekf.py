@@ -16,10 +16,12 @@ from __future__ import annotations
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
+from navreplay.pipeline.estimation.core import gating as gt
+from navreplay.pipeline.estimation.core import runlog as rl
+from navreplay.pipeline.estimation.core.runlog import RunLog
 from navreplay.pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
-from navreplay.pipeline.estimation.kernels import common as cm
 from navreplay.pipeline.estimation.kernels.fwekf import RING_COLS, push_residuals
-from navreplay.pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
+from navreplay.pipeline.estimation.kernels.records import Fading, Schedule, Settings
 from navreplay.pipeline.estimation.models import measurement as me
 from navreplay.pipeline.estimation.reference import _Run
 from navreplay.pipeline.nav.earth import F64, I64
@@ -44,7 +46,7 @@ def run_fwekf_filterpy(
     ring = np.full((int(fz[FZ_WINDOW]), RING_COLS), np.nan)
     n_ring, alpha = 0, 1.0
     out_alpha[0] = alpha
-    cm.record_output(sched.t0, X, kf.P, log)
+    gt.record_output(sched.t0, X, kf.P, log)
     for k, stop, t in run.stops():
         run.predict_nominal(X, t)
         a_k = alpha if stop[me.ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
@@ -62,12 +64,12 @@ def run_fwekf_filterpy(
             n_ring = int(push_residuals(ring, n_ring, buf.rows, buf.nu, buf.S, m))
             rules = fuzzy_rules(fading.rules)
             alpha = float(infer_alpha(*residual_inputs(ring, n_ring), fz, rules))
-        if stop[me.ST_OUT] > 0 and counts[cm.CNT_OUT] < out_alpha.shape[0]:
-            out_alpha[counts[cm.CNT_OUT]] = alpha
+        if stop[me.ST_OUT] > 0 and counts[rl.CNT_OUT] < out_alpha.shape[0]:
+            out_alpha[counts[rl.CNT_OUT]] = alpha
         status = run.finish_kf(kf, k, stop, X)
-        if status != cm.STATUS_OK:
+        if status != gt.STATUS_OK:
             return status
-    return cm.STATUS_OK
+    return gt.STATUS_OK
 
 
 def fuzzy_rules(rules: I64) -> I64:

@@ -25,9 +25,11 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, IMMEstimator
 
-from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.estimation.core import gating as gt
+from navreplay.pipeline.estimation.core import linalg as la
+from navreplay.pipeline.estimation.core import runlog as rl
+from navreplay.pipeline.estimation.core.runlog import RunLog
 from navreplay.pipeline.estimation.kernels import vehicle as kv
-from navreplay.pipeline.estimation.kernels.records import RunLog
 from navreplay.pipeline.estimation.models import vehicle as vm
 from navreplay.pipeline.nav.earth import F64
 
@@ -78,7 +80,7 @@ class _ModelEKF(ExtendedKalmanFilter):  # type: ignore[misc]
             self.F, self.Q = F.copy(), Q.copy()
             super().predict()
         P = np.ascontiguousarray(self.P)
-        cm.symmetrize(P, vm.NX)
+        la.symmetrize(P, vm.NX)
         self.P = P
 
     def update(self, z: Any = None, *args: Any, **kwargs: Any) -> None:
@@ -118,7 +120,7 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
     rows = np.empty((kv.M_MAX, 2), np.int64)
     blocks = np.empty((kv.M_MAX, 4), np.int64)
     ms = kv.model_rows(len(filters))
-    gw = kv.gate_work(cm.N_STREAMS)
+    gw = kv.gate_work(gt.N_STREAMS)
     x, P = x0.copy(), P0.copy()
     kv._record(t0, x, P, aux, log, out_aux)
     t_cur = t0
@@ -169,14 +171,14 @@ def run_vehicle_filterpy(  # noqa: PLR0912, PLR0915 - mirrors kernels.vehicle.ru
         ok = True
         for f in filters:
             Pf = np.ascontiguousarray(f.P, dtype=float)
-            ok = bool(cm.keep_pd(Pf, vm.NX, L, t, ev_i, ev_f, counts)) and ok
+            ok = bool(gt.keep_pd(Pf, vm.NX, L, t, ev_i, ev_f, counts)) and ok
             f.P = Pf
         if not imm_on:
             P = np.asarray(filters[0].P, dtype=float)
         status = int(kv.check(np.ascontiguousarray(x), np.ascontiguousarray(P), vs)) if ok else 3
-        if status != cm.STATUS_OK:
-            return int(cm.fail(t, status, ev_i, ev_f, counts))
+        if status != gt.STATUS_OK:
+            return int(gt.fail(t, status, ev_i, ev_f, counts))
         if stops[k, kv.VS_OUT] > 0:
             kv._record(t, np.ascontiguousarray(x), np.ascontiguousarray(P), aux, log, out_aux)
-        counts[cm.CNT_STOP] = k + 1
-    return cm.STATUS_OK
+        counts[rl.CNT_STOP] = k + 1
+    return gt.STATUS_OK

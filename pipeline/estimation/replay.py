@@ -37,9 +37,12 @@ from navreplay.pipeline.estimation import inputs as inp
 from navreplay.pipeline.estimation.alignment import Alignment, align
 from navreplay.pipeline.estimation.config import FILTER_KINDS, FilterKind, InsFilterParams
 from navreplay.pipeline.estimation.contract import Backend
-from navreplay.pipeline.estimation.kernels import common as cm
-from navreplay.pipeline.estimation.kernels.records import Fading, RunLog, Schedule, Settings
-from navreplay.pipeline.estimation.kernels.unscented import ukf_weights
+from navreplay.pipeline.estimation.core import gating as gt
+from navreplay.pipeline.estimation.core import runlog as rl
+from navreplay.pipeline.estimation.core import tables as tb
+from navreplay.pipeline.estimation.core.runlog import RunLog
+from navreplay.pipeline.estimation.core.unscented import ukf_weights
+from navreplay.pipeline.estimation.kernels.records import Fading, Schedule, Settings
 from navreplay.pipeline.estimation.models import ins, ins_errors
 from navreplay.pipeline.estimation.models import measurement as me
 from navreplay.pipeline.nav.earth import F64, I64
@@ -98,7 +101,7 @@ class RunResult:
     P: F64
     inn_i: I64
     inn_f: F64
-    events: list[inp.Event]
+    events: list[tb.Event]
     alignments: list[Alignment]
     status: str = "ok"
     failure: str | None = None
@@ -254,7 +257,7 @@ def run_filter(
         if initial is None or k_seg > 0:
             al = align(imu_data, seg, fixes, obs, params.init, noise_model, setup.lever_b, setup.n)
         if al is None:
-            events.append(inp.Event(int(imu_data.t_ns[seg[0]]), "no_alignment", "imu"))
+            events.append(tb.Event(int(imu_data.t_ns[seg[0]]), "no_alignment", "imu"))
             continue
         alignments.append(al)
         out, code, t_fail, seg_events, seg_compile_s, alpha = _run_segment(
@@ -265,8 +268,8 @@ def run_filter(
         alphas.append(alpha)
         events += seg_events
         duration += (out[0][-1] - al.t_ns) * 1e-9 if out[0].size else 0.0
-        if code != cm.STATUS_OK:
-            failure = f"{cm.STATUS_TEXT[code]} at t_ns={t_fail}"
+        if code != gt.STATUS_OK:
+            failure = f"{gt.STATUS_TEXT[code]} at t_ns={t_fail}"
             status = "diverged"
             if params.divergence.on_divergence == "raise":
                 raise DivergenceError(
@@ -378,7 +381,7 @@ def _run_segment(
     seg: tuple[int, int],
     meas: _Measurements,
     al: Alignment,
-) -> tuple[tuple[I64, F64, F64, I64, F64], int, int, list[inp.Event], float, F64]:
+) -> tuple[tuple[I64, F64, F64, I64, F64], int, int, list[tb.Event], float, F64]:
     """Run ``kernel`` over the IMU samples ``seg`` of ``imu`` from the alignment ``al``."""
     lo, hi = seg
     imu_t = imu.t_ns[lo:hi]
@@ -420,9 +423,9 @@ def _run_segment(
     out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts = log_
     k_out, k_inn, k_ev = log_.wanted()
     seg_events = [
-        inp.Event(
+        tb.Event(
             int(ev_i[j, 0]),
-            cm.EVENT_NAMES.get(int(ev_i[j, 1]), str(ev_i[j, 1])),
+            gt.EVENT_NAMES.get(int(ev_i[j, 1]), str(ev_i[j, 1])),
             me.STREAM_NAMES[ev_i[j, 2]] if ev_i[j, 2] >= 0 else "",
             me.sv_name(int(ev_i[j, 3])),
             float(ev_f[j]),
@@ -430,4 +433,4 @@ def _run_segment(
         for j in range(k_ev)
     ]
     out = (out_t[:k_out], out_x[:k_out], out_P[:k_out], inn_i[:k_inn], inn_f[:k_inn])
-    return out, int(code), int(counts[cm.CNT_T_FAIL]), seg_events, compile_s, out_alpha[:k_out]
+    return out, int(code), int(counts[rl.CNT_T_FAIL]), seg_events, compile_s, out_alpha[:k_out]

@@ -12,39 +12,13 @@ import numpy as np
 import pyarrow as pa
 from scipy.spatial.transform import Rotation
 
+from navreplay.pipeline.estimation.core.tables import _ANGLES, truth_at
 from navreplay.pipeline.estimation.models import ins
 from navreplay.pipeline.estimation.outputs import BIAS_COLUMNS, CLOCK_COLUMNS
 from navreplay.pipeline.estimation.replay import RunResult
 from navreplay.pipeline.nav.earth import E2, F64, A
 
 _NAV_TRUTH = ("lat_deg", "lon_deg", "alt_m", "vel_n_mps", "vel_e_mps", "vel_d_mps")
-_ANGLES = ("roll_rad", "pitch_rad", "yaw_rad")
-
-
-def truth_at(truth: pa.Table, t_ns: np.ndarray) -> tuple[np.ndarray, dict[str, F64]]:
-    """Truth columns interpolated to ``t_ns`` (only times inside the truth's span).
-
-    Returns:
-        (boolean mask of the usable times, column name -> values at those times); angles
-        are interpolated unwrapped.
-    """
-    tt = np.asarray(truth.column("t_ns").to_numpy(), dtype=np.int64)
-    inside = (t_ns >= tt[0]) & (t_ns <= tt[-1])
-    t = t_ns[inside].astype(np.float64)
-    ttf = tt.astype(np.float64)
-    out: dict[str, F64] = {}
-    for name in truth.column_names:
-        if name == "t_ns":
-            continue
-        col = truth.column(name)
-        if col.null_count == len(col):
-            continue
-        v = np.asarray(col.to_numpy(zero_copy_only=False), dtype=np.float64)
-        if name in _ANGLES:
-            out[name] = np.angle(np.exp(1j * np.interp(t, ttf, np.unwrap(v))))
-        else:
-            out[name] = np.interp(t, ttf, v)
-    return inside, out
 
 
 def error_states(result: RunResult, truth: pa.Table) -> tuple[np.ndarray, F64, list[str]]:

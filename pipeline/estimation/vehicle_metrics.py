@@ -15,10 +15,10 @@ import numpy as np
 import pyarrow as pa
 
 from navreplay.pipeline.estimation.contract import RunMetrics
+from navreplay.pipeline.estimation.core.consistency import nis_by_stream
+from navreplay.pipeline.estimation.core.tables import truth_at
 from navreplay.pipeline.estimation.kernels import vehicle as kv
-from navreplay.pipeline.estimation.metrics import nis_by_stream
 from navreplay.pipeline.estimation.models import vehicle as vm
-from navreplay.pipeline.estimation.truth import truth_at
 from navreplay.pipeline.estimation.vehicle_replay import VehicleRunResult
 from navreplay.pipeline.nav.earth import F64
 

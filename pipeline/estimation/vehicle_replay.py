@@ -29,11 +29,12 @@ import pyarrow as pa
 from scipy.stats import chi2
 
 from navreplay.pipeline.errors import DivergenceError
-from navreplay.pipeline.estimation import inputs as inp
 from navreplay.pipeline.estimation.contract import Backend
-from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.estimation.core import gating as gt
+from navreplay.pipeline.estimation.core import runlog as rl
+from navreplay.pipeline.estimation.core import tables as tb
+from navreplay.pipeline.estimation.core.runlog import RunLog
 from navreplay.pipeline.estimation.kernels import vehicle as kv
-from navreplay.pipeline.estimation.kernels.records import RunLog
 from navreplay.pipeline.estimation.models import vehicle as vm
 from navreplay.pipeline.estimation.replay import ReplayInputError
 from navreplay.pipeline.estimation.vehicle_config import VehicleFilterParams
@@ -68,7 +69,7 @@ class VehicleRunResult:
     origin: LocalFrame
     inn_i: I64
     inn_f: F64
-    events: list[inp.Event]
+    events: list[tb.Event]
     steer_source: str
     init: dict[str, Any] = field(default_factory=dict)
     status: str = "ok"
@@ -87,7 +88,7 @@ class VehicleData:
     fix: F64
     origin: LocalFrame
     steer_source: str
-    events: tuple[inp.Event, ...]
+    events: tuple[tb.Event, ...]
 
 
 def virtual_steering(v_mps: F64, r_radps: F64, vp: F64) -> tuple[F64, F64]:
@@ -124,13 +125,13 @@ def prepare(tables: Mapping[str, pa.Table], params: VehicleFilterParams, name: s
             raise ReplayInputError(f"filter {name} needs the {need!r} table, which is absent")
     vt = tables["vehicle"]
     t = np.asarray(vt.column("t_ns").to_numpy(), dtype=np.int64)
-    speed = inp.float_column(vt, "speed_mps")
-    steer = inp.float_column(vt, "steer_rad")
-    yaw = inp.float_column(vt, "yaw_rate_radps")
-    events: list[inp.Event] = []
+    speed = tb.float_column(vt, "speed_mps")
+    steer = tb.float_column(vt, "steer_rad")
+    yaw = tb.float_column(vt, "yaw_rate_radps")
+    events: list[tb.Event] = []
     ok = np.isfinite(speed) & (np.isfinite(steer) | np.isfinite(yaw))
     for k in np.flatnonzero(~ok):
-        events.append(inp.Event(int(t[k]), "skip_invalid", "vehicle"))
+        events.append(tb.Event(int(t[k]), "skip_invalid", "vehicle"))
     order = np.argsort(t[ok], kind="stable")
     t, speed, steer, yaw = t[ok][order], speed[ok][order], steer[ok][order], yaw[ok][order]
     keep = np.r_[True, np.diff(t) > 0]
@@ -154,20 +155,20 @@ def prepare(tables: Mapping[str, pa.Table], params: VehicleFilterParams, name: s
 def _fixes(table: pa.Table, params: VehicleFilterParams) -> tuple[I64, F64, LocalFrame]:
     g = params.gnss
     t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)
-    lat, lon = inp.float_column(table, "lat_deg"), inp.float_column(table, "lon_deg")
-    fix_type = inp.float_column(table, "fix_type", 0.0)
+    lat, lon = tb.float_column(table, "lat_deg"), tb.float_column(table, "lon_deg")
+    fix_type = tb.float_column(table, "fix_type", 0.0)
     pos_ok = np.isfinite(lat) & np.isfinite(lon) & (fix_type >= 2)
-    vn, ve = inp.float_column(table, "vel_n_mps"), inp.float_column(table, "vel_e_mps")
+    vn, ve = tb.float_column(table, "vel_n_mps"), tb.float_column(table, "vel_e_mps")
     vel_ok = np.isfinite(vn) & np.isfinite(ve) & (fix_type >= 2)
     if not pos_ok.any():
         raise ReplayInputError("the gnss table has no usable position fix")
     k0 = int(np.flatnonzero(pos_ok)[0])
-    alt = inp.float_column(table, "alt_m")
+    alt = tb.float_column(table, "alt_m")
     origin = LocalFrame(
         float(lat[k0]), float(lon[k0]), float(alt[k0]) if np.isfinite(alt[k0]) else 0.0
     )
     n, e, _ = origin.to_ned(lat, lon, origin.alt_m)
-    h_acc, s_acc = inp.float_column(table, "h_acc_m"), inp.float_column(table, "speed_acc_mps")
+    h_acc, s_acc = tb.float_column(table, "h_acc_m"), tb.float_column(table, "speed_acc_mps")
     sig_pos = np.maximum(
         np.where(np.isfinite(h_acc), h_acc, g.pos_sigma_default_m), g.pos_sigma_floor_m
     )
@@ -340,9 +341,9 @@ def run_vehicle_filter(
     out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts = log_
     k_out, k_inn, k_ev = log_.wanted()
     events = list(data.events) + [
-        inp.Event(
+        tb.Event(
             int(ev_i[j, 0]),
-            cm.EVENT_NAMES.get(int(ev_i[j, 1]), str(ev_i[j, 1])),
+            gt.EVENT_NAMES.get(int(ev_i[j, 1]), str(ev_i[j, 1])),
             kv.STREAM_NAMES[ev_i[j, 2]] if ev_i[j, 2] >= 0 else "",
             "",
             float(ev_f[j]),
@@ -351,8 +352,8 @@ def run_vehicle_filter(
     ]
     events.sort(key=lambda e: e.t_ns)
     status, failure = "ok", None
-    if code != cm.STATUS_OK:
-        failure = f"{cm.STATUS_TEXT[int(code)]} at t_ns={int(counts[cm.CNT_T_FAIL])}"
+    if code != gt.STATUS_OK:
+        failure = f"{gt.STATUS_TEXT[int(code)]} at t_ns={int(counts[rl.CNT_T_FAIL])}"
         status = "diverged"
         if params.on_divergence == "raise":
             raise DivergenceError(f"filter {name} ({backend}) diverged: {failure}")

@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from navreplay.pipeline.estimation.config import FiltersParams
 from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.filters_config import FiltersParams
 from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS
 from navreplay.pipeline.estimation.vehicle_metrics import errors, per_band
 from navreplay.pipeline.estimation.vehicle_replay import run_vehicle_filter

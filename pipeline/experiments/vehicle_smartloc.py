@@ -33,8 +33,8 @@ import numpy as np
 import pyarrow as pa
 
 from navreplay.ingest.schema import FixType, from_columns
-from navreplay.pipeline.estimation.config import FiltersParams
 from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.filters_config import FiltersParams
 from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS, VehicleFilterParams
 from navreplay.pipeline.estimation.vehicle_metrics import errors, per_band, summarize
 from navreplay.pipeline.estimation.vehicle_replay import run_vehicle_filter
@@ -187,7 +187,7 @@ def smartloc_rows(
 
 def errors_of_fixes(fixes: pa.Table, truth: pa.Table) -> np.ndarray:
     """Horizontal error of the least-squares fixes against the truth, m."""
-    from navreplay.pipeline.estimation.truth import truth_at
+    from navreplay.pipeline.estimation.core.tables import truth_at
     from navreplay.pipeline.nav.local import LocalFrame
 
     t = np.asarray(fixes.column("t_ns").to_numpy(), dtype=np.int64)

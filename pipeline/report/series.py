@@ -17,7 +17,7 @@ from typing import Literal
 import numpy as np
 import pyarrow as pa
 
-from navreplay.pipeline.estimation.truth import truth_at
+from navreplay.pipeline.estimation.core.tables import truth_at
 from navreplay.pipeline.nav.earth import E2, F64, A
 from navreplay.pipeline.report.inputs import Run, column, times_ns
 

@@ -64,9 +64,7 @@ from navreplay.pipeline.estimation.cascaded.model import (
     model_noise,
 )
 from navreplay.pipeline.estimation.cascaded.numerics import check_filter
-from navreplay.pipeline.estimation.kernels.common import (
-    CNT_OUT,
-    CNT_STOP,
+from navreplay.pipeline.estimation.core.gating import (
     STATUS_INDEFINITE,
     STATUS_LIMIT,
     STATUS_OK,
@@ -74,7 +72,7 @@ from navreplay.pipeline.estimation.kernels.common import (
     keep_pd,
     record_event,
 )
-from navreplay.pipeline.estimation.kernels.records import RunLog
+from navreplay.pipeline.estimation.core.runlog import CNT_OUT, CNT_STOP, RunLog
 from navreplay.pipeline.nav.earth import F64, I64
 
 # measurement streams (innovations.parquet ``stream``)

@@ -32,14 +32,15 @@ from navreplay.pipeline.estimation.cascaded_config import (
     NAV_STATE_NAMES,
     CascadedFilterParams,
 )
-from navreplay.pipeline.estimation.inputs import Event
-from navreplay.pipeline.estimation.kernels import common as cm
-from navreplay.pipeline.estimation.kernels.records import RunLog
-from navreplay.pipeline.estimation.kernels.unscented import ukf_weights
+from navreplay.pipeline.estimation.core import gating as gt
+from navreplay.pipeline.estimation.core import runlog as rl
+from navreplay.pipeline.estimation.core.runlog import RunLog
+from navreplay.pipeline.estimation.core.tables import Event
+from navreplay.pipeline.estimation.core.unscented import ukf_weights
 from navreplay.pipeline.nav.earth import F64, I64
 
 _EST_CODE = {"ekf": EST_EKF, "ukf": EST_UKF, "hybrid": EST_HYBRID}
-EVENT_NAMES = {**cm.EVENT_NAMES, cs.EV_GAP: "input_gap"}
+EVENT_NAMES = {**gt.EVENT_NAMES, cs.EV_GAP: "input_gap"}
 _NAN4 = np.full(cs.VEH_COLS, math.nan)
 
 
@@ -148,11 +149,11 @@ class CascadeState:
         self.out_t = np.zeros(capacity, np.int64)
         self.out_x = np.zeros((capacity, 2 * NX))
         self.out_P = np.zeros((capacity, 2, NX, NX))
-        self.inn_i = np.zeros((n_inn, cm.INN_I_COLS), np.int64)
-        self.inn_f = np.zeros((n_inn, cm.INN_F_COLS))
+        self.inn_i = np.zeros((n_inn, rl.INN_I_COLS), np.int64)
+        self.inn_f = np.zeros((n_inn, rl.INN_F_COLS))
         self.ev_i = np.zeros((n_ev, 4), np.int64)
         self.ev_f = np.zeros(n_ev)
-        self.counts = np.zeros(cm.CNT_DIM, np.int64)
+        self.counts = np.zeros(rl.CNT_DIM, np.int64)
         self.log = RunLog(self.out_t, self.out_x, self.out_P, self.inn_i, self.inn_f, self.ev_i,
                           self.ev_f, self.counts)  # fmt: skip
 
@@ -181,7 +182,7 @@ class CascadeState:
             PipelineError: the run wanted more rows than its logs hold (the capacity is sized
                 from the samples, so this is a bug, never a silent truncation).
         """
-        k_out, k_inn, k_ev = (int(self.counts[c]) for c in (cm.CNT_OUT, cm.CNT_INN, cm.CNT_EV))
+        k_out, k_inn, k_ev = (int(self.counts[c]) for c in (rl.CNT_OUT, rl.CNT_INN, rl.CNT_EV))
         have = (self.out_t.size, self.inn_i.shape[0], self.ev_i.shape[0])
         if k_out > have[0] or k_inn > have[1] or k_ev > have[2]:
             raise PipelineError(
@@ -200,8 +201,8 @@ class CascadeState:
         ]
         t = self.out_t[:k_out].copy()
         failure = None
-        if status != cm.STATUS_OK:
-            failure = f"{cm.STATUS_TEXT[status]} at t_ns={int(self.counts[cm.CNT_T_FAIL])}"
+        if status != gt.STATUS_OK:
+            failure = f"{gt.STATUS_TEXT[status]} at t_ns={int(self.counts[rl.CNT_T_FAIL])}"
         return CascadedResult(
             filter=self.setup.name,
             backend=backend,
@@ -211,7 +212,7 @@ class CascadeState:
             inn_i=self.inn_i[:k_inn].copy(),
             inn_f=self.inn_f[:k_inn].copy(),
             events=events,
-            status="ok" if status == cm.STATUS_OK else "diverged",
+            status="ok" if status == gt.STATUS_OK else "diverged",
             failure=failure,
             runtime_s=runtime_s,
             duration_s=float((t[-1] - t[0]) * 1e-9) if t.size else 0.0,
@@ -230,7 +231,7 @@ class StepperBase:
     def __init__(self, setup: CascadeSetup, capacity: int, n_gps: int = 0) -> None:
         self.setup = setup
         self.state = CascadeState(setup, capacity, n_gps)
-        self.status = cm.STATUS_OK
+        self.status = gt.STATUS_OK
         self.wall = 0.0
 
     @property
@@ -239,7 +240,7 @@ class StepperBase:
 
     @property
     def ok(self) -> bool:
-        return self.status == cm.STATUS_OK
+        return self.status == gt.STATUS_OK
 
     def set_command(self, u: float) -> None:
         self.state.mem[cs.M_CMD] = u
@@ -249,7 +250,7 @@ class StepperBase:
 
     def _set_status(self, status: int) -> None:
         self.status = status
-        if status != cm.STATUS_OK:
+        if status != gt.STATUS_OK:
             raise_if_diverged(self.setup, self.state.result(self.backend, status, 0.0))
 
 
@@ -270,7 +271,7 @@ class NumbaStepper(StepperBase):
         self._call(t_ns, _NAN4, gps, True)
 
     def _call(self, t_ns: int, veh: F64, gps: F64, nav_only: bool) -> None:
-        if self.status != cm.STATUS_OK:
+        if self.status != gt.STATUS_OK:
             return
         t0 = time.perf_counter()
         if not nav_only:

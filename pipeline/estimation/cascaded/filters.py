@@ -77,20 +77,22 @@ from navreplay.pipeline.estimation.cascaded.numerics import (
     reset_observed,
     stream_resets,
 )
-from navreplay.pipeline.estimation.kernels.common import (
+from navreplay.pipeline.estimation.core.gating import (
     EV_RESET,
     accepted_rows,
-    cho_solve,
-    cholesky,
     gate_blocks,
-    innovation_cov,
-    propagate_cov,
     record_event,
     record_innovations,
 )
-from navreplay.pipeline.estimation.kernels.ekf import joseph_update
-from navreplay.pipeline.estimation.kernels.records import GatedBlocks, RunLog
-from navreplay.pipeline.estimation.kernels.unscented import cross_cov, draw_sigmas
+from navreplay.pipeline.estimation.core.linalg import (
+    cho_solve,
+    cholesky,
+    innovation_cov,
+    joseph_update,
+    propagate_cov,
+)
+from navreplay.pipeline.estimation.core.runlog import GatedBlocks, RunLog
+from navreplay.pipeline.estimation.core.unscented import cross_cov, draw_sigmas
 from navreplay.pipeline.nav.earth import F64, I64
 
 EST_EKF, EST_UKF, EST_HYBRID = 0, 1, 2

@@ -28,7 +28,7 @@ from navreplay.pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, 
 from navreplay.pipeline.estimation.cascaded.outputs import STATE_COLUMNS
 from navreplay.pipeline.estimation.cascaded_config import ConvergenceBand
 from navreplay.pipeline.estimation.contract import RunMetrics
-from navreplay.pipeline.estimation.metrics import nis_by_stream
+from navreplay.pipeline.estimation.core.consistency import nis_by_stream
 from navreplay.pipeline.nav.earth import F64
 from navreplay.pipeline.nav.local import LocalFrame
 

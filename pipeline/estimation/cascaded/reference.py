@@ -50,7 +50,8 @@ from navreplay.pipeline.estimation.cascaded.model import (
     model_noise,
     wrap_pi,
 )
-from navreplay.pipeline.estimation.kernels import common as cm
+from navreplay.pipeline.estimation.core import gating as gt
+from navreplay.pipeline.estimation.core import runlog as rl
 from navreplay.pipeline.nav.earth import F64
 
 
@@ -213,7 +214,7 @@ class FilterpyStepper(StepperBase):
         if dt <= 0.0:
             return
         if dt > s.gap_s:
-            cm.record_event(st.ev_i, st.ev_f, st.counts, t_ns, cs.EV_GAP, -1, -1, dt)
+            gt.record_event(st.ev_i, st.ev_f, st.counts, t_ns, cs.EV_GAP, -1, -1, dt)
         n_sub = max(1, math.ceil(dt / s.max_step_s - 1e-9))
         u = st.mem[cs.M_RADAR : cs.M_GYRO + 1].copy()
         for _ in range(n_sub):
@@ -238,7 +239,7 @@ class FilterpyStepper(StepperBase):
 
     def nav_epoch(self, t_ns: int, gps: F64) -> None:
         """A GPS fix between vehicle samples (``cascade_sample`` with ``nav_only``)."""
-        if self.status != cm.STATUS_OK or not self.state.imem[cs.I_STARTED]:
+        if self.status != gt.STATUS_OK or not self.state.imem[cs.I_STARTED]:
             return
         self._nav_predict(t_ns)
         ok = self.nav.update(t_ns, gps, self.state)
@@ -246,11 +247,11 @@ class FilterpyStepper(StepperBase):
 
     def _fail(self, t_ns: int) -> int:
         st = self.state
-        return int(cm.fail(t_ns, cm.STATUS_INDEFINITE, st.ev_i, st.ev_f, st.counts))
+        return int(gt.fail(t_ns, gt.STATUS_INDEFINITE, st.ev_i, st.ev_f, st.counts))
 
     def sample(self, t_ns: int, veh: F64, gps: F64) -> None:
         """``cascade.cascade_sample`` on filterpy."""
-        if self.status != cm.STATUS_OK:
+        if self.status != gt.STATUS_OK:
             return
         t0 = time.perf_counter()
         st = self.state
@@ -271,10 +272,10 @@ class FilterpyStepper(StepperBase):
         z2 = np.array([gyro - x1[NAV_GB], radar - x1[NAV_RB], float(veh[cs.V_POT])])
         ok = ok and self.ctl.update(t_ns, z2, st)
         self._set_status(self._finish(t_ns) if ok else self._fail(t_ns))
-        if self.status == cm.STATUS_OK:
-            k = int(st.counts[cm.CNT_OUT])
+        if self.status == gt.STATUS_OK:
+            k = int(st.counts[rl.CNT_OUT])
             if k < st.out_t.size:
                 st.out_t[k], st.out_x[k], st.out_P[k] = t_ns, st.x, st.P
-            st.counts[cm.CNT_OUT] = k + 1
-            st.counts[cm.CNT_STOP] += 1
+            st.counts[rl.CNT_OUT] = k + 1
+            st.counts[rl.CNT_STOP] += 1
         self.wall += time.perf_counter() - t0

@@ -19,33 +19,28 @@ from __future__ import annotations
 import numpy as np
 
 from navreplay.pipeline._jit import njit
-from navreplay.pipeline.estimation.kernels.common import (
-    CNT_STOP,
+from navreplay.pipeline.estimation.core.gating import (
     STATUS_INDEFINITE,
     STATUS_OK,
-    check_state,
-    cho_solve,
-    cholesky,
-    close_gating,
-    epoch_buffers,
     fail,
     gate_blocks,
     gating_cov,
-    innovation_cov,
     keep_pd,
-    mat_mul_into,
-    propagate_cov,
     record_output,
+)
+from navreplay.pipeline.estimation.core.linalg import (
+    innovation_cov,
+    joseph_update,
+    propagate_cov,
+)
+from navreplay.pipeline.estimation.core.runlog import CNT_STOP, GatedBlocks, RunLog
+from navreplay.pipeline.estimation.kernels.common import (
+    check_state,
+    close_gating,
+    epoch_buffers,
     reset_timed_out,
 )
-from navreplay.pipeline.estimation.kernels.records import (
-    Epoch,
-    EpochBuffers,
-    GatedBlocks,
-    RunLog,
-    Schedule,
-    Settings,
-)
+from navreplay.pipeline.estimation.kernels.records import Epoch, EpochBuffers, Schedule, Settings
 from navreplay.pipeline.estimation.models.ins import (
     ImuSpan,
     Stepping,
@@ -63,7 +58,7 @@ from navreplay.pipeline.estimation.models.measurement import (
     epoch_z,
     gate_shift,
 )
-from navreplay.pipeline.nav.earth import F64, I64
+from navreplay.pipeline.nav.earth import F64
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -112,55 +107,6 @@ def ekf_prepare(
         if attempt == 1 or not reset_timed_out(t_ns, P, g, buf.reject_since, ones, cfg, log):
             break
     return close_gating(t_ns, g, gate, buf, log)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def joseph_update(
-    P: F64, n: int, H: F64, S: F64, r: F64, nu: F64, acc_rows: I64, ma: int
-) -> tuple[F64, bool]:
-    """Kalman update of the accepted rows in Joseph form; returns (dx, ok).
-
-    ``K = P H^T S^-1`` (by Cholesky), ``P <- (I - K H) P (I - K H)^T + K R K^T``, symmetrized.
-    ``ok`` is False (and nothing changes) if the accepted ``S`` is not positive definite.
-    """
-    Ha = np.empty((ma, n))
-    Sa = np.empty((ma, ma))
-    for i in range(ma):
-        for j in range(n):
-            Ha[i, j] = H[acc_rows[i], j]
-        for j in range(ma):
-            Sa[i, j] = S[acc_rows[i], acc_rows[j]]
-    L = np.empty((ma, ma))
-    dx = np.zeros(n)
-    if not cholesky(Sa, ma, L):
-        return dx, False
-    Kt = np.empty((ma, n))  # (P H^T)^T, then S^-1 (P H^T)^T = K^T
-    mat_mul_into(Ha, P, ma, n, n, Kt)
-    cho_solve(L, ma, Kt, n)
-    for j in range(n):
-        a = 0.0
-        for i in range(ma):
-            a += Kt[i, j] * nu[acc_rows[i]]
-        dx[j] = a
-    A = np.empty((n, n))  # I - K H
-    for i in range(n):
-        for j in range(n):
-            a = 1.0 if i == j else 0.0
-            for k in range(ma):
-                a -= Kt[k, i] * Ha[k, j]
-            A[i, j] = a
-    AP = np.empty((n, n))
-    mat_mul_into(A, P, n, n, n, AP)
-    for i in range(n):
-        for j in range(i, n):
-            a = 0.0
-            for k in range(n):
-                a += AP[i, k] * A[j, k]
-            for k in range(ma):
-                a += Kt[k, i] * r[acc_rows[k]] * Kt[k, j]
-            P[i, j] = a
-            P[j, i] = a
-    return dx, True
 
 
 @njit(cache=True, error_model="numpy")

@@ -45,24 +45,22 @@ import math
 import numpy as np
 
 from navreplay.pipeline._jit import njit
-from navreplay.pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
-from navreplay.pipeline.estimation.kernels.common import (
-    CNT_OUT,
-    CNT_STOP,
+from navreplay.pipeline.estimation.core.gating import (
     STATUS_INDEFINITE,
     STATUS_OK,
-    check_state,
-    epoch_buffers,
     fail,
     keep_pd,
     record_output,
 )
-from navreplay.pipeline.estimation.kernels.ekf import ekf_prepare, joseph_update
+from navreplay.pipeline.estimation.core.linalg import joseph_update
+from navreplay.pipeline.estimation.core.runlog import CNT_OUT, CNT_STOP, RunLog
+from navreplay.pipeline.estimation.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
+from navreplay.pipeline.estimation.kernels.common import check_state, epoch_buffers
+from navreplay.pipeline.estimation.kernels.ekf import ekf_prepare
 from navreplay.pipeline.estimation.kernels.records import (
     Epoch,
     EpochBuffers,
     Fading,
-    RunLog,
     Schedule,
     Settings,
 )

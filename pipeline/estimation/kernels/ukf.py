@@ -41,39 +41,34 @@ from __future__ import annotations
 import numpy as np
 
 from navreplay.pipeline._jit import njit
-from navreplay.pipeline.estimation.kernels.common import (
-    CNT_STOP,
+from navreplay.pipeline.estimation.core.gating import (
     STATUS_INDEFINITE,
     STATUS_OK,
-    check_state,
-    cho_solve,
-    cholesky,
-    close_gating,
-    epoch_buffers,
     fail,
     gate_blocks,
     gating_cov,
     keep_pd,
     record_output,
+)
+from navreplay.pipeline.estimation.core.linalg import cho_solve, cholesky
+from navreplay.pipeline.estimation.core.runlog import CNT_STOP, GatedBlocks, RunLog
+from navreplay.pipeline.estimation.core.unscented import cross_cov, draw_sigmas, unscented_mean_cov
+from navreplay.pipeline.estimation.kernels.common import (
+    check_state,
+    close_gating,
+    epoch_buffers,
     reset_timed_out,
 )
 from navreplay.pipeline.estimation.kernels.records import (
     Epoch,
     EpochBuffers,
-    GatedBlocks,
     RowPrediction,
-    RunLog,
     Schedule,
     Settings,
     SigmaWork,
     UkfState,
 )
-from navreplay.pipeline.estimation.kernels.unscented import (
-    cross_cov,
-    draw_sigmas,
-    sigma_h,
-    unscented_mean_cov,
-)
+from navreplay.pipeline.estimation.kernels.unscented import sigma_h
 from navreplay.pipeline.estimation.models.ins import (
     E_CB,
     FULL_DIM,

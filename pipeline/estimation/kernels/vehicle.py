@@ -35,27 +35,23 @@ from typing import NamedTuple
 import numpy as np
 
 from navreplay.pipeline._jit import njit
-from navreplay.pipeline.estimation.kernels.common import (
-    CNT_OUT,
-    CNT_STOP,
+from navreplay.pipeline.estimation.core.gating import (
     EV_RESET,
     STATUS_INDEFINITE,
     STATUS_LIMIT,
     STATUS_NONFINITE,
     STATUS_OK,
     accepted_rows,
-    cholesky,
     fail,
     gate_blocks,
     keep_pd,
     record_event,
     record_innovations,
     streams_to_reset,
-    symmetrize,
     update_reject_since,
 )
-from navreplay.pipeline.estimation.kernels.ekf import joseph_update
-from navreplay.pipeline.estimation.kernels.records import GatedBlocks, RunLog
+from navreplay.pipeline.estimation.core.linalg import cholesky, joseph_update, symmetrize
+from navreplay.pipeline.estimation.core.runlog import CNT_OUT, CNT_STOP, GatedBlocks, RunLog
 from navreplay.pipeline.estimation.models import vehicle as vm
 from navreplay.pipeline.nav.earth import F64, I64
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import pytest
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.filters_config import FiltersParams
 from navreplay.pipeline.estimation.metrics import compute_metrics
 from navreplay.pipeline.estimation.replay import run_filter
 from navreplay.pipeline.params import load_params

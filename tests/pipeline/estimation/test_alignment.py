@@ -8,7 +8,7 @@ import pyarrow as pa
 from navreplay.ingest.meta import SensorMeta
 from navreplay.pipeline.estimation import inputs as inp
 from navreplay.pipeline.estimation.alignment import align
-from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.filters_config import FiltersParams
 from navreplay.pipeline.estimation.models import ins
 from navreplay.pipeline.estimation.replay import run_filter
 from tests.pipeline.estimation.conftest import Tables, t0_ns, truth_state

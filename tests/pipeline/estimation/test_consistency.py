@@ -28,8 +28,9 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from navreplay.pipeline.estimation.config import FILTER_KINDS, FiltersParams
-from navreplay.pipeline.estimation.metrics import nees
+from navreplay.pipeline.estimation.config import FILTER_KINDS
+from navreplay.pipeline.estimation.core.consistency import nees
+from navreplay.pipeline.estimation.filters_config import FiltersParams
 from navreplay.pipeline.estimation.models import measurement as me
 from navreplay.pipeline.estimation.replay import run_filter
 from navreplay.pipeline.estimation.truth import error_states

@@ -11,7 +11,8 @@ import pytest
 
 from navreplay.ingest.meta import SensorMeta
 from navreplay.pipeline.estimation import inputs as inp
-from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.core import tables as tb
+from navreplay.pipeline.estimation.filters_config import FiltersParams
 from navreplay.pipeline.estimation.replay import RunResult, run_filter
 from navreplay.pipeline.estimation.truth import error_states
 from tests.pipeline.estimation.conftest import seoul, t0_ns
@@ -39,7 +40,7 @@ def errors_and_sigmas(r: RunResult, truth: pa.Table) -> tuple[np.ndarray, np.nda
     return (r.t_ns[inside] - t0) * 1e-9, err, sig
 
 
-def kinds(r: RunResult, kind: str) -> list[inp.Event]:
+def kinds(r: RunResult, kind: str) -> list[tb.Event]:
     return [e for e in r.events if e.kind == kind]
 
 

@@ -9,7 +9,7 @@ import pyarrow as pa
 import pytest
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.filters_config import FiltersParams
 from navreplay.pipeline.estimation.kernels.common import epoch_buffers
 from navreplay.pipeline.estimation.kernels.fwekf import fade_prior, weighted_update
 from navreplay.pipeline.estimation.models import ins

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from navreplay.pipeline.estimation.kernels.common import (
+from navreplay.pipeline.estimation.core.gating import (
     stream_health,
     streams_to_reset,
     update_reject_since,

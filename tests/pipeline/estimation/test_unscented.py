@@ -9,15 +9,15 @@ import pytest
 from filterpy.kalman import KalmanFilter, MerweScaledSigmaPoints
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.config import FiltersParams
-from navreplay.pipeline.estimation.kernels.ekf import joseph_update
-from navreplay.pipeline.estimation.kernels.ukf import _apply_gain
-from navreplay.pipeline.estimation.kernels.unscented import (
+from navreplay.pipeline.estimation.core.linalg import joseph_update
+from navreplay.pipeline.estimation.core.unscented import (
     cross_cov,
     draw_sigmas,
     ukf_weights,
     unscented_mean_cov,
 )
+from navreplay.pipeline.estimation.filters_config import FiltersParams
+from navreplay.pipeline.estimation.kernels.ukf import _apply_gain
 from navreplay.pipeline.estimation.models import ins
 from navreplay.pipeline.estimation.replay import run_filter
 

@@ -34,9 +34,10 @@ from navreplay.pipeline.estimation.cascaded.model import (
     model_f,
     model_params,
 )
-from navreplay.pipeline.estimation.kernels import common as cm
-from navreplay.pipeline.estimation.kernels.records import RunLog
-from navreplay.pipeline.estimation.kernels.unscented import ukf_weights
+from navreplay.pipeline.estimation.core import gating as gt
+from navreplay.pipeline.estimation.core import runlog as rl
+from navreplay.pipeline.estimation.core.runlog import RunLog
+from navreplay.pipeline.estimation.core.unscented import ukf_weights
 
 UT = Unscented(*ukf_weights(NX, 1e-3, 2.0, 0.0))
 GATE = np.array([math.inf, 15.13, 18.42, 21.11])  # chi2(0.9999) by dimension
@@ -53,18 +54,18 @@ def random_cov(rng: np.random.Generator, scale: np.ndarray) -> np.ndarray:
 
 class Logs:
     def __init__(self, n: int = 64) -> None:
-        self.inn_i = np.zeros((n, cm.INN_I_COLS), np.int64)
-        self.inn_f = np.zeros((n, cm.INN_F_COLS))
+        self.inn_i = np.zeros((n, rl.INN_I_COLS), np.int64)
+        self.inn_f = np.zeros((n, rl.INN_F_COLS))
         self.ev_i = np.zeros((n, 4), np.int64)
         self.ev_f = np.zeros(n)
-        self.counts = np.zeros(cm.CNT_DIM, np.int64)
+        self.counts = np.zeros(rl.CNT_DIM, np.int64)
         self.reject_since = -np.ones(5, np.int64)
         none = np.zeros(0, np.int64)
         self.log = RunLog(none, np.zeros((0, 2 * NX)), np.zeros((0, 2, NX, NX)), self.inn_i,
                           self.inn_f, self.ev_i, self.ev_f, self.counts)  # fmt: skip
 
     def kinds(self) -> list[int]:
-        return [int(k) for k in self.ev_i[: self.counts[cm.CNT_EV], 1]]
+        return [int(k) for k in self.ev_i[: self.counts[rl.CNT_EV], 1]]
 
 
 def update(model: int, est: int, t_ns: int, x: np.ndarray, P: np.ndarray, z: np.ndarray,
@@ -155,12 +156,12 @@ def test_an_outlier_is_rejected_and_a_persistent_step_is_followed_after_the_time
     jump = np.array([5.0, 0.0, math.nan])  # 5 m jump, heading not available
     nav_update(est, 0, x, P, jump, logs)
     assert x[NAV_E] == 0.0  # rejected, nothing applied
-    assert logs.kinds() == [cm.EV_REJECT]
+    assert logs.kinds() == [gt.EV_REJECT]
     for k in range(1, 6):  # the same 5 m offset for 1.0 s at 5 Hz: rejected until the timeout
         nav_update(est, k * 200_000_000, x, P, jump, logs)
-    assert cm.EV_RESET in logs.kinds()
+    assert gt.EV_RESET in logs.kinds()
     assert x[NAV_E] == pytest.approx(5.0, abs=0.05)  # followed once reset
-    i = logs.inn_i[: logs.counts[cm.CNT_INN]]
+    i = logs.inn_i[: logs.counts[rl.CNT_INN]]
     assert (i[:, 1] == S_GPS_POS).all()
     assert i[-1, 4] == 1
     assert (i[:-1, 4] == 0).all()
