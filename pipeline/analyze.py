@@ -29,7 +29,7 @@ from navreplay.ingest.config import DatasetConfig
 from navreplay.ingest.tables import params_hash
 from navreplay.ingest.typed import to_plain
 from navreplay.pipeline.errors import DivergenceError, ParamsError, PipelineError
-from navreplay.pipeline.estimation.config import FILTER_KINDS
+from navreplay.pipeline.estimation.ins.config import FILTER_KINDS
 from navreplay.pipeline.params import Params
 from navreplay.pipeline.report.render import RenderedReport
 
@@ -110,8 +110,8 @@ def analyze(
     progress: Progress = lambda _: None,
 ) -> AnalysisResult:
     """Ingest, run and report one log (see the module docstring)."""
-    from navreplay.pipeline.estimation.contract import RunInputs, write_run
-    from navreplay.pipeline.estimation.run import INPUTS
+    from navreplay.pipeline.estimation.core.contract import RunInputs, write_run
+    from navreplay.pipeline.estimation.ins.run import INPUTS
     from navreplay.pipeline.outages.runs import run_scenarios
     from navreplay.pipeline.report.inputs import load_dataset
     from navreplay.pipeline.report.render import render_dataset

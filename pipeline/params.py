@@ -16,10 +16,10 @@ import yaml
 
 from navreplay.ingest.typed import FieldError, load_dataclass, to_plain
 from navreplay.pipeline.errors import ParamsError
-from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS
-from navreplay.pipeline.estimation.config import FILTER_KINDS
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS
+from navreplay.pipeline.estimation.cascaded.config import CASCADED_KINDS
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.ins.config import FILTER_KINDS
+from navreplay.pipeline.estimation.vehicle.config import VEHICLE_FILTERS
 from navreplay.pipeline.experiments.tractor_cascaded.config import TractorExperimentParams
 from navreplay.pipeline.experiments.vehicle_bands_config import VehicleBandsParams
 from navreplay.pipeline.outages.config import OutagesParams

@@ -46,8 +46,8 @@ def groups(names: Sequence[str] | None = None) -> list[tuple[str, ...]]:
     """The filters in compile groups (one compiled kernel each), in family order.
 
     ``names`` restricts them to those filters (unknown names raise ``KeyError``)."""
-    from navreplay.pipeline.estimation.config import FILTER_KINDS
     from navreplay.pipeline.estimation.families import FAMILIES, filter_names
+    from navreplay.pipeline.estimation.ins.config import FILTER_KINDS
 
     known = filter_names()
     wanted = known if names is None else tuple(names)

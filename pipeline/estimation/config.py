@@ -1,333 +1,81 @@
-"""Typed parameters of the INS/GNSS filters: the ``filters.<name>`` sections of params.yaml.
-
-Each filter name of architecture section 3 has one section, an ``InsFilterParams``. The name
-fixes the estimator (``*_ekf*``: error-state EKF, ``*_ukf*``: total-state UKF), the coupling
-(``lc_*``: GNSS fixes, ``tc_*``: pseudoranges and rates) and whether the non-holonomic
-constraint is fused (``*_nhc``); ``FiltersParams`` checks that each section carries the
-sub-sections its name needs (``ukf`` for UKFs, ``nhc`` for ``_nhc`` variants) and no others.
-
-Sensor metadata from the dataset's ``meta.json`` wins over these values: ``sensors.imu_noise``
-replaces ``imu_noise`` and ``sensors.lever_arm_m`` is the antenna lever arm (the params have no
-lever arm; a dataset without one has the antenna at the IMU).
-"""
+"""The ``filters`` section of params.yaml: one typed sub-section per filter of every family."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-from typing import Literal
+from dataclasses import dataclass
 
-from navreplay.ingest.config import ImuNoise
 from navreplay.ingest.typed import FieldError
-from navreplay.pipeline.estimation.core.checks import _positive
-from navreplay.pipeline.estimation.fuzzy import FuzzyParams
-
-Estimator = Literal["ekf", "ukf"]
-Coupling = Literal["loose", "tight"]
+from navreplay.pipeline.estimation.cascaded.config import (
+    CASCADED_KINDS,
+    CascadedFilterParams,
+    check_sections,
+)
+from navreplay.pipeline.estimation.ins.config import FILTER_KINDS, InsFilterParams
+from navreplay.pipeline.estimation.vehicle.config import VehicleFilterParams
 
 
 @dataclass(frozen=True)
-class InitParams:
-    """Initialization and coarse alignment.
+class FiltersParams:
+    """The ``filters`` section: one sub-section per filter of architecture section 3."""
 
-    The filter starts at the first GNSS epoch where the horizontal speed reaches
-    ``align_speed_mps``: heading from the GNSS velocity, roll and pitch from the specific force
-    (corrected by the GNSS-derived acceleration), position and velocity from GNSS. A static
-    period before it (``static_window_s`` of IMU with ``|f| - g`` and ``|w|`` below the
-    thresholds) initializes the gyro bias.
-
-    Attributes:
-        align_speed_mps: minimum horizontal GNSS speed for the heading alignment, m/s.
-        static_window_s: shortest static window used for the gyro-bias estimate, s.
-        static_accel_tol_mps2: static if the specific-force norm stays within this of g.
-        static_gyro_tol_radps: static if the angular-rate norm stays below this.
-        pos_sigma_m: initial position 1-sigma per axis (at least the fix accuracy), m.
-        vel_sigma_mps: initial velocity 1-sigma per axis, m/s.
-        roll_pitch_sigma_rad: initial roll and pitch 1-sigma, rad.
-        yaw_sigma_rad: initial heading 1-sigma, rad.
-        clock_bias_sigma_m: initial receiver clock bias 1-sigma (tight coupling), m.
-        clock_drift_sigma_mps: initial receiver clock drift 1-sigma (tight coupling), m/s.
-    """
-
-    align_speed_mps: float = 2.0
-    static_window_s: float = 2.0
-    static_accel_tol_mps2: float = 0.3
-    static_gyro_tol_radps: float = 0.02
-    pos_sigma_m: float = 3.0
-    vel_sigma_mps: float = 0.3
-    roll_pitch_sigma_rad: float = 0.03
-    yaw_sigma_rad: float = 0.1
-    clock_bias_sigma_m: float = 10.0
-    clock_drift_sigma_mps: float = 1.0
+    lc_ekf: InsFilterParams
+    tc_ekf: InsFilterParams
+    tc_ukf: InsFilterParams
+    lc_ekf_nhc: InsFilterParams
+    tc_ekf_nhc: InsFilterParams
+    tc_ukf_nhc: InsFilterParams
+    fwekf: InsFilterParams
+    vehicle_kinematic: VehicleFilterParams
+    vehicle_dynamic: VehicleFilterParams
+    vehicle_switched: VehicleFilterParams
+    vehicle_imm: VehicleFilterParams
+    cascaded_ekf: CascadedFilterParams
+    cascaded_ukf: CascadedFilterParams
+    cascaded_hybrid: CascadedFilterParams
 
     def __post_init__(self) -> None:
-        _positive(self, *(f.name for f in fields(self)))
+        check_sections({name: getattr(self, name) for name in CASCADED_KINDS})
+        for name, kind in FILTER_KINDS.items():
+            section: InsFilterParams = getattr(self, name)
+            if kind.nhc and section.nhc is None:
+                raise FieldError(f"{name}.nhc", "missing: the _nhc filters need an nhc section")
+            if not kind.nhc and section.nhc is not None:
+                raise FieldError(f"{name}.nhc", "only the _nhc filters take an nhc section")
+            if kind.estimator == "ukf" and section.ukf is None:
+                raise FieldError(f"{name}.ukf", "missing: a UKF needs a ukf section")
+            if kind.estimator != "ukf" and section.ukf is not None:
+                raise FieldError(f"{name}.ukf", "only UKF filters take a ukf section")
+            if kind.fading != (section.fuzzy is not None):
+                raise FieldError(f"{name}.fuzzy", "fwekf needs a fuzzy section; no other filter")
 
+    def section(self, name: str) -> InsFilterParams | VehicleFilterParams | CascadedFilterParams:
+        """The section of any filter ``name`` (its family's run takes it)."""
+        if name not in self.__dataclass_fields__:
+            known = ", ".join(self.__dataclass_fields__)
+            raise KeyError(f"unknown filter {name!r} (known: {known})")
+        section: InsFilterParams | VehicleFilterParams | CascadedFilterParams = getattr(self, name)
+        return section
 
-@dataclass(frozen=True)
-class GnssNoiseParams:
-    """Measurement noise of the GNSS updates; reported accuracies are floored (F8).
+    def get(self, name: str) -> InsFilterParams:
+        """The section of filter ``name`` (a key of ``FILTER_KINDS``)."""
+        if name not in FILTER_KINDS:
+            known = ", ".join(FILTER_KINDS)
+            raise KeyError(f"unknown filter {name!r} (known: {known})")
+        section: InsFilterParams = getattr(self, name)
+        return section
 
-    Attributes:
-        pos_sigma_floor_m: floor on the receiver's h_acc / v_acc, m.
-        pos_sigma_default_m: position 1-sigma when the receiver reports none, m.
-        pos_error_corr_time_s: correlation time of the fixes' position errors (multipath,
-            atmosphere), s. A first-order Gauss-Markov error sampled every dt carries about
-            the information of one independent fix per 2 tau, so the fix variance is inflated
-            by ``1 + 2 tau / dt`` (0: white errors, no inflation). Reported accuracies are
-            per-fix sigmas and say nothing about correlation; without this a loosely coupled
-            filter averages correlated errors as if they were white and becomes overconfident.
-            The inflation applies to the update only: a fix is gated, and its NIS computed,
-            against the marginal variance (``measurement.gate_shift``).
-        vel_sigma_floor_mps: floor on the receiver's speed accuracy, m/s.
-        vel_sigma_default_mps: velocity 1-sigma when the receiver reports none, m/s.
-        use_velocity: fuse the receiver velocity where present (loose coupling).
-        use_fix_latency: apply each fix at its own epoch, ``t_ns - latency_s``, where the
-            table has a ``latency_s`` column (arrival minus the receiver's epoch).
-        pseudorange_sigma_floor_m: floor on the pseudorange 1-sigma, m.
-        pseudorange_sigma_default_m: pseudorange 1-sigma when the table has none, m.
-        pseudorange_rate_sigma_floor_mps: floor on the pseudorange-rate 1-sigma, m/s.
-        pseudorange_rate_sigma_default_mps: pseudorange-rate 1-sigma when absent, m/s.
-        elevation_mask_deg: satellites below this elevation are not used (tight coupling).
-    """
+    def cascaded(self, name: str) -> CascadedFilterParams:
+        """The section of cascaded filter ``name`` (``cascaded.config.CASCADED_KINDS``)."""
+        if name not in CASCADED_KINDS:
+            raise KeyError(f"unknown cascaded filter {name!r} (known: {', '.join(CASCADED_KINDS)})")
+        section: CascadedFilterParams = getattr(self, name)
+        return section
 
-    pos_sigma_floor_m: float = 0.5
-    pos_sigma_default_m: float = 3.0
-    pos_error_corr_time_s: float = 0.0
-    vel_sigma_floor_mps: float = 0.05
-    vel_sigma_default_mps: float = 0.2
-    use_velocity: bool = True
-    use_fix_latency: bool = True
-    pseudorange_sigma_floor_m: float = 0.5
-    pseudorange_sigma_default_m: float = 3.0
-    pseudorange_rate_sigma_floor_mps: float = 0.02
-    pseudorange_rate_sigma_default_mps: float = 0.1
-    elevation_mask_deg: float = 10.0
+    def vehicle(self, name: str) -> VehicleFilterParams:
+        """The section of vehicle filter ``name`` (``vehicle.config.VEHICLE_FILTERS``)."""
+        from navreplay.pipeline.estimation.vehicle.config import VEHICLE_FILTERS
 
-    def __post_init__(self) -> None:
-        _positive(self, "pos_error_corr_time_s", allow_zero=True)
-        _positive(
-            self,
-            "pos_sigma_floor_m",
-            "pos_sigma_default_m",
-            "vel_sigma_floor_mps",
-            "vel_sigma_default_mps",
-            "pseudorange_sigma_floor_m",
-            "pseudorange_sigma_default_m",
-            "pseudorange_rate_sigma_floor_mps",
-            "pseudorange_rate_sigma_default_mps",
-        )
-        if not -90.0 <= self.elevation_mask_deg < 90.0:
-            raise FieldError("elevation_mask_deg", "must be within [-90, 90)")
-
-
-@dataclass(frozen=True)
-class ClockParams:
-    """Receiver clock model (tight coupling): bias and drift as random walks (paper 001).
-
-    The defaults are a typical TCXO (Allan coefficients h0 = 2e-19, h-2 = 2e-20:
-    ``c^2 h0 / 2`` and ``2 pi^2 c^2 h-2``).
-
-    Attributes:
-        bias_psd_m2ps: white-noise density driving the clock bias, m^2/s.
-        drift_psd_m2ps3: white-noise density driving the clock drift, m^2/s^3.
-    """
-
-    bias_psd_m2ps: float = 0.01
-    drift_psd_m2ps3: float = 0.04
-
-    def __post_init__(self) -> None:
-        _positive(self, "bias_psd_m2ps", "drift_psd_m2ps3", allow_zero=True)
-
-
-@dataclass(frozen=True)
-class GatingParams:
-    """Chi-square innovation gating with a timeout reset.
-
-    Each measurement block (a fix's position, its velocity, one satellite's pseudorange and
-    rate, the NHC pair) is gated on its NIS against the chi-square quantile ``probability``
-    for its dimension. When a stream has been rejected without interruption for longer than
-    ``timeout_s``, the covariance of the states it observes is reset (inflated to at least the
-    current innovation) and the epoch is processed again, so a persistent step is followed
-    instead of locking the filter out (bad-inputs F2).
-
-    Attributes:
-        probability: gate probability, e.g. 0.9999.
-        timeout_s: continuous rejection time that triggers a reset, s.
-        reset_pos_sigma_m: minimum position 1-sigma after a reset, m.
-        reset_vel_sigma_mps: minimum velocity 1-sigma after a reset, m/s.
-        reset_clock_sigma_m: minimum clock-bias 1-sigma after a reset, m.
-    """
-
-    probability: float = 0.9999
-    timeout_s: float = 5.0
-    reset_pos_sigma_m: float = 10.0
-    reset_vel_sigma_mps: float = 1.0
-    reset_clock_sigma_m: float = 30.0
-
-    def __post_init__(self) -> None:
-        if not 0.5 < self.probability < 1.0:
-            raise FieldError("probability", "must be within (0.5, 1)")
-        _positive(self, "timeout_s", "reset_pos_sigma_m", "reset_vel_sigma_mps")
-        _positive(self, "reset_clock_sigma_m")
-
-
-@dataclass(frozen=True)
-class StepParams:
-    """Time stepping of the replay loop.
-
-    The loop stops on a grid of ``step_s`` (the covariance / sigma-point step and the output
-    rate) and at every update epoch. Between stops the navigation state (and every UKF sigma
-    point) is integrated through the IMU samples by RK4 with ``substeps`` steps per sample
-    interval, more where an interval exceeds ``max_rk4_step_s``. IMU intervals longer than
-    ``imu_gap_s`` are gaps: bridged by interpolating the samples on both sides, with white
-    process noise of densities ``gap_*_psd`` added for the unknown manoeuvres (a 2 s gap adds
-    sqrt(2 q) to the velocity sigma); longer than ``imu_gap_max_s`` they end a segment and
-    the filter re-aligns after them.
-
-    Attributes:
-        step_s: covariance propagation, sigma-point redraw and output interval, s.
-        substeps: RK4 steps per IMU interval (paper 001: 10).
-        max_rk4_step_s: longest single RK4 step, s.
-        imu_gap_s: an IMU interval longer than this is a gap, s.
-        imu_gap_max_s: a gap longer than this splits the run into segments, s.
-        gap_accel_psd_m2ps3: white acceleration noise density during a gap, m^2/s^3.
-        gap_gyro_psd_rad2ps: white angular-rate noise density during a gap, rad^2/s.
-    """
-
-    step_s: float = 0.1
-    substeps: int = 1
-    max_rk4_step_s: float = 0.02
-    imu_gap_s: float = 0.05
-    imu_gap_max_s: float = 5.0
-    gap_accel_psd_m2ps3: float = 4.0
-    gap_gyro_psd_rad2ps: float = 0.05
-
-    def __post_init__(self) -> None:
-        _positive(self, "step_s", "max_rk4_step_s", "imu_gap_s", "imu_gap_max_s")
-        _positive(self, "gap_accel_psd_m2ps3", "gap_gyro_psd_rad2ps", allow_zero=True)
-        if not 1 <= self.substeps <= 100:
-            raise FieldError("substeps", "must be within 1..100")
-        if self.imu_gap_max_s < self.imu_gap_s:
-            raise FieldError("imu_gap_max_s", "must be >= imu_gap_s")
-
-
-@dataclass(frozen=True)
-class DivergenceParams:
-    """The NaN barrier and divergence limits.
-
-    A non-finite state or covariance, a covariance that stays indefinite after repair, or a
-    position 1-sigma above ``max_pos_sigma_m`` ends the run: ``on_divergence: raise`` raises
-    ``DivergenceError``; ``flag`` keeps the output up to that time and marks the run diverged
-    in metrics.json.
-
-    Attributes:
-        on_divergence: ``raise`` or ``flag``.
-        max_pos_sigma_m: largest acceptable horizontal position 1-sigma, m.
-        max_speed_mps: largest physically plausible speed, m/s.
-    """
-
-    on_divergence: Literal["raise", "flag"] = "raise"
-    max_pos_sigma_m: float = 1.0e5
-    max_speed_mps: float = 200.0
-
-    def __post_init__(self) -> None:
-        _positive(self, "max_pos_sigma_m", "max_speed_mps")
-
-
-@dataclass(frozen=True)
-class NhcParams:
-    """Non-holonomic constraint: body-frame v_y = 0 and v_z = 0 as pseudo-measurements.
-
-    Fused at every GNSS epoch together with GNSS, and on its own between epochs at
-    ``rate_hz`` (paper 001: applied together with GNSS, not only during outages).
-
-    Attributes:
-        sigma_lateral_mps: 1-sigma of the lateral constraint v_y^b = 0, m/s.
-        sigma_vertical_mps: 1-sigma of the vertical constraint v_z^b = 0, m/s.
-        rate_hz: rate of the pseudo-measurements, Hz.
-    """
-
-    sigma_lateral_mps: float = 0.1
-    sigma_vertical_mps: float = 0.1
-    rate_hz: float = 10.0
-
-    def __post_init__(self) -> None:
-        _positive(self, "sigma_lateral_mps", "sigma_vertical_mps", "rate_hz")
-
-
-@dataclass(frozen=True)
-class UkfParams:
-    """Scaled unscented transform (Van der Merwe) of the total-state UKF (paper 001).
-
-    Attributes:
-        alpha: spread of the sigma points (paper 001: 0.99).
-        beta: prior-distribution parameter (paper 001: 2, optimal for Gaussians).
-        kappa: secondary scaling (paper 001: 0).
-    """
-
-    alpha: float = 0.99
-    beta: float = 2.0
-    kappa: float = 0.0
-
-    def __post_init__(self) -> None:
-        if not 0.0 < self.alpha <= 1.0:
-            raise FieldError("alpha", "must be within (0, 1]")
-        _positive(self, "beta", "kappa", allow_zero=True)
-
-
-@dataclass(frozen=True)
-class InsFilterParams:
-    """One INS/GNSS filter section, ``filters.<name>``.
-
-    Attributes:
-        imu_noise: IMU noise used when the dataset's meta.json declares none.
-        init: initialization and alignment.
-        gnss: GNSS measurement noise.
-        clock: receiver clock model (tight coupling only; ignored otherwise).
-        gating: innovation gating and timeout reset.
-        step: time stepping.
-        divergence: the NaN barrier.
-        nhc: the non-holonomic constraint (required by and only by ``*_nhc`` filters).
-        ukf: the unscented transform (required by and only by UKF filters).
-        fuzzy: the fuzzy fading factor (required by and only by ``fwekf``, paper 004).
-    """
-
-    imu_noise: ImuNoise
-    init: InitParams
-    gnss: GnssNoiseParams
-    clock: ClockParams
-    gating: GatingParams
-    step: StepParams
-    divergence: DivergenceParams
-    nhc: NhcParams | None = None
-    ukf: UkfParams | None = None
-    fuzzy: FuzzyParams | None = None
-
-
-@dataclass(frozen=True)
-class FilterKind:
-    """What a filter name means: estimator, coupling, NHC and fuzzy fading (paper 004)."""
-
-    estimator: Estimator
-    coupling: Coupling
-    nhc: bool
-    fading: bool = False
-
-    @property
-    def numba_kernel(self) -> str:
-        """``module:qualname`` of the numba kernel that runs this kind."""
-        module, fn = (
-            ("fwekf", "run_fwekf") if self.fading else (self.estimator, f"run_{self.estimator}")
-        )
-        return f"navreplay.pipeline.estimation.kernels.{module}:{fn}"
-
-
-FILTER_KINDS: dict[str, FilterKind] = {
-    "lc_ekf": FilterKind("ekf", "loose", nhc=False),
-    "tc_ekf": FilterKind("ekf", "tight", nhc=False),
-    "tc_ukf": FilterKind("ukf", "tight", nhc=False),
-    "lc_ekf_nhc": FilterKind("ekf", "loose", nhc=True),
-    "tc_ekf_nhc": FilterKind("ekf", "tight", nhc=True),
-    "tc_ukf_nhc": FilterKind("ukf", "tight", nhc=True),
-    "fwekf": FilterKind("ekf", "loose", nhc=False, fading=True),
-}
+        if name not in VEHICLE_FILTERS:
+            raise KeyError(f"unknown vehicle filter {name!r} (known: {', '.join(VEHICLE_FILTERS)})")
+        section: VehicleFilterParams = getattr(self, name)
+        return section

@@ -1,8 +1,8 @@
 """The filter families, in one small table, and a run from a tables directory.
 
 ``navreplay run --filter NAME`` looks the name up here (``family_of``). Every family
-implements the run contract (``estimation.contract.Family``): the INS/GNSS filters
-(``estimation.run``), the vehicle-model filters (``estimation.vehicle_run``) and the cascaded
+implements the run contract (``estimation.core.contract.Family``): the INS/GNSS filters
+(``estimation.ins.run``), the vehicle-model filters (``estimation.vehicle.run``) and the cascaded
 filters (``estimation.cascaded.run``). Their runs are written by one writer
 (``contract.write_run``).
 """
@@ -13,9 +13,9 @@ from pathlib import Path
 from typing import Any
 
 from navreplay.pipeline.estimation.cascaded.run import CASCADED
-from navreplay.pipeline.estimation.contract import Backend, Family, RunInputs, RunOutput
-from navreplay.pipeline.estimation.run import INS
-from navreplay.pipeline.estimation.vehicle_run import VEHICLE
+from navreplay.pipeline.estimation.core.contract import Backend, Family, RunInputs, RunOutput
+from navreplay.pipeline.estimation.ins.run import INS
+from navreplay.pipeline.estimation.vehicle.run import VEHICLE
 
 #: every family, in the order of the reports and the ranking
 FAMILIES: tuple[Family, ...] = (INS, VEHICLE, CASCADED)

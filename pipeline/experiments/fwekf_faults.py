@@ -32,12 +32,12 @@ import numpy as np
 import pyarrow as pa
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.config import InsFilterParams
-from navreplay.pipeline.estimation.contract import Backend
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.metrics import nis_summary
-from navreplay.pipeline.estimation.replay import run_filter
-from navreplay.pipeline.estimation.truth import error_states
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.core.contract import Backend
+from navreplay.pipeline.estimation.ins.config import InsFilterParams
+from navreplay.pipeline.estimation.ins.metrics import nis_summary
+from navreplay.pipeline.estimation.ins.replay import run_filter
+from navreplay.pipeline.estimation.ins.truth import error_states
 from navreplay.pipeline.experiments.gnss_outages import (
     Window,
     drop_fixes,

@@ -43,13 +43,13 @@ import numpy as np
 import pyarrow as pa
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.alignment import Alignment
-from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.core.contract import Backend
 from navreplay.pipeline.estimation.core.tables import truth_at
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.models import ins
-from navreplay.pipeline.estimation.replay import RunResult, run_filter
-from navreplay.pipeline.estimation.truth import error_states
+from navreplay.pipeline.estimation.ins.alignment import Alignment
+from navreplay.pipeline.estimation.ins.models import ins
+from navreplay.pipeline.estimation.ins.replay import RunResult, run_filter
+from navreplay.pipeline.estimation.ins.truth import error_states
 from navreplay.pipeline.nav.earth import radii
 from navreplay.pipeline.nav.rotations import euler_to_quat
 

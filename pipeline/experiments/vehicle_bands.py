@@ -17,11 +17,11 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from navreplay.pipeline.estimation.contract import Backend
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS
-from navreplay.pipeline.estimation.vehicle_metrics import errors, per_band
-from navreplay.pipeline.estimation.vehicle_replay import run_vehicle_filter
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.core.contract import Backend
+from navreplay.pipeline.estimation.vehicle.config import VEHICLE_FILTERS
+from navreplay.pipeline.estimation.vehicle.metrics import errors, per_band
+from navreplay.pipeline.estimation.vehicle.replay import run_vehicle_filter
 from navreplay.pipeline.experiments.gnss_outages import drop_fixes, in_windows, periodic_windows
 
 SPEED_EDGES_MPS = (0.0, 2.5, 5.0, 10.0, 15.0, 20.0, 25.0, 35.0)

@@ -36,9 +36,9 @@ import numpy as np
 import pyarrow as pa
 from scipy import stats
 
-from navreplay.pipeline.estimation.contract import Backend
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS, SwitchingParams
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.core.contract import Backend
+from navreplay.pipeline.estimation.vehicle.config import VEHICLE_FILTERS, SwitchingParams
 from navreplay.pipeline.experiments.vehicle_bands import band_table
 from navreplay.pipeline.experiments.vehicle_bands_config import VehicleBandsParams
 from navreplay.pipeline.nav.earth import F64

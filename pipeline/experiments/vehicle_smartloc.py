@@ -15,7 +15,7 @@ clock states), and a tightly coupled variant would need three more states per co
 The receiver gives no Doppler, so the GPS speed and course of eq. 20 are absent.
 
 **No steering angle.** Each model is driven by the virtual steering for which its steady-state
-yaw rate equals the measured yaw rate (``vehicle_replay.virtual_steering``); the yaw rate is
+yaw rate equals the measured yaw rate (``vehicle.replay.virtual_steering``); the yaw rate is
 then an input and not fused again.
 
 **Truth.** The reference gives positions only; its speed (for the speed bands) is the central
@@ -33,11 +33,11 @@ import numpy as np
 import pyarrow as pa
 
 from navreplay.ingest.schema import FixType, from_columns
-from navreplay.pipeline.estimation.contract import Backend
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS, VehicleFilterParams
-from navreplay.pipeline.estimation.vehicle_metrics import errors, per_band, summarize
-from navreplay.pipeline.estimation.vehicle_replay import run_vehicle_filter
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.core.contract import Backend
+from navreplay.pipeline.estimation.vehicle.config import VEHICLE_FILTERS, VehicleFilterParams
+from navreplay.pipeline.estimation.vehicle.metrics import errors, per_band, summarize
+from navreplay.pipeline.estimation.vehicle.replay import run_vehicle_filter
 from navreplay.pipeline.experiments.gnss_outages import drop_fixes, in_windows, periodic_windows
 from navreplay.pipeline.nav.earth import dcm_ecef_to_ned, ecef_to_geodetic, geodetic_to_ecef
 

@@ -34,8 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from navreplay.pipeline.estimation.contract import Backend
-from navreplay.pipeline.estimation.filters_config import FiltersParams
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.core.contract import Backend
 from navreplay.pipeline.experiments.vehicle_bands import SPEED_EDGES_MPS, band_table
 from navreplay.pipeline.experiments.vehicle_bands_config import VehicleBandsParams
 from navreplay.pipeline.experiments.vehicle_paired import SINGLE, mean_ci

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from navreplay.ingest.typed import FieldError
-from navreplay.pipeline.estimation.config import FILTER_KINDS
+from navreplay.pipeline.estimation.ins.config import FILTER_KINDS
 from navreplay.pipeline.scenarios.config import Policy
 
 

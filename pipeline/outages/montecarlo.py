@@ -29,19 +29,19 @@ import numpy as np
 import pyarrow as pa
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.alignment import Alignment
-from navreplay.pipeline.estimation.config import InsFilterParams
-from navreplay.pipeline.estimation.contract import Backend
-from navreplay.pipeline.estimation.outage_metrics import (
-    fixes_track,
-    truth_track,
-)
-from navreplay.pipeline.estimation.replay import RunResult, run_filter
-from navreplay.pipeline.estimation.windows import (
+from navreplay.pipeline.estimation.core.contract import Backend
+from navreplay.pipeline.estimation.core.windows import (
     NS,
     ErrorTrack,
     WindowMetricsParams,
     window_metrics,
+)
+from navreplay.pipeline.estimation.ins.alignment import Alignment
+from navreplay.pipeline.estimation.ins.config import InsFilterParams
+from navreplay.pipeline.estimation.ins.replay import RunResult, run_filter
+from navreplay.pipeline.estimation.ins.tracks import (
+    fixes_track,
+    truth_track,
 )
 from navreplay.pipeline.nav.earth import I64
 from navreplay.pipeline.scenarios.apply import apply_scenario, log_span

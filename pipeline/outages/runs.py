@@ -3,8 +3,8 @@
 
 The tables are read once; each scenario is applied to them (``scenarios.apply``: outage
 windows, satellites kept, faults), the filter's family runs on the result
-(``estimation.contract.Family.run``) and the outage windows are measured on the run's error
-track (``Family.track``, ``estimation.windows.window_metrics``) against the truth or the
+(``estimation.core.contract.Family.run``) and the outage windows are measured on the run's error
+track (``Family.track``, ``estimation.core.windows.window_metrics``) against the truth or the
 withheld fixes. A fault scenario of an INS filter is also checked against the catalogue's
 pass criteria (``scenarios.criteria``), which compares it with the nominal run of the same
 filter. The scenario (definition, windows, satellites chosen, faults injected) goes into
@@ -20,10 +20,10 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Any
 
-from navreplay.pipeline.estimation.contract import Backend, Family, RunInputs, RunOutput
+from navreplay.pipeline.estimation.core.contract import Backend, Family, RunInputs, RunOutput
+from navreplay.pipeline.estimation.core.windows import window_metrics
 from navreplay.pipeline.estimation.families import family_of
-from navreplay.pipeline.estimation.replay import RunResult
-from navreplay.pipeline.estimation.windows import window_metrics
+from navreplay.pipeline.estimation.ins.replay import RunResult
 from navreplay.pipeline.scenarios.apply import AppliedScenario, apply_scenario
 from navreplay.pipeline.scenarios.config import ScenariosParams, ScenarioSpec
 from navreplay.pipeline.scenarios.criteria import check_fault

@@ -44,7 +44,7 @@ _BIASES = (
 
 
 def _sigma_name(col: str) -> str:
-    """``acc_bias_x_mps2`` -> ``acc_bias_x_sigma_mps2`` (``estimation.outputs``)."""
+    """``acc_bias_x_mps2`` -> ``acc_bias_x_sigma_mps2`` (``estimation.ins.outputs``)."""
     stem, unit = col.rsplit("_", 1)
     return f"{stem}_sigma_{unit}"
 

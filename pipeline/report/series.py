@@ -1,7 +1,7 @@
 """Time series a report plots: position error against a reference, with the filter's sigma.
 
 The reference is the ``truth`` table when the dataset has one (interpolated to the estimate's
-times, ``estimation.truth.truth_at``). Without truth it is the GNSS fixes (the estimate
+times, ``estimation.core.tables.truth_at``). Without truth it is the GNSS fixes (the estimate
 interpolated to each fix time): outside outages that is a residual, not an error, but inside
 an outage window the withheld fixes are the truth (architecture section 5).
 

@@ -18,7 +18,7 @@ import pyarrow as pa
 
 from navreplay.ingest.schema import FixType
 from navreplay.ingest.typed import to_plain
-from navreplay.pipeline.estimation.windows import Window
+from navreplay.pipeline.estimation.core.windows import Window
 from navreplay.pipeline.nav import earth
 from navreplay.pipeline.scenarios.config import SatellitesSpec, ScenarioSpec
 from navreplay.pipeline.scenarios.faults import (

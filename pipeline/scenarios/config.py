@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from navreplay.ingest.typed import FieldError
-from navreplay.pipeline.estimation.windows import WindowMetricsParams
+from navreplay.pipeline.estimation.core.windows import WindowMetricsParams
 
 Placement = Literal["explicit", "random", "periodic"]
 Policy = Literal["highest_elevation", "lowest_elevation", "random", "best_dop", "worst_dop"]

@@ -33,11 +33,11 @@ import numpy as np
 import pyarrow as pa
 from scipy.stats import chi2
 
-from navreplay.pipeline.estimation.config import FILTER_KINDS
-from navreplay.pipeline.estimation.models import measurement as me
-from navreplay.pipeline.estimation.replay import RunResult
-from navreplay.pipeline.estimation.truth import error_states
-from navreplay.pipeline.estimation.windows import NS, Window
+from navreplay.pipeline.estimation.core.windows import NS, Window
+from navreplay.pipeline.estimation.ins.config import FILTER_KINDS
+from navreplay.pipeline.estimation.ins.models import measurement as me
+from navreplay.pipeline.estimation.ins.replay import RunResult
+from navreplay.pipeline.estimation.ins.truth import error_states
 from navreplay.pipeline.nav.earth import F64
 from navreplay.pipeline.scenarios.apply import AppliedScenario
 

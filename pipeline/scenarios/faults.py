@@ -25,7 +25,7 @@ import pyarrow as pa
 
 from navreplay.ingest.schema import FixType
 from navreplay.pipeline.errors import PipelineError
-from navreplay.pipeline.estimation.windows import NS, Window
+from navreplay.pipeline.estimation.core.windows import NS, Window
 from navreplay.pipeline.nav import earth
 from navreplay.pipeline.nav.earth import F64, I64
 from navreplay.pipeline.scenarios.config import FaultSpec

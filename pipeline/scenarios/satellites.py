@@ -23,7 +23,7 @@ import pyarrow as pa
 
 from navreplay.ingest.gnss import spp
 from navreplay.pipeline.estimation.core.tables import float_column
-from navreplay.pipeline.estimation.inputs import corrected_observables
+from navreplay.pipeline.estimation.ins.inputs import corrected_observables
 from navreplay.pipeline.nav import earth
 from navreplay.pipeline.nav.earth import F64, I64
 from navreplay.pipeline.scenarios.config import Policy

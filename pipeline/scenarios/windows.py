@@ -10,7 +10,7 @@ import logging
 
 import numpy as np
 
-from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.estimation.core.windows import NS
 from navreplay.pipeline.nav.earth import I64
 from navreplay.pipeline.scenarios.config import WindowsSpec
 

@@ -175,7 +175,7 @@ def _vehicle_switch_speed(params: Params, out: Path) -> int:
 def _tractor_cascaded(params: Params, out: Path) -> int:
     import time
 
-    from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS
+    from navreplay.pipeline.estimation.cascaded.config import CASCADED_KINDS
     from navreplay.pipeline.experiments.tractor_cascaded.artifacts import write_experiment
     from navreplay.pipeline.experiments.tractor_cascaded.runs import ExperimentInputs
 

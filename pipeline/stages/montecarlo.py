@@ -50,8 +50,8 @@ def run(args: argparse.Namespace) -> int:
 
     from navreplay.ingest.atomic import atomic_directory, atomic_write_json
     from navreplay.ingest.typed import to_plain
-    from navreplay.pipeline.estimation.contract import RunInputs
-    from navreplay.pipeline.estimation.run import INPUTS
+    from navreplay.pipeline.estimation.core.contract import RunInputs
+    from navreplay.pipeline.estimation.ins.run import INPUTS
     from navreplay.pipeline.outages.montecarlo import (
         SKIPPED,
         cases_for,

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any
 from navreplay.pipeline.errors import ParamsError
 
 if TYPE_CHECKING:
-    from navreplay.pipeline.estimation.contract import Backend
+    from navreplay.pipeline.estimation.core.contract import Backend
     from navreplay.pipeline.params import Params
 
 log = logging.getLogger(__name__)
@@ -100,9 +100,9 @@ def _run(
 ) -> int:
     from navreplay.ingest.atomic import atomic_directory
     from navreplay.pipeline.analyze import Skipped, plan, write_skip
-    from navreplay.pipeline.estimation.contract import RunInputs, write_run
+    from navreplay.pipeline.estimation.core.contract import RunInputs, write_run
     from navreplay.pipeline.estimation.families import family_of
-    from navreplay.pipeline.estimation.run import INS
+    from navreplay.pipeline.estimation.ins.run import INS
     from navreplay.pipeline.outages.runs import run_scenarios
 
     try:

@@ -90,10 +90,10 @@ def test_editing_a_report_keeps_the_kernels_and_editing_their_sources_does_not(
         assert edited(rel) == first, rel
     # a kernel, a callee in another module, a module of constants a kernel imports
     for rel in (
-        "pipeline/estimation/kernels/ukf.py",
-        "pipeline/estimation/models/ins.py",
+        "pipeline/estimation/ins/kernels/ukf.py",
+        "pipeline/estimation/ins/models/ins.py",
         "pipeline/nav/earth.py",
-        "pipeline/estimation/kernels/common.py",
+        "pipeline/estimation/ins/kernels/common.py",
     ):
         assert edited(rel) != first, rel
     assert source_digest(base) == first
@@ -139,7 +139,7 @@ def test_the_digest_covers_every_module_python_loads_with_the_jitted_ones() -> N
     seeds = [p for p in compiled_sources(REPO) if b"njit" in p.read_bytes()]
     modules = [".".join(p.relative_to(REPO).with_suffix("").parts) for p in seeds]
     modules = ["navreplay." + m.removesuffix(".__init__") for m in modules]
-    assert "navreplay.pipeline.estimation.kernels.ukf" in modules
+    assert "navreplay.pipeline.estimation.ins.kernels.ukf" in modules
     env = dict(os.environ)
     out = subprocess.run(
         [sys.executable, "-c", IMPORTED, *modules],

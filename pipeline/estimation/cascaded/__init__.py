@@ -12,7 +12,7 @@ Two six-state filters in cascade (paper 000, section 6):
 Filters (``filters.<name>`` in params.yaml): ``cascaded_ekf`` (both filters EKF, Euler time
 update, eq. 21-23), ``cascaded_ukf`` (both UKF, eq. 24-27, alpha 1e-3, beta 2, kappa 0) and
 ``cascaded_hybrid`` (the paper's future-work hybrid; see ``filters``). Their sections are
-typed in ``estimation.cascaded_config``, beside ``estimation.config``, which holds them.
+typed in ``config``; ``estimation.config`` holds them with every other filter's.
 
 Layout: ``model`` (the physics as pure functions: f, F, h, H, Q, R), ``numerics`` (small
 generic pieces the INS kernels do not provide for a six-state filter), ``filters``

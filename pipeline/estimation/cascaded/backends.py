@@ -14,7 +14,7 @@ import numpy as np
 
 from navreplay.pipeline.estimation.cascaded import cascade as cs
 from navreplay.pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup, NumbaStepper
-from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.core.contract import Backend
 from navreplay.pipeline.nav.earth import F64, I64
 
 

@@ -81,7 +81,7 @@ STREAM_NAMES = ("gnss_pos", "gnss_heading", "yaw_rate", "speed", "steer")
 STREAM_UNITS = ("m", "rad", "rad/s", "m/s", "rad")
 N_STREAMS = 5
 
-#: event kind beyond ``kernels.common``'s: an input interval longer than ``gap_s``
+#: event kind beyond ``core.gating``'s: an input interval longer than ``gap_s``
 EV_GAP = 5
 
 # vehicle sample columns (``veh``) and GPS columns (``gps``)

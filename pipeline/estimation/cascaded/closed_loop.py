@@ -37,7 +37,7 @@ from navreplay.pipeline.estimation.cascaded.model import (
     NAV_PSI,
     NX,
 )
-from navreplay.pipeline.estimation.contract import Backend
+from navreplay.pipeline.estimation.core.contract import Backend
 from navreplay.pipeline.nav.earth import F64
 from navreplay.pipeline.synth.tractor import TractorSim, TractorState, TractorStraightParams
 

@@ -25,13 +25,13 @@ from scipy.stats import chi2
 
 from navreplay.pipeline.errors import DivergenceError, PipelineError
 from navreplay.pipeline.estimation.cascaded import cascade as cs
-from navreplay.pipeline.estimation.cascaded.filters import EST_EKF, EST_HYBRID, EST_UKF, Unscented
-from navreplay.pipeline.estimation.cascaded.model import NX, ctl_discretize, model_params
-from navreplay.pipeline.estimation.cascaded_config import (
+from navreplay.pipeline.estimation.cascaded.config import (
     CASCADED_KINDS,
     NAV_STATE_NAMES,
     CascadedFilterParams,
 )
+from navreplay.pipeline.estimation.cascaded.filters import EST_EKF, EST_HYBRID, EST_UKF, Unscented
+from navreplay.pipeline.estimation.cascaded.model import NX, ctl_discretize, model_params
 from navreplay.pipeline.estimation.core import gating as gt
 from navreplay.pipeline.estimation.core import runlog as rl
 from navreplay.pipeline.estimation.core.runlog import RunLog
@@ -112,7 +112,7 @@ class CascadedResult:
     Attributes:
         filter, backend: names. t_ns: output times (K,). x: ``[X1, X2]`` per output (K, 12).
         P: covariances (K, 2, 6, 6). inn_i (J, 5), inn_f (J, 8): innovations
-            (``kernels.common`` layout; streams ``cascade.STREAM_NAMES``). events: by time.
+            (``core.gating`` layout; streams ``cascade.STREAM_NAMES``). events: by time.
         status: ``ok`` or ``diverged``; failure: what and when. runtime_s: wall time of the
             filter. duration_s: time span processed. extra: free-form (closed loop, frame).
     """

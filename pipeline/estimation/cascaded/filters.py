@@ -45,7 +45,7 @@ unscented covariance equals the EKF's to second order, so no faster bias converg
 to inherit.
 
 An update is ``prepare_update`` (rows, innovations, gating per block with
-``kernels.common.gate_blocks``, the timeout reset of a stream rejected for too long, logs with
+``core.gating.gate_blocks``, the timeout reset of a stream rejected for too long, logs with
 the shared recorders; also the filterpy backend's front end) then ``apply_update``.
 
 The functions take records (``typing.NamedTuple``, compiled by numba as tuples with named
@@ -319,7 +319,7 @@ def prepare_update(
             and ``H``.
         meas: the rows and their gating blocks (``measurement_layout``).
         gating: gates, timeout and the stream clocks; ut: sigma points (UKF only).
-        log: where innovations and events are recorded (``kernels.common``).
+        log: where innovations and events are recorded (``core.gating``).
 
     Returns:
         ``(rows, acc, ma)``: the available rows with their prior innovations

@@ -24,8 +24,7 @@ import pyarrow as pa
 
 from navreplay.ingest.schema import FixType
 from navreplay.pipeline.estimation.cascaded import cascade as cs
-from navreplay.pipeline.estimation.core.tables import Event
-from navreplay.pipeline.estimation.replay import ReplayInputError
+from navreplay.pipeline.estimation.core.tables import Event, ReplayInputError
 from navreplay.pipeline.nav.earth import F64, I64
 from navreplay.pipeline.nav.local import LocalFrame
 

@@ -23,12 +23,12 @@ import numpy as np
 import pyarrow as pa
 
 from navreplay.pipeline.estimation.cascaded.cascade import STREAM_NAMES
+from navreplay.pipeline.estimation.cascaded.config import ConvergenceBand
 from navreplay.pipeline.estimation.cascaded.engine import CascadedResult
 from navreplay.pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, NX
 from navreplay.pipeline.estimation.cascaded.outputs import STATE_COLUMNS
-from navreplay.pipeline.estimation.cascaded_config import ConvergenceBand
-from navreplay.pipeline.estimation.contract import RunMetrics
 from navreplay.pipeline.estimation.core.consistency import nis_by_stream
+from navreplay.pipeline.estimation.core.contract import RunMetrics
 from navreplay.pipeline.nav.earth import F64
 from navreplay.pipeline.nav.local import LocalFrame
 

@@ -1,6 +1,6 @@
 """Small generic numerics for the six-state cascaded filters (numba, ``cache=True``).
 
-The estimation core's shared code (``kernels.common``, ``kernels.unscented``) is reused for
+The estimation core's shared code (``core.gating``, ``kernels.unscented``) is reused for
 Cholesky, gating, Joseph update, recording and sigma-point drawing. Four of its pieces are
 written for the INS filters and do not fit these filters, so small generic versions live here:
 

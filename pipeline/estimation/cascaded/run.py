@@ -2,7 +2,7 @@
 
 ``CASCADED.run`` replays a recording open loop (the recorded steering command drives the
 control filter) over the ``vehicle`` and ``gnss`` tables, measures it against the truth in the
-local map, and decodes it into the contract's ``RunOutput`` (``estimation.contract``).
+local map, and decodes it into the contract's ``RunOutput`` (``estimation.core.contract``).
 """
 
 from __future__ import annotations
@@ -12,17 +12,17 @@ import logging
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.typed import to_plain
 from navreplay.pipeline.estimation.cascaded.backends import replay
+from navreplay.pipeline.estimation.cascaded.config import CASCADED_KINDS, CascadedFilterParams
 from navreplay.pipeline.estimation.cascaded.engine import make_setup
 from navreplay.pipeline.estimation.cascaded.inputs import prepare_inputs
 from navreplay.pipeline.estimation.cascaded.metrics import compute_metrics, truth_from_table
 from navreplay.pipeline.estimation.cascaded.outputs import estimate_table, innovations_table
-from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams
-from navreplay.pipeline.estimation.contract import (
+from navreplay.pipeline.estimation.core.contract import (
     Backend,
     RunInputs,
     RunOutput,
 )
-from navreplay.pipeline.estimation.windows import ErrorTrack, table_track
+from navreplay.pipeline.estimation.core.windows import ErrorTrack, table_track
 
 log = logging.getLogger(__name__)
 

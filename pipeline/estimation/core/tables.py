@@ -11,6 +11,7 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
+from navreplay.pipeline.errors import PipelineError
 from navreplay.pipeline.nav.earth import F64
 
 B8 = npt.NDArray[np.bool_]
@@ -73,3 +74,7 @@ def truth_at(truth: pa.Table, t_ns: np.ndarray) -> tuple[np.ndarray, dict[str, F
         else:
             out[name] = np.interp(t, ttf, v)
     return inside, out
+
+
+class ReplayInputError(PipelineError):
+    """The tables cannot drive this filter (a required table or column is missing)."""

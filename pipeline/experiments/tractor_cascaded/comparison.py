@@ -45,7 +45,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from navreplay.pipeline.estimation.cascaded_config import CascadedFilterParams
+from navreplay.pipeline.estimation.cascaded.config import CascadedFilterParams
 from navreplay.pipeline.experiments.tractor_cascaded.config import (
     BASELINE,
     NOMINAL,

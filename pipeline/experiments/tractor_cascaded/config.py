@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from navreplay.ingest.typed import FieldError
-from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS
+from navreplay.pipeline.estimation.cascaded.config import CASCADED_KINDS
 
 #: the EKF linearized about psi_d (paper 000 eq. 17 as printed); nominal runs only
 PSI_D_LABEL = "cascaded_ekf_psi_d"
@@ -27,7 +27,7 @@ class TractorExperimentParams:
         sensitivity_noise_interval_s: also run every filter (every scenario) with Table 1's
             variances accumulating over these intervals instead of the section's
             ``process_noise.interval_s`` (label ``<filter>@q<interval>s``), e.g. 0.02: Table 1
-            read literally as the variance of one 0.02 s step (``estimation.cascaded_config``
+            read literally as the variance of one 0.02 s step (``estimation.cascaded.config``
             discusses the two readings).
         seeds: Monte Carlo runs per filter and scenario.
         outage_start_s: start of the GPS outage (after the biases have converged), s.

@@ -55,7 +55,7 @@ def vs_paper(summary: dict[str, Any], comparison: list[dict[str, Any]], mech: di
         'Table 1") and calls the Q of eq. 22-23 the "discretized process noise covariance '
         'matrix". The literal reading (Table 1 as the variance added at each 0.02 s step) runs '
         "as the `@q0.02s` variant, in the second column. The argument in full: "
-        "`pipeline/estimation/cascaded_config.py`.",
+        "`pipeline/estimation/cascaded/config.py`.",
         "",
         "## The paper's claims",
         "",

@@ -39,13 +39,13 @@ from navreplay.pipeline.estimation.cascaded.closed_loop import (
     ClosedLoopRun,
     run_closed_loop_scenarios,
 )
-from navreplay.pipeline.estimation.cascaded.engine import make_setup
-from navreplay.pipeline.estimation.cascaded.metrics import BIASES, bias_convergence
-from navreplay.pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, NAV_RB, NX
-from navreplay.pipeline.estimation.cascaded_config import (
+from navreplay.pipeline.estimation.cascaded.config import (
     CascadedFilterParams,
     LinearizationParams,
 )
+from navreplay.pipeline.estimation.cascaded.engine import make_setup
+from navreplay.pipeline.estimation.cascaded.metrics import BIASES, bias_convergence
+from navreplay.pipeline.estimation.cascaded.model import NAV_E, NAV_N, NAV_PSI, NAV_RB, NX
 from navreplay.pipeline.experiments.tractor_cascaded.config import (
     BASELINE,
     NOMINAL,

@@ -12,10 +12,10 @@ import pyarrow as pa
 import pytest
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.alignment import Alignment
-from navreplay.pipeline.estimation.config import FILTER_KINDS, InsFilterParams
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.models import ins
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.ins.alignment import Alignment
+from navreplay.pipeline.estimation.ins.config import FILTER_KINDS, InsFilterParams
+from navreplay.pipeline.estimation.ins.models import ins
 from navreplay.pipeline.nav.rotations import euler_to_quat
 from navreplay.pipeline.params import load_params
 from navreplay.pipeline.synth.seoul_campus import simulate

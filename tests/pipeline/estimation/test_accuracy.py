@@ -10,9 +10,9 @@ from __future__ import annotations
 import pytest
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.metrics import compute_metrics
-from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.ins.metrics import compute_metrics
+from navreplay.pipeline.estimation.ins.replay import run_filter
 from navreplay.pipeline.params import load_params
 from navreplay.pipeline.synth.seoul_campus import simulate
 from tests.pipeline.estimation.conftest import ALL_FILTERS, REPO, Tables

@@ -6,11 +6,11 @@ import numpy as np
 import pyarrow as pa
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation import inputs as inp
-from navreplay.pipeline.estimation.alignment import align
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.models import ins
-from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.ins import inputs as inp
+from navreplay.pipeline.estimation.ins.alignment import align
+from navreplay.pipeline.estimation.ins.models import ins
+from navreplay.pipeline.estimation.ins.replay import run_filter
 from tests.pipeline.estimation.conftest import Tables, t0_ns, truth_state
 
 

@@ -7,9 +7,9 @@ import pyarrow as pa
 import pytest
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.models import ins
-from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.ins.models import ins
+from navreplay.pipeline.estimation.ins.replay import run_filter
 from tests.pipeline.estimation.conftest import ALL_FILTERS
 
 

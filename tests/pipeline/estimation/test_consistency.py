@@ -28,12 +28,12 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from navreplay.pipeline.estimation.config import FILTER_KINDS
+from navreplay.pipeline.estimation.config import FiltersParams
 from navreplay.pipeline.estimation.core.consistency import nees
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.models import measurement as me
-from navreplay.pipeline.estimation.replay import run_filter
-from navreplay.pipeline.estimation.truth import error_states
+from navreplay.pipeline.estimation.ins.config import FILTER_KINDS
+from navreplay.pipeline.estimation.ins.models import measurement as me
+from navreplay.pipeline.estimation.ins.replay import run_filter
+from navreplay.pipeline.estimation.ins.truth import error_states
 from tests.pipeline.estimation.conftest import ALL_FILTERS, drawn_start, seoul
 
 N_RUNS = 20

@@ -10,11 +10,11 @@ import pyarrow as pa
 import pytest
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation import inputs as inp
+from navreplay.pipeline.estimation.config import FiltersParams
 from navreplay.pipeline.estimation.core import tables as tb
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.replay import RunResult, run_filter
-from navreplay.pipeline.estimation.truth import error_states
+from navreplay.pipeline.estimation.ins import inputs as inp
+from navreplay.pipeline.estimation.ins.replay import RunResult, run_filter
+from navreplay.pipeline.estimation.ins.truth import error_states
 from tests.pipeline.estimation.conftest import seoul, t0_ns
 
 Tables = dict[str, pa.Table]

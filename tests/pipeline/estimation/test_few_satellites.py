@@ -7,9 +7,9 @@ import pyarrow as pa
 import pytest
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.replay import RunResult, run_filter
-from navreplay.pipeline.estimation.truth import error_states
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.ins.replay import RunResult, run_filter
+from navreplay.pipeline.estimation.ins.truth import error_states
 from tests.pipeline.estimation.conftest import Tables, seoul, t0_ns
 
 

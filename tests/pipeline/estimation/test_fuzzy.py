@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from navreplay.ingest.typed import FieldError
-from navreplay.pipeline.estimation.fuzzy import (
+from navreplay.pipeline.estimation.ins.fuzzy import (
     FZ_COV_C,
     FZ_COV_S,
     FZ_MEAN_C,

@@ -9,11 +9,11 @@ import pyarrow as pa
 import pytest
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.kernels.common import epoch_buffers
-from navreplay.pipeline.estimation.kernels.fwekf import fade_prior, weighted_update
-from navreplay.pipeline.estimation.models import ins
-from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.ins.kernels.common import epoch_buffers
+from navreplay.pipeline.estimation.ins.kernels.fwekf import fade_prior, weighted_update
+from navreplay.pipeline.estimation.ins.models import ins
+from navreplay.pipeline.estimation.ins.replay import run_filter
 from navreplay.pipeline.experiments.fwekf_faults import optimistic_accuracy
 from navreplay.pipeline.experiments.fwekf_paper import convergence_rows, run_case
 from navreplay.pipeline.params import Params, load_params

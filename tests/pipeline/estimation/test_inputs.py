@@ -10,10 +10,10 @@ import pytest
 
 from navreplay.ingest.meta import SensorMeta
 from navreplay.ingest.schema import from_columns
-from navreplay.pipeline.estimation import inputs as inp
-from navreplay.pipeline.estimation.config import GnssNoiseParams, StepParams
-from navreplay.pipeline.estimation.models import measurement as me
-from navreplay.pipeline.estimation.replay import resolve_imu_noise
+from navreplay.pipeline.estimation.ins import inputs as inp
+from navreplay.pipeline.estimation.ins.config import GnssNoiseParams, StepParams
+from navreplay.pipeline.estimation.ins.models import measurement as me
+from navreplay.pipeline.estimation.ins.replay import resolve_imu_noise
 from tests.pipeline.scenarios.drives import params
 
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from navreplay.pipeline.estimation.models import ins, ins_errors
-from navreplay.pipeline.estimation.models import measurement as me
-from navreplay.pipeline.estimation.outputs import euler_covariance, quat_to_euler_batch
+from navreplay.pipeline.estimation.ins.models import ins, ins_errors
+from navreplay.pipeline.estimation.ins.models import measurement as me
+from navreplay.pipeline.estimation.ins.outputs import euler_covariance, quat_to_euler_batch
 from navreplay.pipeline.nav.earth import dcm_ecef_to_ned, geodetic_to_ecef
 from navreplay.pipeline.nav.mechanization import LANES, LN_DIM, imu_from_motion
 from navreplay.pipeline.nav.rotations import euler_to_quat, quat_to_dcm, quat_to_euler

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation.config import FiltersParams
 from navreplay.pipeline.estimation.core.runlog import CNT_EV, CNT_INN, CNT_OUT, RunLog
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.ins.replay import run_filter
 from tests.pipeline.estimation.conftest import Tables
 
 

@@ -9,7 +9,7 @@ from navreplay.pipeline.estimation.core.gating import (
     streams_to_reset,
     update_reject_since,
 )
-from navreplay.pipeline.estimation.models.measurement import S_OBS
+from navreplay.pipeline.estimation.ins.models.measurement import S_OBS
 
 NS = 1_000_000_000
 

@@ -9,6 +9,7 @@ import pytest
 from filterpy.kalman import KalmanFilter, MerweScaledSigmaPoints
 
 from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.estimation.config import FiltersParams
 from navreplay.pipeline.estimation.core.linalg import joseph_update
 from navreplay.pipeline.estimation.core.unscented import (
     cross_cov,
@@ -16,10 +17,9 @@ from navreplay.pipeline.estimation.core.unscented import (
     ukf_weights,
     unscented_mean_cov,
 )
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.kernels.ukf import _apply_gain
-from navreplay.pipeline.estimation.models import ins
-from navreplay.pipeline.estimation.replay import run_filter
+from navreplay.pipeline.estimation.ins.kernels.ukf import _apply_gain
+from navreplay.pipeline.estimation.ins.models import ins
+from navreplay.pipeline.estimation.ins.replay import run_filter
 
 
 @pytest.mark.parametrize(("alpha", "beta", "kappa"), [(0.99, 2.0, 0.0), (1e-3, 2.0, 0.0)])

@@ -14,10 +14,10 @@ from navreplay.ingest.meta import DatasetMeta, SensorMeta, write_meta
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.tables import Provenance, read_table, write_table
 from navreplay.pipeline.cli import main
-from navreplay.pipeline.estimation.filters_config import FiltersParams
-from navreplay.pipeline.estimation.kernels import vehicle as kv
-from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS
-from navreplay.pipeline.estimation.vehicle_replay import run_vehicle_filter
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.estimation.vehicle import kernel as kv
+from navreplay.pipeline.estimation.vehicle.config import VEHICLE_FILTERS
+from navreplay.pipeline.estimation.vehicle.replay import run_vehicle_filter
 from navreplay.pipeline.experiments.vehicle_bands_config import VehicleBandsParams
 from navreplay.pipeline.experiments.vehicle_paired import monte_carlo, note, paired_table
 from navreplay.pipeline.params import load_params

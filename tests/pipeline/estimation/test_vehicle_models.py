@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from navreplay.pipeline.estimation.models import vehicle as vm
-from navreplay.pipeline.estimation.vehicle_replay import virtual_steering
+from navreplay.pipeline.estimation.vehicle import model as vm
+from navreplay.pipeline.estimation.vehicle.replay import virtual_steering
 from navreplay.pipeline.synth.bicycle import VehicleParams
 
 _V = VehicleParams()
@@ -38,7 +38,7 @@ def central_difference(fn: Callable[[np.ndarray], Any], x: np.ndarray, eps: np.n
 
 
 def stepped(model: int, x: np.ndarray, v_whl: float, delta: float) -> np.ndarray:
-    """``models.vehicle.step`` over 0.02 s as a function."""
+    """``vehicle.model.step`` over 0.02 s as a function."""
     out = np.empty(5)
     vm.step(model, x, v_whl, delta, 0.02, VP, out)
     return out

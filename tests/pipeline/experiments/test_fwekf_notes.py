@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from navreplay.pipeline.estimation.fuzzy import FuzzyParams
+from navreplay.pipeline.estimation.ins.fuzzy import FuzzyParams
 from navreplay.pipeline.experiments.fwekf_notes import convergence_note, faults_note
 
 FZ = FuzzyParams()

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams
+from navreplay.pipeline.estimation.cascaded.config import CASCADED_KINDS, CascadedFilterParams
 from navreplay.pipeline.experiments.tractor_cascaded.artifacts import write_experiment
 from navreplay.pipeline.experiments.tractor_cascaded.config import TractorExperimentParams
 from navreplay.pipeline.experiments.tractor_cascaded.runs import (

@@ -8,9 +8,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from navreplay.pipeline.estimation.metrics import compute_metrics
-from navreplay.pipeline.estimation.replay import run_filter
-from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.estimation.core.windows import NS
+from navreplay.pipeline.estimation.ins.metrics import compute_metrics
+from navreplay.pipeline.estimation.ins.replay import run_filter
 from navreplay.pipeline.outages.montecarlo import (
     Case,
     cases_for,

@@ -7,14 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from navreplay.pipeline.estimation.metrics import compute_metrics
-from navreplay.pipeline.estimation.outage_metrics import (
-    fixes_track,
-    truth_track,
-)
-from navreplay.pipeline.estimation.outputs import estimate_table
-from navreplay.pipeline.estimation.replay import run_filter
-from navreplay.pipeline.estimation.windows import (
+from navreplay.pipeline.estimation.core.windows import (
     NS,
     ErrorTrack,
     Window,
@@ -22,6 +15,13 @@ from navreplay.pipeline.estimation.windows import (
     reconverge_s,
     table_track,
     window_metrics,
+)
+from navreplay.pipeline.estimation.ins.metrics import compute_metrics
+from navreplay.pipeline.estimation.ins.outputs import estimate_table
+from navreplay.pipeline.estimation.ins.replay import run_filter
+from navreplay.pipeline.estimation.ins.tracks import (
+    fixes_track,
+    truth_track,
 )
 from navreplay.pipeline.scenarios.apply import apply_scenario
 from navreplay.pipeline.scenarios.config import ScenarioSpec, WindowsSpec

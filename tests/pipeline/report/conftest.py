@@ -22,7 +22,7 @@ import pytest
 from navreplay.ingest.meta import DatasetMeta, SourceRecord, write_meta
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.tables import Provenance, write_table
-from navreplay.pipeline.estimation.contract import write_run
+from navreplay.pipeline.estimation.core.contract import write_run
 from navreplay.pipeline.estimation.families import run_tables
 from navreplay.pipeline.params import load_params
 from navreplay.pipeline.synth.seoul_campus import simulate

@@ -16,7 +16,7 @@ from typing import Any
 import pyarrow as pa
 
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.estimation.core.windows import NS
 from navreplay.pipeline.outages.montecarlo import Case, Start, run_montecarlo
 from navreplay.pipeline.params import Params, load_params
 from navreplay.pipeline.scenarios.config import Policy

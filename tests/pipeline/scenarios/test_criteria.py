@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import pytest
 
-from navreplay.pipeline.estimation.replay import RunResult, run_filter
+from navreplay.pipeline.estimation.ins.replay import RunResult, run_filter
 from navreplay.pipeline.scenarios.apply import apply_scenario
 from navreplay.pipeline.scenarios.config import FaultSpec, ScenarioSpec
 from navreplay.pipeline.scenarios.criteria import Check, check_fault

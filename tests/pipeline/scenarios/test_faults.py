@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from navreplay.ingest.schema import validate
-from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.estimation.core.windows import NS
 from navreplay.pipeline.nav import earth
 from navreplay.pipeline.scenarios.apply import apply_scenario
 from navreplay.pipeline.scenarios.config import FaultSpec, ScenarioSpec, WindowsSpec

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.estimation.core.windows import NS
 from navreplay.pipeline.scenarios.apply import apply_scenario
 from navreplay.pipeline.scenarios.config import SatellitesSpec, ScenarioSpec, WindowsSpec
 from navreplay.pipeline.scenarios.faults import column

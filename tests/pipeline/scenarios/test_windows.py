@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.stats import kstest
 
-from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.estimation.core.windows import NS
 from navreplay.pipeline.scenarios.config import WindowsSpec
 from navreplay.pipeline.scenarios.windows import in_any, place_windows
 

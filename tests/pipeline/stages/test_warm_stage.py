@@ -25,7 +25,7 @@ from pathlib import Path
 from navreplay.pipeline.params import load_params
 from navreplay.pipeline.warm import _drive
 from navreplay.pipeline.estimation.families import run_tables
-from navreplay.pipeline.estimation.kernels.ekf import run_ekf
+from navreplay.pipeline.estimation.ins.kernels.ekf import run_ekf
 params = load_params(Path(sys.argv[1]))
 with tempfile.TemporaryDirectory() as tmp:
     tables = _drive("ins", params, Path(tmp) / "t")

@@ -8,7 +8,7 @@ from pathlib import Path
 import pyarrow as pa
 import pytest
 
-from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS, CascadedFilterParams
+from navreplay.pipeline.estimation.cascaded.config import CASCADED_KINDS, CascadedFilterParams
 from navreplay.pipeline.params import Params, load_params
 from navreplay.pipeline.synth.tractor import TractorStraightParams
 from navreplay.pipeline.synth.tractor_log import synthesize

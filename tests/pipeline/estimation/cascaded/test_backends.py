@@ -10,10 +10,10 @@ import pytest
 
 from navreplay.pipeline.estimation.cascaded.backends import replay
 from navreplay.pipeline.estimation.cascaded.closed_loop import run_closed_loop
+from navreplay.pipeline.estimation.cascaded.config import CascadedFilterParams
 from navreplay.pipeline.estimation.cascaded.engine import CascadedResult, make_setup
 from navreplay.pipeline.estimation.cascaded.inputs import prepare_inputs
 from navreplay.pipeline.estimation.cascaded.outputs import sigmas
-from navreplay.pipeline.estimation.cascaded_config import CascadedFilterParams
 from navreplay.pipeline.synth.tractor import TractorStraightParams
 from tests.pipeline.estimation.cascaded.conftest import CASCADED
 

@@ -15,10 +15,10 @@ from navreplay.pipeline.estimation.cascaded.closed_loop import (
     run_closed_loop,
     run_closed_loop_scenarios,
 )
+from navreplay.pipeline.estimation.cascaded.config import CascadedFilterParams
 from navreplay.pipeline.estimation.cascaded.engine import make_setup
 from navreplay.pipeline.estimation.cascaded.metrics import BIASES, bias_convergence
 from navreplay.pipeline.estimation.cascaded.model import NAV_PSI, NAV_RB
-from navreplay.pipeline.estimation.cascaded_config import CascadedFilterParams
 from navreplay.pipeline.synth.tractor import TractorStraightParams
 from tests.pipeline.estimation.cascaded.conftest import CASCADED
 

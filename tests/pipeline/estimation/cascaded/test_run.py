@@ -16,10 +16,10 @@ from navreplay.ingest.schema import TableName
 from navreplay.ingest.tables import read_table
 from navreplay.pipeline.cli import main
 from navreplay.pipeline.estimation.cascaded.backends import replay
+from navreplay.pipeline.estimation.cascaded.config import CascadedFilterParams
 from navreplay.pipeline.estimation.cascaded.engine import make_setup
 from navreplay.pipeline.estimation.cascaded.inputs import prepare_inputs
 from navreplay.pipeline.estimation.cascaded.outputs import STATE_COLUMNS
-from navreplay.pipeline.estimation.cascaded_config import CascadedFilterParams
 from navreplay.pipeline.estimation.families import FAMILIES, family_of
 from navreplay.pipeline.synth.tractor import TractorStraightParams
 from navreplay.pipeline.synth.tractor_log import synthesize, write

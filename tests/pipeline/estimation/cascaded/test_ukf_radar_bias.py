@@ -12,7 +12,7 @@ With Table 1 read literally (its variances per 0.02 s step) the heading-bias ran
 (with the position process noise) keeps ``P_psipsi`` near 0.15 rad^2 and the radar bias 0.25
 m/s off; a 100x smaller heading-bias variance brings ``P_psipsi`` to 0.018 rad^2 and the
 radar bias into its band, and so does Table 1 read per second (the default,
-``estimation.cascaded_config``): ``P_psipsi`` 0.004 rad^2.
+``estimation.cascaded.config``): ``P_psipsi`` 0.004 rad^2.
 """
 
 from __future__ import annotations
@@ -24,9 +24,9 @@ import pytest
 
 from navreplay.pipeline.estimation.cascaded import cascade as cs
 from navreplay.pipeline.estimation.cascaded.backends import replay
+from navreplay.pipeline.estimation.cascaded.config import CascadedFilterParams
 from navreplay.pipeline.estimation.cascaded.engine import CascadedResult, CascadeSetup, make_setup
 from navreplay.pipeline.estimation.cascaded.model import NAV_PSI, NAV_PSIB, NAV_RB, NX
-from navreplay.pipeline.estimation.cascaded_config import CascadedFilterParams
 
 SPEED, RADAR_BIAS, GYRO_BIAS, HEADING_BIAS, STEER_BIAS = 3.0, 0.4, 0.3, 0.2, 0.1
 DT_NS, DURATION_S = 20_000_000, 80.0  # the paper's 50 Hz and 80 s

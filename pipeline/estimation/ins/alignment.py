@@ -1,0 +1,338 @@
+"""Initialization and coarse alignment of the INS/GNSS filters (explicit and reported).
+
+The filter starts at the first GNSS epoch of a segment whose horizontal speed reaches
+``init.align_speed_mps`` (a low-cost gyro cannot find north by gyrocompassing; a land vehicle
+moves along its body x axis):
+
+- heading: ``atan2(v_e, v_n)`` of the GNSS velocity (a reversing vehicle would be 180 deg
+  off; the yaw 1-sigma of ``init`` must cover sideslip);
+- roll and pitch: from the specific force averaged over +-0.25 s, corrected by the
+  acceleration seen in the GNSS velocity: ``f^b = C_n^b (a^n - g^n)`` solved for pitch and
+  roll at the known heading (static levelling when the vehicle is at rest);
+- position and velocity: the GNSS antenna moved back by the lever arm; without fixes, a
+  single-point solution (``ingest.gnss.spp``) from the pseudoranges and rates;
+- gyro bias: the mean angular rate over the last static window before the start (at least
+  ``init.static_window_s``) minus the earth rate; zero without a static window;
+- clock (tight coupling): medians of the pseudorange and rate residuals at the start.
+
+The covariance ``P0`` (error coordinates of ``models.ins``) takes the 1-sigma values of
+``init`` (position at least the receiver's accuracy) and the IMU noise model's bias sigmas.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from navreplay.ingest.config import ImuNoise
+from navreplay.ingest.gnss import spp
+from navreplay.pipeline.estimation.ins.config import InitParams
+from navreplay.pipeline.estimation.ins.inputs import FixData, ImuData, ObsData
+from navreplay.pipeline.estimation.ins.models import ins
+from navreplay.pipeline.estimation.ins.models import measurement as me
+from navreplay.pipeline.estimation.ins.models.gnss import AN_DIM, AN_RE, AN_VE, antenna
+from navreplay.pipeline.nav.earth import F64, OMEGA_IE, ecef_to_geodetic, gravity, radii
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """Where and how a segment's filter starts.
+
+    Attributes:
+        t_ns: start time.
+        x0: initial full state (18,).
+        P0: initial error covariance (n, n).
+        method: ``gnss_velocity`` (+ ``static_gyro_bias`` when a static window was used).
+        speed_mps: GNSS horizontal speed at the start.
+        static_window_s: duration of the static window used for the gyro bias (0 if none).
+    """
+
+    t_ns: int
+    x0: F64
+    P0: F64
+    method: str
+    speed_mps: float
+    static_window_s: float
+
+    def summary(self) -> dict[str, object]:
+        q = self.x0[ins.X_Q : ins.X_Q + 4]
+        yaw, pitch, roll = Rotation.from_quat(q[[1, 2, 3, 0]]).as_euler("ZYX")
+        return {
+            "t_ns": self.t_ns,
+            "method": self.method,
+            "speed_mps": self.speed_mps,
+            "static_window_s": self.static_window_s,
+            "lat_deg": math.degrees(self.x0[ins.X_LAT]),
+            "lon_deg": math.degrees(self.x0[ins.X_LON]),
+            "alt_m": float(self.x0[ins.X_H]),
+            "roll_rad": float(roll),
+            "pitch_rad": float(pitch),
+            "yaw_rad": float(yaw),
+        }
+
+
+@dataclass(frozen=True)
+class _Track:
+    t_ns: np.ndarray
+    llh: np.ndarray  # antenna lat, lon (rad), h (m)
+    vel: np.ndarray  # NED m/s (NaN where unknown)
+    sig_h: np.ndarray
+    sig_v: np.ndarray
+    clock: np.ndarray  # (K, 2) clock bias, drift from SPP (NaN from fixes)
+
+
+def _spp(rows: F64) -> tuple[F64, float, F64, float] | None:
+    """Single-point position and velocity of one epoch's ``obs`` rows (``ingest.gnss.spp``).
+
+    Returns:
+        (ECEF position m, clock bias m, ECEF velocity m/s, clock drift m/s), or None with
+        fewer than four usable pseudoranges; the velocity is NaN with fewer than four rates.
+    """
+    pr = rows[rows[:, me.OB_PR_OK] > 0]
+    if pr.shape[0] < 4:
+        return None
+    sat = np.ascontiguousarray(pr[:, me.OB_SAT : me.OB_SAT + 3])
+    w = 1.0 / np.square(pr[:, me.OB_SIG_PR])
+    x, _, _, ok = spp.solve_position(sat, pr[:, me.OB_PR].copy(), w, np.zeros(4), 20, 1e-4)
+    if not ok:
+        return None
+    rr = rows[rows[:, me.OB_PRR_OK] > 0]
+    v = np.full(4, math.nan)
+    if rr.shape[0] >= 4:
+        v, _ = spp.solve_velocity(
+            np.ascontiguousarray(rr[:, me.OB_SAT : me.OB_SAT + 3]),
+            np.ascontiguousarray(rr[:, me.OB_SAT + 3 : me.OB_SAT + 6]),
+            rr[:, me.OB_PRR].copy(),
+            1.0 / np.square(rr[:, me.OB_SIG_PRR]),
+            x[:3].copy(),
+        )
+    return x[:3], float(x[3]), v[:3], float(v[3])
+
+
+def _track_from_fixes(fixes: FixData) -> _Track | None:
+    f = fixes.fix[fixes.usable & (fixes.fix[:, me.FX_POS_DIM] > 0)]
+    t = fixes.t_ns[fixes.usable & (fixes.fix[:, me.FX_POS_DIM] > 0)]
+    if t.size < 2:
+        return None
+    llh = f[:, [me.FX_LAT, me.FX_LON, me.FX_ALT]]
+    vel = np.where(f[:, [me.FX_VEL_DIM]] > 0, f[:, me.FX_VN : me.FX_VN + 3], math.nan)
+    vel[f[:, me.FX_VEL_DIM] == 2, 2] = 0.0  # no vertical velocity given: assume level
+    # where the receiver gives no velocity, difference the neighbouring positions
+    rm, rn = np.vectorize(radii)(llh[:, 0])
+    ned = np.column_stack(
+        [
+            (llh[:, 0] - llh[0, 0]) * (rm + llh[:, 2]),
+            (llh[:, 1] - llh[0, 1]) * (rn + llh[:, 2]) * np.cos(llh[:, 0]),
+            -(llh[:, 2] - llh[0, 2]),
+        ]
+    )
+    ts = t * 1e-9
+    for k in (int(j) for j in np.flatnonzero(~np.isfinite(vel[:, 0]))):
+        lo, hi = max(k - 1, 0), min(k + 1, int(t.size) - 1)
+        if hi > lo and ts[hi] - ts[lo] <= 2.5:
+            vel[k] = (ned[hi] - ned[lo]) / (ts[hi] - ts[lo])
+    clock = np.full((t.size, 2), math.nan)
+    return _Track(t, llh, vel, f[:, me.FX_SIG_H], f[:, me.FX_SIG_V], clock)
+
+
+def _track_from_obs(obs: ObsData) -> _Track | None:
+    ts, llh, vel, clock = [], [], [], []
+    for e in range(obs.epoch_t_ns.size):
+        sol = _spp(obs.obs[obs.start[e] : obs.start[e + 1]])
+        if sol is None:
+            continue
+        r, cb, v, cd = sol
+        lat, lon, h = ecef_to_geodetic(r[0], r[1], r[2])
+        ts.append(obs.epoch_t_ns[e])
+        llh.append((lat, lon, h))
+        vel.append(_ecef_to_ned(lat, lon) @ v)
+        clock.append((cb, cd))
+    if len(ts) < 2:
+        return None
+    k = len(ts)
+    return _Track(
+        np.array(ts),
+        np.array(llh),
+        np.array(vel),
+        np.full(k, 5.0),
+        np.full(k, 8.0),
+        np.array(clock),
+    )
+
+
+def _level(f_b: F64, a_minus_g: F64, yaw: float) -> tuple[float, float]:
+    """Roll and pitch with ``f_b = C_n^b (a^n - g^n)`` at heading ``yaw``."""
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    u = np.array(
+        [
+            cy * a_minus_g[0] + sy * a_minus_g[1],
+            -sy * a_minus_g[0] + cy * a_minus_g[1],
+            a_minus_g[2],
+        ]
+    )
+    # f_x = cos(p) u_x - sin(p) u_z  ->  p = delta - acos(f_x / rho), the branch near level
+    rho = math.hypot(u[0], u[2])
+    delta = math.atan2(-u[2], u[0])
+    c = max(-1.0, min(1.0, f_b[0] / rho))
+    cands = (delta - math.acos(c), delta + math.acos(c))
+    pitch = min(cands, key=lambda p: abs(math.remainder(p, 2 * math.pi)))
+    pitch = math.remainder(pitch, 2 * math.pi)
+    w_y = u[1]
+    w_z = math.sin(pitch) * u[0] + math.cos(pitch) * u[2]
+    roll = math.remainder(math.atan2(w_z, w_y) - math.atan2(f_b[2], f_b[1]), 2 * math.pi)
+    return roll, pitch
+
+
+def _static_gyro_bias(
+    imu: ImuData, lo: int, hi: int, init: InitParams, c_bn: F64, lat: float, h: float
+) -> tuple[F64, float]:
+    """Gyro bias from the last static window in samples ``lo:hi`` (zero and 0 s if none)."""
+    f, w = imu.data[lo:hi, :3], imu.data[lo:hi, 3:]
+    g = gravity(lat, h)
+    static = (np.abs(np.linalg.norm(f, axis=1) - g) < init.static_accel_tol_mps2) & (
+        np.linalg.norm(w, axis=1) < init.static_gyro_tol_radps
+    )
+    if not static.any():
+        return np.zeros(3), 0.0
+    # last run of static samples
+    end = int(np.flatnonzero(static)[-1]) + 1
+    start = end
+    while start > 0 and static[start - 1]:
+        start -= 1
+    t = imu.t_ns[lo:hi]
+    dur = (t[end - 1] - t[start]) * 1e-9
+    if dur < init.static_window_s:
+        return np.zeros(3), 0.0
+    w_ie_n = np.array([OMEGA_IE * math.cos(lat), 0.0, -OMEGA_IE * math.sin(lat)])
+    return w[start:end].mean(axis=0) - c_bn.T @ w_ie_n, float(dur)
+
+
+def _initial_navigation(
+    imu: ImuData, lo: int, hi: int, track: _Track, k: int, lever_b: F64
+) -> tuple[F64, F64]:
+    """Full state (biases and clock zero) at track epoch ``k``, and its C_b^n: heading from
+    the GNSS velocity, roll and pitch from the specific force, IMU position from the antenna's
+    (lever arm removed)."""
+    t_imu = imu.t_ns[lo:hi]
+    t0 = int(track.t_ns[k])
+    v = track.vel[k]
+    yaw = math.atan2(v[1], v[0])
+    a_n = np.zeros(3)
+    lo_k, hi_k = max(k - 1, 0), min(k + 1, track.t_ns.size - 1)
+    dt = (track.t_ns[hi_k] - track.t_ns[lo_k]) * 1e-9
+    if hi_k > lo_k and 0 < dt <= 2.5 and np.isfinite(track.vel[[lo_k, hi_k]]).all():
+        a_n = (track.vel[hi_k] - track.vel[lo_k]) / dt
+    lat, lon, h_ant = track.llh[k]
+    half = 250_000_000
+    win = (t_imu >= t0 - half) & (t_imu <= t0 + half)
+    f_b = imu.data[lo:hi][win, :3].mean(axis=0)
+    g_n = np.array([0.0, 0.0, gravity(lat, h_ant)])
+    roll, pitch = _level(f_b, a_n - g_n, yaw)
+    att = Rotation.from_euler("ZYX", [yaw, pitch, roll])
+    c_bn = att.as_matrix()
+    lever_n = c_bn @ lever_b
+    rm, rn = radii(lat)
+    x0 = np.zeros(ins.FULL_DIM)
+    x0[ins.X_LAT] = lat - lever_n[0] / (rm + h_ant)
+    x0[ins.X_LON] = lon - lever_n[1] / ((rn + h_ant) * math.cos(lat))
+    x0[ins.X_H] = h_ant + lever_n[2]
+    x0[ins.X_VEL : ins.X_VEL + 3] = v
+    q = att.as_quat()[[3, 0, 1, 2]]
+    x0[ins.X_Q : ins.X_Q + 4] = q if q[0] >= 0 else -q
+    return x0, c_bn
+
+
+def align(
+    imu: ImuData,
+    segment: tuple[int, int],
+    fixes: FixData | None,
+    obs: ObsData | None,
+    init: InitParams,
+    noise: ImuNoise,
+    lever_b: F64,
+    n: int,
+) -> Alignment | None:
+    """Coarse alignment of one IMU segment (see the module docstring); None if the segment
+    never reaches the alignment speed with GNSS available."""
+    lo, hi = segment
+    t_imu = imu.t_ns[lo:hi]
+    track = _track_from_fixes(fixes) if fixes is not None else None
+    if track is None and obs is not None:
+        track = _track_from_obs(obs)
+    if track is None:
+        return None
+    half = 250_000_000
+    speed = np.hypot(track.vel[:, 0], track.vel[:, 1])
+    ok = (
+        np.isfinite(speed)
+        & (speed >= init.align_speed_mps)
+        & (track.t_ns - half >= t_imu[0])
+        & (track.t_ns + half <= t_imu[-1])
+    )
+    if not ok.any():
+        return None
+    k = int(np.flatnonzero(ok)[0])
+    t0 = int(track.t_ns[k])
+    x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b)
+    lat, h_ant = track.llh[k, 0], track.llh[k, 2]
+    i_start = int(np.searchsorted(t_imu, t0))
+    bg, static_s = _static_gyro_bias(imu, lo, lo + i_start, init, c_bn, lat, h_ant)
+    x0[ins.X_BG : ins.X_BG + 3] = bg
+    if n > ins.N_LOOSE:
+        x0[ins.X_CB], x0[ins.X_CD] = _clock(x0, obs, t0, lever_b, track.clock[k])
+    sig_h = max(init.pos_sigma_m, float(track.sig_h[k]))
+    sig_v = max(init.pos_sigma_m, float(track.sig_v[k]))
+    d = [sig_h, sig_h, sig_v] + [init.vel_sigma_mps] * 3
+    d += [init.roll_pitch_sigma_rad] * 2 + [init.yaw_sigma_rad]
+    d += [max(noise.accel_bias_sigma_mps2, 1e-6)] * 3
+    d += [max(noise.gyro_bias_sigma_radps, OMEGA_IE if static_s else 1e-7)] * 3
+    d += [init.clock_bias_sigma_m, init.clock_drift_sigma_mps]
+    P0 = np.diag(np.square(d[:n]))
+    method = "gnss_velocity" + ("+static_gyro_bias" if static_s else "")
+    log.info("aligned at t=%d ns: %s, speed %.1f m/s", t0, method, speed[k])
+    return Alignment(t0, x0, P0, method, float(speed[k]), static_s)
+
+
+def _clock(
+    x0: F64, obs: ObsData | None, t0: int, lever_b: F64, spp_clock: F64
+) -> tuple[float, float]:
+    """Clock bias and drift at the start: medians of the residuals of the nearest epoch."""
+    if obs is None or obs.epoch_t_ns.size == 0:
+        return 0.0, 0.0
+    e = min(int(np.searchsorted(obs.epoch_t_ns, t0)), obs.epoch_t_ns.size - 1)
+    rows = obs.obs[obs.start[e] : obs.start[e + 1]]
+    ant = np.empty(AN_DIM)
+    antenna(x0, lever_b, np.zeros(3), np.empty((3, 3)), ant)
+    r_ant, v_ant = ant[AN_RE : AN_RE + 3], ant[AN_VE : AN_VE + 3]
+    pr = rows[rows[:, me.OB_PR_OK] > 0]
+    if pr.shape[0] == 0:
+        return (
+            (float(spp_clock[0]), float(spp_clock[1]))
+            if np.isfinite(spp_clock).all()
+            else (
+                0.0,
+                0.0,
+            )
+        )
+    d = pr[:, me.OB_SAT : me.OB_SAT + 3] - r_ant
+    cb = float(np.median(pr[:, me.OB_PR] - np.linalg.norm(d, axis=1)))
+    rr = rows[rows[:, me.OB_PRR_OK] > 0]
+    cd = 0.0
+    if rr.shape[0]:
+        d = rr[:, me.OB_SAT : me.OB_SAT + 3] - r_ant
+        e_u = d / np.linalg.norm(d, axis=1)[:, None]
+        pred = np.sum(e_u * (rr[:, me.OB_SAT + 3 : me.OB_SAT + 6] - v_ant), axis=1)
+        cd = float(np.median(rr[:, me.OB_PRR] - pred))
+    return cb, cd
+
+
+def _ecef_to_ned(lat: float, lon: float) -> F64:
+    """C_e^n at (lat, lon) (numpy; the kernels have their own)."""
+    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+    return np.array([[-sl * co, -sl * so, cl], [-so, co, 0.0], [-cl * co, -cl * so, -sl]])

@@ -1,0 +1,172 @@
+"""The error-state EKF replay loop, compiled whole with numba (``cache=True``).
+
+Per stop of the schedule (``models.measurement`` layout): propagate the full nominal state
+through the IMU samples (``ins.propagate_span``, RK4), propagate the error covariance with the
+span's transition ``P <- Phi P Phi^T + Qd`` (``ins.transition``), then, if the stop carries
+measurements, one joint update of every accepted block: chi-square gating per block, timeout
+resets, Joseph-form covariance update, injection of the error estimate into the nominal state
+(error reset). The covariance is symmetrized and checked positive definite at every stop and
+the NaN barrier (``common.check_state``) ends the run on divergence.
+
+``ekf_prepare`` is also the filterpy backend's update front end (same gating, same resets);
+only the Joseph update itself is done by filterpy there. ``ekf_prepare`` and
+``joseph_update`` are inlined into the loop at compile time (see "Compile time" in
+``kernels.ukf``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from navreplay.pipeline._jit import njit
+from navreplay.pipeline.estimation.core.gating import (
+    STATUS_INDEFINITE,
+    STATUS_OK,
+    fail,
+    gate_blocks,
+    gating_cov,
+    keep_pd,
+    record_output,
+)
+from navreplay.pipeline.estimation.core.linalg import (
+    innovation_cov,
+    joseph_update,
+    propagate_cov,
+)
+from navreplay.pipeline.estimation.core.runlog import CNT_STOP, GatedBlocks, RunLog
+from navreplay.pipeline.estimation.ins.kernels.common import (
+    check_state,
+    close_gating,
+    epoch_buffers,
+    reset_timed_out,
+)
+from navreplay.pipeline.estimation.ins.kernels.records import (
+    Epoch,
+    EpochBuffers,
+    Schedule,
+    Settings,
+)
+from navreplay.pipeline.estimation.ins.models.ins import (
+    ImuSpan,
+    Stepping,
+    inject,
+    propagate_span,
+    span_work,
+)
+from navreplay.pipeline.estimation.ins.models.ins_errors import transition
+from navreplay.pipeline.estimation.ins.models.measurement import (
+    ST_OUT,
+    ST_T,
+    epoch_h,
+    epoch_jac,
+    epoch_layout,
+    epoch_z,
+    gate_shift,
+)
+from navreplay.pipeline.nav.earth import F64
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def ekf_prepare(
+    ep: Epoch,
+    X: F64,
+    P: F64,
+    fix: F64 | None,
+    obs: F64 | None,
+    cfg: Settings,
+    buf: EpochBuffers,
+    log: RunLog,
+) -> int:
+    """Measurement front end of one EKF epoch ``ep``: values, Jacobians, gating, timeout
+    resets.
+
+    Fills ``z``, ``r`` (variances), ``nu = z - h(X)``, ``H`` (m, n) and the prior innovation
+    covariance ``S = H P H^T + R``; gates every block; resets the covariance of a stream
+    rejected for longer than the timeout (modifying ``P``) and gates again; records the
+    innovations and events; writes the accepted row indices into ``acc_rows``.
+
+    Returns:
+        the number of accepted rows.
+    """
+    t_ns, m, nb_, w_ib_b = ep
+    n, lever_b, gate = cfg.n, cfg.lever_b, cfg.gate
+    rows, blocks, z, r, nu, H, S = buf.rows, buf.blocks, buf.z, buf.r, buf.nu, buf.H, buf.S
+    ref = X[:3].copy()
+    epoch_z(rows, m, fix, obs, ref, cfg.nhc_sigma, z, r)
+    dr = np.empty(m)
+    gate_shift(rows, m, fix, r, dr)
+    hx = np.empty(m)
+    epoch_h(X, rows, m, obs, ref, w_ib_b, lever_b, hx)
+    epoch_jac(X, rows, m, obs, w_ib_b, lever_b, n, H)
+    for k in range(m):
+        nu[k] = z[k] - hx[k]
+    nis = np.empty(nb_)
+    accepted = np.empty(nb_, np.int64)
+    gwork = np.empty((3, 6))
+    ones = np.ones(n)
+    PHt = np.empty((n, m))
+    for attempt in range(2):
+        innovation_cov(H, P, r, m, n, PHt, S)
+        g = GatedBlocks(nu, gating_cov(S, dr, m), blocks, nb_, nis, accepted)
+        gate_blocks(nu, g.S, blocks, nb_, gate, nis, accepted, gwork)
+        if attempt == 1 or not reset_timed_out(t_ns, P, g, buf.reject_since, ones, cfg, log):
+            break
+    return close_gating(t_ns, g, gate, buf, log)
+
+
+@njit(cache=True, error_model="numpy")
+def run_ekf(
+    x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
+) -> int:
+    """Replay the error-state EKF from ``x0, P0`` at ``sched.t0`` over every stop.
+
+    Args:
+        x0: initial full state (18,); P0: initial error covariance (n, n).
+        sched: the segment's IMU samples and stops (``records.Schedule``).
+        fix, obs: the measurements (``models.measurement``); the one the filter does not read
+            is None, and the kernel compiled for it carries no code for it.
+        cfg: the settings (``records.Settings``); log: what the run writes (``records.RunLog``).
+
+    Returns:
+        a ``common.STATUS_*`` code (``log.counts[CNT_T_FAIL]`` holds the time of a failure).
+    """
+    n, m_max = cfg.n, sched.m_max
+    X = x0.copy()
+    P = P0.copy()
+    ones = np.ones(n)
+    L = np.empty((n, n))
+    Phi = np.empty((n, n))
+    Qd = np.empty((n, n))
+    tmp = np.empty((n, n))
+    step = Stepping(cfg.substeps, cfg.max_step_s, cfg.gap_s)
+    sw = span_work()
+    u = sched.u0.copy()
+    buf = epoch_buffers(m_max, n)
+    record_output(sched.t0, X, P, log)
+    t_cur = sched.t0
+    i = sched.i0
+    stops = sched.stops
+    for k in range(stops.shape[0]):
+        stop = stops[k]
+        t = stop[ST_T]
+        i = propagate_span(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), step, sw, True)
+        for j in range(6):
+            u[j] = sw.u_end[j]
+        t_cur = t
+        transition(X, sw.acc, cfg.noise, n, Phi, Qd)
+        propagate_cov(P, Phi, Qd, n, tmp)
+        m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
+        if m > 0:
+            ma = ekf_prepare(Epoch(t, m, nb_, u[3:6]), X, P, fix, obs, cfg, buf, log)
+            if ma > 0:
+                dx, ok = joseph_update(P, n, buf.H, buf.S, buf.r, buf.nu, buf.acc_rows, ma)
+                if ok:
+                    inject(X, dx, n)
+        ok = keep_pd(P, n, L, t, log.ev_i, log.ev_f, log.counts)
+        status = check_state(X, P, ones, cfg) if ok else STATUS_INDEFINITE
+        if status != STATUS_OK:
+            return fail(t, status, log.ev_i, log.ev_f, log.counts)
+        if stop[ST_OUT] > 0:
+            record_output(t, X, P, log)
+        log.counts[CNT_STOP] = k + 1
+    return STATUS_OK

@@ -1,0 +1,288 @@
+"""The filterpy reference backend: the same model driven by filterpy's EKF and UKF.
+
+``run_ekf_filterpy`` and ``run_ukf_filterpy`` take exactly the records of the compiled
+``kernels.ekf.run_ekf`` / ``kernels.ukf.run_ukf`` and fill the same outputs. Everything that
+is model or bookkeeping is the *same* code: the span propagation and transition
+(``models.ins``, ``models.ins_errors``), the measurement rows (``models.measurement``), the
+gating, timeout resets, positive-definiteness repair, NaN barrier and recording
+(``core.gating``), and the EKF's measurement front end (``kernels.ekf.ekf_prepare``).
+filterpy does the estimator arithmetic: ``ExtendedKalmanFilter.predict`` / ``update``
+(Joseph form) on the error state, and ``UnscentedKalmanFilter`` with
+``MerweScaledSigmaPoints`` on the UKF coordinates, its ``fx`` integrating one sigma point
+through the span and its ``hx`` predicting the rows.
+
+The loop runs in Python, one stop at a time, so this backend is slow; it is the community
+reference the compiled backend is checked against (tests require agreement within 1e-6
+sigma).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+from navreplay.pipeline.estimation.core import gating as gt
+from navreplay.pipeline.estimation.core import linalg as la
+from navreplay.pipeline.estimation.core import runlog as rl
+from navreplay.pipeline.estimation.core.runlog import GatedBlocks, RunLog
+from navreplay.pipeline.estimation.ins.kernels import common as cm
+from navreplay.pipeline.estimation.ins.kernels.ekf import ekf_prepare
+from navreplay.pipeline.estimation.ins.kernels.records import (
+    Epoch,
+    RowPrediction,
+    Schedule,
+    Settings,
+)
+from navreplay.pipeline.estimation.ins.kernels.unscented import sigma_h
+from navreplay.pipeline.estimation.ins.models import ins, ins_errors
+from navreplay.pipeline.estimation.ins.models import measurement as me
+from navreplay.pipeline.nav.earth import F64, I64
+
+
+@dataclass
+class _Run:
+    """A replay's records (the kernel's arguments) and the loop state of the driver."""
+
+    sched: Schedule
+    fix: F64 | None
+    obs: F64 | None
+    cfg: Settings
+    log: RunLog
+
+    def __post_init__(self) -> None:
+        n, m_max = self.cfg.n, self.sched.m_max
+        self.t_cur = int(self.sched.t0)
+        self.i = int(self.sched.i0)
+        self.u = self.sched.u0.copy()
+        self.step = ins.Stepping(self.cfg.substeps, self.cfg.max_step_s, self.cfg.gap_s)
+        self.out = ins.span_work()
+        self.L = np.empty((n, n))
+        self.Phi, self.Qd = np.empty((n, n)), np.empty((n, n))
+        self.buf = cm.epoch_buffers(m_max, n)
+
+    def stops(self) -> Iterator[tuple[int, I64, int]]:
+        """(index, row, time in ns) of every stop of the schedule, in order."""
+        for k, stop in enumerate(self.sched.stops):
+            yield k, stop, int(stop[me.ST_T])
+
+    def error_filter(self, kind: Any, P0: F64) -> Any:
+        """A filterpy filter of class ``kind`` on the error state: zero, covariance ``P0``."""
+        kf = kind(dim_x=self.cfg.n, dim_z=1)
+        kf.x = np.zeros(self.cfg.n)
+        kf.P = np.array(P0, dtype=float)
+        return kf
+
+    def span(self, X: F64, t: int, accumulate: bool) -> int:
+        """Propagate ``X`` to ``t`` from the cursor (the cursor does not move)."""
+        span = ins.ImuSpan(self.sched.imu_t, self.sched.imu, self.i, self.t_cur, self.u, t)
+        return int(ins.propagate_span(X, span, self.step, self.out, accumulate))
+
+    @property
+    def acc(self) -> F64:
+        """The span accumulator of the last ``span(..., accumulate=True)``."""
+        return self.out.acc
+
+    def advance(self, i_next: int, t: int) -> None:
+        self.i = i_next
+        self.u[:] = self.out.u_end
+        self.t_cur = t
+
+    def epoch(self, t: int, m: int, nb_: int) -> Epoch:
+        """The epoch at ``t`` of ``m`` rows in ``nb_`` blocks (after ``advance`` to ``t``)."""
+        return Epoch(t, m, nb_, self.u[3:6].copy())
+
+    def predict_nominal(self, X: F64, t: int) -> None:
+        """Propagate the nominal state ``X`` to ``t`` (the cursor moves with it), and the
+        span's transition and process noise into ``Phi``, ``Qd`` (error-state filters)."""
+        self.advance(self.span(X, t, True), t)
+        ins_errors.transition(X, self.acc, self.cfg.noise, self.cfg.n, self.Phi, self.Qd)
+
+    def prepare(self, kf: Any, t: int, stop: I64, X: F64) -> tuple[int, int]:
+        """``ekf_prepare`` of the epoch at ``stop`` on the covariance of the error-state
+        filter ``kf``; returns (rows, accepted rows) (``buf.acc_rows``)."""
+        m, nb_ = self.layout(stop)
+        if m == 0:
+            return 0, 0
+        P = np.ascontiguousarray(kf.P)
+        ep = self.epoch(t, m, nb_)
+        ma = int(ekf_prepare(ep, X, P, self.fix, self.obs, self.cfg, self.buf, self.log))
+        kf.P = P
+        return m, ma
+
+    def inject(self, kf: Any, X: F64) -> None:
+        """Move the error estimate of ``kf`` into the nominal state ``X`` (error reset)."""
+        n = self.cfg.n
+        ins.inject(X, np.asarray(kf.x, dtype=float).reshape(n), n)
+        kf.x = np.zeros(n)
+
+    def finish_kf(self, kf: Any, k: int, stop: I64, X: F64) -> int:
+        """``finish`` of stop ``k`` for the error-state filter ``kf``, counted as done if
+        it passed."""
+        P = np.ascontiguousarray(kf.P)
+        status = self.finish(int(stop[me.ST_T]), stop, X, P, P, np.ones(self.cfg.n))
+        kf.P = P
+        if status == gt.STATUS_OK:
+            self.log.counts[rl.CNT_STOP] = k + 1
+        return status
+
+    def layout(self, stop: I64) -> tuple[int, int]:
+        m, nb_ = me.epoch_layout(
+            stop, self.fix, self.obs, self.sched.obs_start, self.cfg.nhc_on, self.buf.rows,
+            self.buf.blocks,
+        )  # fmt: skip
+        return int(m), int(nb_)
+
+    def finish(self, t: int, stop: I64, X: F64, P: F64, P_err: F64, scale: F64) -> int:
+        """Positive definiteness, the NaN barrier and the output of one stop."""
+        log = self.log
+        ok = gt.keep_pd(P, self.cfg.n, self.L, t, log.ev_i, log.ev_f, log.counts)
+        status = int(cm.check_state(X, P, scale, self.cfg)) if ok else 3
+        if status != gt.STATUS_OK:
+            return int(gt.fail(t, status, log.ev_i, log.ev_f, log.counts))
+        if stop[me.ST_OUT] > 0:
+            gt.record_output(t, X, P_err, log)
+        return gt.STATUS_OK
+
+
+def run_ekf_filterpy(
+    x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
+) -> int:
+    """``kernels.ekf.run_ekf`` with filterpy's ``ExtendedKalmanFilter`` doing predict/update."""
+    run = _Run(sched, fix, obs, cfg, log)
+    n, buf = cfg.n, run.buf
+    ekf = run.error_filter(ExtendedKalmanFilter, P0)
+    X = x0.copy()
+    gt.record_output(sched.t0, X, ekf.P, log)
+    for k, stop, t in run.stops():
+        run.predict_nominal(X, t)
+        ekf.F, ekf.Q = run.Phi, run.Qd
+        ekf.x = np.zeros(n)
+        ekf.predict()
+        _, ma = run.prepare(ekf, t, stop, X)
+        if ma > 0:
+            a = buf.acc_rows[:ma]
+            Ha, hx = buf.H[a, :n].copy(), buf.z[a] - buf.nu[a]
+            ekf.update(
+                buf.z[a], HJacobian=lambda _x, h=Ha: h, Hx=lambda _x, v=hx: v, R=np.diag(buf.r[a])
+            )
+            run.inject(ekf, X)
+        status = run.finish_kf(ekf, k, stop, X)
+        if status != gt.STATUS_OK:
+            return status
+    return gt.STATUS_OK
+
+
+def run_ukf_filterpy(
+    x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
+) -> int:
+    """``kernels.ukf.run_ukf`` with filterpy's ``UnscentedKalmanFilter`` doing the UT."""
+    run = _Run(sched, fix, obs, cfg, log)
+    n = cfg.n
+    points = MerweScaledSigmaPoints(n, alpha=cfg.ukf_alpha, beta=cfg.ukf_beta, kappa=cfg.ukf_kappa)
+    if not (
+        np.allclose(points.Wm, cfg.wm, rtol=1e-12) and np.allclose(points.Wc, cfg.wc, rtol=1e-12)
+    ):
+        raise ValueError("filterpy's sigma-point weights differ from the kernel's")
+    ukf = UnscentedKalmanFilter(dim_x=n, dim_z=1, dt=1.0, hx=None, fx=None, points=points)
+    q_ref = x0[ins.X_Q : ins.X_Q + 4].copy()
+    ukf.x = np.empty(n)
+    ins.from_full(x0, q_ref, n, ukf.x)
+    sc = np.empty(n)
+    ins.coords_scale(x0, n, sc)
+    ukf.P = P0 * np.outer(sc, sc)
+    Phi, Qd = np.empty((n, n)), np.empty((n, n))
+    X = np.empty(ins.FULL_DIM)
+    gt.record_output(sched.t0, x0, P0, log)
+
+    def fx(s: F64, dt: float, t_end: int, q_old: F64, q_new: F64) -> F64:
+        Xs = np.empty(ins.FULL_DIM)
+        ins.to_full(np.asarray(s, dtype=float), q_old, n, Xs)
+        run.span(Xs, t_end, False)
+        out = np.empty(n)
+        ins.from_full(Xs, q_new, n, out)
+        return out
+
+    for k, stop, t in run.stops():
+        # the central sigma point carries the process-noise accumulation and the new reference
+        ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, X)
+        i_next = run.span(X, t, True)
+        ins_errors.transition(X, run.acc, cfg.noise, n, Phi, Qd)
+        ins.coords_scale(X, n, sc)
+        q_new = X[ins.X_Q : ins.X_Q + 4].copy()
+        ukf.Q = Qd * np.outer(sc, sc)
+        ukf.predict(dt=(t - run.t_cur) * 1e-9, fx=fx, t_end=t, q_old=q_ref.copy(), q_new=q_new)
+        q_ref = q_new
+        run.advance(i_next, t)
+        P = np.ascontiguousarray(ukf.P)
+        ok = gt.keep_pd(P, n, run.L, t, log.ev_i, log.ev_f, log.counts)
+        ukf.P = P
+        m, nb_ = run.layout(stop)
+        if ok and m > 0:
+            _ukf_update(ukf, points, run, t, q_ref, m, nb_)
+        ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, X)
+        ins.coords_scale(X, n, sc)
+        P = np.ascontiguousarray(ukf.P)
+        status = run.finish(t, stop, X, P, P / np.outer(sc, sc), sc) if ok else 3
+        ukf.P = P
+        if status != gt.STATUS_OK:
+            return status if ok else int(gt.fail(t, status, log.ev_i, log.ev_f, log.counts))
+        log.counts[rl.CNT_STOP] = k + 1
+    return gt.STATUS_OK
+
+
+def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb_: int) -> None:
+    """Gate with the shared code, then let filterpy update with the accepted rows."""
+    cfg, buf = run.cfg, run.buf
+    n, rows, blocks, wm, wc = cfg.n, buf.rows, buf.blocks, cfg.wm, cfg.wc
+    Xm = np.empty(ins.FULL_DIM)
+    ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, Xm)
+    ref = Xm[:3].copy()
+    sc = np.empty(n)
+    ins.coords_scale(Xm, n, sc)
+    z, r = np.empty(m), np.empty(m)
+    me.epoch_z(rows, m, run.fix, run.obs, ref, cfg.nhc_sigma, z, r)
+    dr = np.empty(m)
+    me.gate_shift(rows, m, run.fix, r, dr)
+    ep = run.epoch(t, m, nb_)
+    pred = RowPrediction(rows, m, ref, ep.w_ib_b, cfg.lever_b)
+    h_ref = np.empty(m)  # as the kernel: rows relative to the mean's prediction
+    me.epoch_h(Xm, rows, m, run.obs, ref, ep.w_ib_b, cfg.lever_b, h_ref)
+    z -= h_ref
+    nis, accepted = np.empty(nb_), np.empty(nb_, np.int64)
+    Z = np.empty((2 * n + 1, m))
+    for attempt in range(2):
+        sig = points.sigma_points(ukf.x, ukf.P)
+        sigma_h(sig, q_ref, pred, run.obs, h_ref, np.empty(ins.FULL_DIM), Z)
+        zp = wm @ Z
+        dz = Z - zp
+        S = np.ascontiguousarray(dz.T @ (wc[:, None] * dz) + np.diag(r))
+        nu = z - zp
+        g = GatedBlocks(nu, gt.gating_cov(S, dr, m), blocks, nb_, nis, accepted)
+        gt.gate_blocks(nu, g.S, blocks, nb_, cfg.gate, nis, accepted, np.empty((3, 6)))
+        if attempt == 1:
+            break
+        P = np.ascontiguousarray(ukf.P)
+        reset = cm.reset_timed_out(t, P, g, buf.reject_since, sc, cfg, run.log)
+        ukf.P = P
+        if not reset:
+            break
+    a = buf.acc_rows[: cm.close_gating(t, g, cfg.gate, buf, run.log)].copy()
+    if a.size == 0:
+        return
+    ukf.sigmas_f = sig
+
+    def hx(s: F64) -> F64:
+        Xs = np.empty(ins.FULL_DIM)
+        ins.to_full(np.asarray(s, dtype=float), q_ref, n, Xs)
+        out = np.empty(m)
+        me.epoch_h(Xs, rows, m, run.obs, ref, ep.w_ib_b, cfg.lever_b, out)
+        return (out - h_ref)[a]
+
+    ukf.update(z[a], R=np.diag(r[a]), hx=hx)
+    P = np.ascontiguousarray(ukf.P)
+    la.symmetrize(P, n)
+    ukf.P = P

@@ -1,0 +1,433 @@
+"""One replay loop for every INS/GNSS filter: tables in, a ``RunResult`` out.
+
+``run_filter`` prepares the inputs behind the data barrier (``inputs``), splits the IMU into
+segments at long gaps, aligns each segment (``alignment``), builds the stop schedule (output
+grid + update epochs + NHC slots) and hands arrays to a backend:
+
+- ``numba`` (default): ``kernels.ekf.run_ekf`` / ``kernels.ukf.run_ukf``, the whole loop
+  compiled (``cache=True``);
+- ``filterpy``: ``reference.run_ekf_filterpy`` / ``reference.run_ukf_filterpy``, the same
+  model functions, gating and bookkeeping driven by filterpy's ExtendedKalmanFilter and
+  UnscentedKalmanFilter, with the same signature and outputs.
+
+A divergence (NaN barrier, indefinite covariance, limits) raises ``DivergenceError`` or, with
+``divergence.on_divergence: flag``, ends the run there and marks it diverged.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any, NamedTuple
+
+import numba as nb
+import numpy as np
+import pyarrow as pa
+from scipy.stats import chi2
+
+from navreplay.ingest.config import ImuNoise
+from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline._numba_cache import fewer_gc_passes
+from navreplay.pipeline.errors import DivergenceError
+from navreplay.pipeline.estimation.core import gating as gt
+from navreplay.pipeline.estimation.core import runlog as rl
+from navreplay.pipeline.estimation.core import tables as tb
+from navreplay.pipeline.estimation.core.contract import Backend
+from navreplay.pipeline.estimation.core.runlog import RunLog
+from navreplay.pipeline.estimation.core.tables import ReplayInputError
+from navreplay.pipeline.estimation.core.unscented import ukf_weights
+from navreplay.pipeline.estimation.ins import inputs as inp
+from navreplay.pipeline.estimation.ins.alignment import Alignment, align
+from navreplay.pipeline.estimation.ins.config import FILTER_KINDS, FilterKind, InsFilterParams
+from navreplay.pipeline.estimation.ins.kernels.records import Fading, Schedule, Settings
+from navreplay.pipeline.estimation.ins.models import ins, ins_errors
+from navreplay.pipeline.estimation.ins.models import measurement as me
+from navreplay.pipeline.nav.earth import F64, I64
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FilterSetup:
+    """Everything a backend needs besides the data: one filter's resolved settings."""
+
+    name: str
+    estimator: str
+    settings: Settings
+    fuzzy: F64 | None = None
+
+    @property
+    def n(self) -> int:
+        """The error-state dimension."""
+        return self.settings.n
+
+    @property
+    def lever_b(self) -> F64:
+        """The antenna lever arm, body FRD, m (3,)."""
+        return self.settings.lever_b
+
+
+@dataclass
+class RunResult:
+    """The outcome of one filter run.
+
+    Attributes:
+        filter: filter name; backend: ``numba`` or ``filterpy``; n: error-state dimension.
+        t_ns: output times (K,); x: full states (K, 18); P: error covariances (K, n, n).
+        inn_i: innovation rows (J, 5): t_ns, stream, sv code, dim, accepted.
+        inn_f: innovation rows (J, 8): nis, gate, innovation[3], innovation sigma[3].
+        events: data and filter events, by time.
+        alignments: one per aligned segment.
+        status: ``ok`` or ``diverged``; failure: what diverged, and when.
+        runtime_s: wall time of the replay (inputs, alignment, filter), without compile_s.
+        compile_s: time spent compiling the kernel or loading it from numba's cache.
+        duration_s: span of IMU time replayed.
+        extra: filter-specific series (fwekf: ``alpha``).
+        imu_noise: the IMU noise densities used and their ``source`` (``resolve_imu_noise``).
+    """
+
+    filter: str
+    backend: str
+    n: int
+    t_ns: I64
+    x: F64
+    P: F64
+    inn_i: I64
+    inn_f: F64
+    events: list[tb.Event]
+    alignments: list[Alignment]
+    status: str = "ok"
+    failure: str | None = None
+    runtime_s: float = 0.0
+    compile_s: float = 0.0
+    duration_s: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+    imu_noise: dict[str, Any] = field(default_factory=dict)
+
+
+def make_setup(
+    name: str,
+    params: InsFilterParams,
+    sensors: SensorMeta | None,
+    noise_model: ImuNoise | None = None,
+) -> FilterSetup:
+    """Pack the settings of filter ``name`` for the kernels (sensor metadata first).
+
+    ``noise_model``: the IMU noise to use (``resolve_imu_noise``); default: the dataset's,
+    else the params' fallback.
+    """
+    kind = FILTER_KINDS[name]
+    n = ins.N_TIGHT if kind.coupling == "tight" else ins.N_LOOSE
+    if noise_model is None:
+        noise_model = (
+            sensors.imu_noise if sensors is not None and sensors.imu_noise else params.imu_noise
+        )
+    lever = np.array(sensors.lever_arm_m if sensors is not None else (0.0, 0.0, 0.0), float)
+    st, g = params.step, params.gating
+    wm = wc = np.ones(1)
+    gamma = 0.0
+    ukf = (params.ukf.alpha, params.ukf.beta, params.ukf.kappa) if params.ukf else (0.0, 0.0, 0.0)
+    if params.ukf is not None:
+        wm, wc, gamma = ukf_weights(n, *ukf)
+    noise = ins_errors.noise_vector(
+        noise_model.accel_noise_mps2_rthz,
+        noise_model.gyro_noise_radps_rthz,
+        noise_model.accel_bias_rw_mps3_rthz,
+        noise_model.gyro_bias_rw_radps2_rthz,
+        params.clock.bias_psd_m2ps,
+        params.clock.drift_psd_m2ps3,
+        st.gap_accel_psd_m2ps3,
+        st.gap_gyro_psd_rad2ps,
+    )
+    nhc = params.nhc
+    nhc_sigma = np.array(
+        [nhc.sigma_lateral_mps, nhc.sigma_vertical_mps] if nhc is not None else [1.0, 1.0]
+    )
+    gate = np.array([math.inf] + [float(chi2.ppf(g.probability, d)) for d in (1, 2, 3)])
+    fz = params.fuzzy.vector() if kind.fading and params.fuzzy is not None else None
+    settings = Settings(
+        n=n,
+        substeps=int(st.substeps),
+        max_step_s=float(st.max_rk4_step_s),
+        gap_s=float(st.imu_gap_s),
+        nhc_on=bool(kind.nhc),
+        timeout_s=float(g.timeout_s),
+        reset_pos_sigma_m=float(g.reset_pos_sigma_m),
+        reset_vel_sigma_mps=float(g.reset_vel_sigma_mps),
+        reset_clock_sigma_m=float(g.reset_clock_sigma_m),
+        max_pos_sigma_m=float(params.divergence.max_pos_sigma_m),
+        max_speed_mps=float(params.divergence.max_speed_mps),
+        ukf_gamma=float(gamma),
+        ukf_alpha=float(ukf[0]),
+        ukf_beta=float(ukf[1]),
+        ukf_kappa=float(ukf[2]),
+        noise=noise,
+        lever_b=lever,
+        nhc_sigma=nhc_sigma,
+        gate=gate,
+        wm=wm,
+        wc=wc,
+    )
+    return FilterSetup(name, kind.estimator, settings, fz)
+
+
+def _table(tables: Mapping[str, pa.Table], name: str, filt: str) -> pa.Table:
+    if name not in tables or tables[name].num_rows == 0:
+        raise ReplayInputError(f"filter {filt} needs the {name!r} table, which is absent or empty")
+    return tables[name]
+
+
+KernelFn = Callable[..., int]
+
+
+def kernel_for(kind: FilterKind, backend: Backend) -> KernelFn:
+    """The function that runs a filter of ``kind`` on ``backend`` (a numba dispatcher for
+    ``numba``)."""
+    if backend == "numba":
+        module, _, function = kind.numba_kernel.partition(":")
+        kernel: KernelFn = getattr(importlib.import_module(module), function)
+        return kernel
+    if kind.fading:
+        from navreplay.pipeline.estimation.ins.reference_fwekf import run_fwekf_filterpy
+
+        return run_fwekf_filterpy
+    from navreplay.pipeline.estimation.ins.reference import run_ekf_filterpy, run_ukf_filterpy
+
+    return run_ekf_filterpy if kind.estimator == "ekf" else run_ukf_filterpy
+
+
+def run_filter(
+    tables: Mapping[str, pa.Table],
+    sensors: SensorMeta | None,
+    name: str,
+    params: InsFilterParams,
+    *,
+    backend: Backend = "numba",
+    imu: inp.ImuData | None = None,
+    initial: Alignment | None = None,
+) -> RunResult:
+    """Replay filter ``name`` over canonical tables (``imu`` + ``gnss`` or ``gnss_obs``).
+
+    Args:
+        tables: canonical tables by name (``truth`` is not read here).
+        sensors: the dataset's sensor metadata (IMU noise, lever arm), or None.
+        name: a key of ``config.FILTER_KINDS``.
+        params: the filter's parameter section.
+        backend: ``numba`` or ``filterpy``.
+        imu: already cleaned IMU data (tests feeding raw arrays through ``inputs.clean_imu``);
+            default: the ``imu`` table.
+        initial: start the first segment from this state and covariance instead of aligning
+            (a known initial condition; Monte Carlo consistency tests draw it from ``P0``).
+
+    Raises:
+        ReplayInputError: a table the filter needs is missing.
+        DivergenceError: the filter diverged and ``on_divergence`` is ``raise``.
+    """
+    t_wall = time.perf_counter()
+    kind = FILTER_KINDS[name]
+    kernel = kernel_for(kind, backend)
+    imu_data = imu if imu is not None else inp.prepare_imu(_table(tables, "imu", name), params.step)
+    noise_model, noise_source = resolve_imu_noise(params, sensors, imu_data)
+    setup = make_setup(name, params, sensors, noise_model)
+    fixes = inp.prepare_fixes(tables["gnss"], params.gnss) if "gnss" in tables else None
+    obs = inp.prepare_obs(tables["gnss_obs"], params.gnss) if "gnss_obs" in tables else None
+    if kind.coupling == "loose" and fixes is None:
+        _table(tables, "gnss", name)
+    if kind.coupling == "tight" and obs is None:
+        _table(tables, "gnss_obs", name)
+    events = list(imu_data.events)
+    events += list(fixes.events) if fixes is not None and kind.coupling == "loose" else []
+    events += list(obs.events) if obs is not None and kind.coupling == "tight" else []
+    parts: list[tuple[I64, F64, F64, I64, F64]] = []
+    alphas: list[F64] = []
+    alignments: list[Alignment] = []
+    status, failure = "ok", None
+    duration = 0.0
+    compile_s = 0.0
+    meas = _measurements(kind.coupling, fixes, obs)
+    for k_seg, seg in enumerate(imu_data.segments):
+        al: Alignment | None = initial
+        if initial is None or k_seg > 0:
+            al = align(imu_data, seg, fixes, obs, params.init, noise_model, setup.lever_b, setup.n)
+        if al is None:
+            events.append(tb.Event(int(imu_data.t_ns[seg[0]]), "no_alignment", "imu"))
+            continue
+        alignments.append(al)
+        out, code, t_fail, seg_events, seg_compile_s, alpha = _run_segment(
+            kernel, setup, params, kind, imu_data, seg, meas, al
+        )
+        compile_s += seg_compile_s
+        parts.append(out)
+        alphas.append(alpha)
+        events += seg_events
+        duration += (out[0][-1] - al.t_ns) * 1e-9 if out[0].size else 0.0
+        if code != gt.STATUS_OK:
+            failure = f"{gt.STATUS_TEXT[code]} at t_ns={t_fail}"
+            status = "diverged"
+            if params.divergence.on_divergence == "raise":
+                raise DivergenceError(
+                    f"filter {name} ({backend}) diverged: {failure}; set "
+                    f"filters.{name}.divergence.on_divergence: flag to keep the output up to it"
+                )
+            log.warning("filter %s diverged: %s", name, failure)
+            break
+    events.sort(key=lambda e: e.t_ns)
+    return RunResult(
+        filter=name,
+        backend=backend,
+        n=setup.n,
+        t_ns=np.concatenate([p[0] for p in parts]) if parts else np.empty(0, np.int64),
+        x=np.concatenate([p[1] for p in parts]) if parts else np.empty((0, ins.FULL_DIM)),
+        P=np.concatenate([p[2] for p in parts]) if parts else np.empty((0, setup.n, setup.n)),
+        inn_i=np.concatenate([p[3] for p in parts]) if parts else np.empty((0, 5), np.int64),
+        inn_f=np.concatenate([p[4] for p in parts]) if parts else np.empty((0, 8)),
+        events=events,
+        alignments=alignments,
+        status=status,
+        failure=failure,
+        runtime_s=time.perf_counter() - t_wall - compile_s,
+        compile_s=compile_s,
+        duration_s=duration,
+        extra={"alpha": np.concatenate(alphas)} if setup.fuzzy is not None and alphas else {},
+        imu_noise={
+            "source": noise_source,
+            "accel_noise_mps2_rthz": noise_model.accel_noise_mps2_rthz,
+            "gyro_noise_radps_rthz": noise_model.gyro_noise_radps_rthz,
+        },
+    )
+
+
+def _typeof(value: object) -> Any:
+    return nb.typeof(value)  # type: ignore[no-untyped-call]
+
+
+def resolve_imu_noise(
+    params: InsFilterParams, sensors: SensorMeta | None, imu: inp.ImuData
+) -> tuple[ImuNoise, str]:
+    """The IMU noise model of a run and where it came from.
+
+    The dataset's model (``dataset.yaml`` ``imu.noise``) when it declares one:
+    ``"dataset"``. Otherwise the params' MEMS fallback (``filters.<name>.imu_noise``), its
+    white-noise densities floored by what the log shows (``inputs.imu_white_noise``):
+    ``"params"``, or ``"params, floored by the log"`` when the log is noisier. A log of
+    decimated, vibration-aliased samples fused with datasheet noise makes the filter
+    overconfident in its own prediction until the gates lock the GNSS out.
+    """
+    if sensors is not None and sensors.imu_noise is not None:
+        return sensors.imu_noise, "dataset"
+    base = params.imu_noise
+    acc, gyro = inp.imu_white_noise(imu)
+    if acc <= base.accel_noise_mps2_rthz and gyro <= base.gyro_noise_radps_rthz:
+        return base, "params"
+    floored = replace(
+        base,
+        accel_noise_mps2_rthz=max(base.accel_noise_mps2_rthz, acc),
+        gyro_noise_radps_rthz=max(base.gyro_noise_radps_rthz, gyro),
+    )
+    log.info(
+        "no IMU noise model in the dataset: the log's samples are noisier than the fallback, "
+        "using accel %.3g m/s^2/rtHz, gyro %.3g rad/s/rtHz (declare imu.noise in "
+        "dataset.yaml to override)",
+        floored.accel_noise_mps2_rthz,
+        floored.gyro_noise_radps_rthz,
+    )
+    return floored, "params, floored by the log"
+
+
+class _Measurements(NamedTuple):
+    """A kernel's measurement tables (``models.measurement``) and their epoch times."""
+
+    fix: F64
+    fix_t: I64 | None
+    obs: F64
+    obs_start: I64
+    obs_t: I64 | None
+
+
+def _measurements(
+    coupling: str, fixes: inp.FixData | None, obs: inp.ObsData | None
+) -> _Measurements:
+    """(fix rows, fix times, obs rows, obs epoch starts, obs epoch times) for a kernel.
+
+    The table a filter does not read is passed empty, so loose and tight coupling share one
+    compiled kernel (the measurement code skips a table whose epochs the schedule never
+    names).
+    """
+    no_fix, no_obs = np.zeros((0, me.FIX_COLS)), np.zeros((0, me.OBS_COLS))
+    if coupling == "loose":
+        if fixes is None:
+            return _Measurements(no_fix, None, no_obs, np.zeros(1, np.int64), None)
+        fix_t = fixes.t_ns[fixes.usable]
+        fix = np.ascontiguousarray(fixes.fix[fixes.usable])
+        return _Measurements(fix, fix_t, no_obs, np.zeros(1, np.int64), None)
+    if obs is None:
+        return _Measurements(no_fix, None, no_obs, np.zeros(1, np.int64), None)
+    return _Measurements(no_fix, None, np.ascontiguousarray(obs.obs), obs.start, obs.epoch_t_ns)
+
+
+def _run_segment(
+    kernel: KernelFn,
+    setup: FilterSetup,
+    params: InsFilterParams,
+    kind: FilterKind,
+    imu: inp.ImuData,
+    seg: tuple[int, int],
+    meas: _Measurements,
+    al: Alignment,
+) -> tuple[tuple[I64, F64, F64, I64, F64], int, int, list[tb.Event], float, F64]:
+    """Run ``kernel`` over the IMU samples ``seg`` of ``imu`` from the alignment ``al``."""
+    lo, hi = seg
+    imu_t = imu.t_ns[lo:hi]
+    imu_d = imu.data[lo:hi]
+    t_end = int(imu_t[-1])
+    fix_arr, fix_t, obs_arr, obs_start, obs_t = meas
+    nhc_rate = params.nhc.rate_hz if kind.nhc and params.nhc is not None else None
+    stops = inp.build_schedule(al.t_ns, t_end, params.step.step_s, fix_t, obs_t, nhc_rate)
+    m_max = inp.max_rows(stops, obs_start, kind.coupling == "tight")
+    i0, u0 = inp.interpolate_input(imu_t, imu_d, al.t_ns)
+    n = setup.n
+    n_out = int(stops[:, me.ST_OUT].sum()) + 1
+    n_inn = len(stops) * m_max
+    n_ev = n_inn + 2 * len(stops) + 16
+    sched = Schedule(int(al.t_ns), int(i0), u0, imu_t, imu_d, stops, obs_start, int(m_max))
+
+    def kernel_args(log_: RunLog) -> tuple[tuple[object, ...], F64]:
+        """The kernel's arguments writing into ``log_``, and fwekf's alpha per output row."""
+        out_alpha = np.ones(log_.capacity()[0])
+        args: tuple[object, ...] = (al.x0, al.P0, sched, fix_arr, obs_arr, setup.settings)
+        if setup.fuzzy is not None:
+            from navreplay.pipeline.estimation.ins.fuzzy import RULES
+
+            args = (*args, Fading(setup.fuzzy, RULES, out_alpha))
+        return (*args, log_), out_alpha
+
+    def run(log_: RunLog) -> tuple[int, F64]:
+        args, out_alpha = kernel_args(log_)
+        return kernel(*args), out_alpha
+
+    first = RunLog.allocate(n_out, n_inn, n_ev, n, ins.FULL_DIM)
+    compile_s = 0.0
+    if hasattr(kernel, "compile"):  # a numba dispatcher: compile or load it outside the timing
+        t0 = time.perf_counter()
+        with fewer_gc_passes():
+            kernel.compile(tuple(_typeof(a) for a in kernel_args(first)[0]))
+        compile_s = time.perf_counter() - t0
+    (code, out_alpha), log_ = first.run_growing(run)
+    out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts = log_
+    k_out, k_inn, k_ev = log_.wanted()
+    seg_events = [
+        tb.Event(
+            int(ev_i[j, 0]),
+            gt.EVENT_NAMES.get(int(ev_i[j, 1]), str(ev_i[j, 1])),
+            me.STREAM_NAMES[ev_i[j, 2]] if ev_i[j, 2] >= 0 else "",
+            me.sv_name(int(ev_i[j, 3])),
+            float(ev_f[j]),
+        )
+        for j in range(k_ev)
+    ]
+    out = (out_t[:k_out], out_x[:k_out], out_P[:k_out], inn_i[:k_inn], inn_f[:k_inn])
+    return out, int(code), int(counts[rl.CNT_T_FAIL]), seg_events, compile_s, out_alpha[:k_out]
