@@ -18,9 +18,9 @@ from pathlib import Path
 from benchmarks._table import print_table, timed
 from navreplay.pipeline.estimation.cascaded.backends import replay
 from navreplay.pipeline.estimation.cascaded.closed_loop import run_closed_loop
+from navreplay.pipeline.estimation.cascaded.config import CASCADED_KINDS
 from navreplay.pipeline.estimation.cascaded.engine import make_setup
 from navreplay.pipeline.estimation.cascaded.inputs import prepare_inputs
-from navreplay.pipeline.estimation.cascaded_config import CASCADED_KINDS
 from navreplay.pipeline.params import load_params
 from navreplay.pipeline.synth.tractor import TractorSim
 from navreplay.pipeline.synth.tractor_log import synthesize

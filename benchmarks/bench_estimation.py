@@ -134,7 +134,7 @@ def _write_tables(tables: dict[str, Any], sensors: Any, out: Path) -> Path:
 
 def _run(tables: dict[str, Any], sensors: Any, name: str, backend: str) -> tuple[float, float, Any]:
     """(wall s, cpu s, result) of one run; the kernel's compile/load time is excluded."""
-    from navreplay.pipeline.estimation.replay import run_filter
+    from navreplay.pipeline.estimation.ins.replay import run_filter
 
     base = "tc_ukf" if name == "tc_ukf_10" else name
     cpu = _cpu()
@@ -275,8 +275,8 @@ def run(options: argparse.Namespace) -> None:
 
 def _accuracy_cost() -> None:
     """H RMS and NEES of the speed choices on the 900 s seoul_campus drive (cw)."""
-    from navreplay.pipeline.estimation.metrics import compute_metrics
-    from navreplay.pipeline.estimation.replay import run_filter
+    from navreplay.pipeline.estimation.ins.metrics import compute_metrics
+    from navreplay.pipeline.estimation.ins.replay import run_filter
     from navreplay.pipeline.params import load_params
     from navreplay.pipeline.synth.seoul_campus import simulate
 

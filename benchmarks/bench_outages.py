@@ -18,9 +18,9 @@ import argparse
 import time
 
 from benchmarks._table import print_table
-from navreplay.pipeline.estimation.metrics import compute_metrics
-from navreplay.pipeline.estimation.replay import run_filter
-from navreplay.pipeline.estimation.windows import NS
+from navreplay.pipeline.estimation.core.windows import NS
+from navreplay.pipeline.estimation.ins.metrics import compute_metrics
+from navreplay.pipeline.estimation.ins.replay import run_filter
 from navreplay.pipeline.outages.montecarlo import Case, draw_starts, run_montecarlo
 from navreplay.pipeline.scenarios.apply import apply_scenario
 from navreplay.pipeline.scenarios.config import ScenarioSpec, WindowsSpec

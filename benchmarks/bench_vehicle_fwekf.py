@@ -26,9 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(options: argparse.Namespace) -> None:
-    from navreplay.pipeline.estimation.replay import run_filter
-    from navreplay.pipeline.estimation.vehicle_config import VEHICLE_FILTERS
-    from navreplay.pipeline.estimation.vehicle_replay import run_vehicle_filter
+    from navreplay.pipeline.estimation.ins.replay import run_filter
+    from navreplay.pipeline.estimation.vehicle.config import VEHICLE_FILTERS
+    from navreplay.pipeline.estimation.vehicle.replay import run_vehicle_filter
     from navreplay.pipeline.params import load_params
     from navreplay.pipeline.synth import car
     from navreplay.pipeline.synth.seoul_campus import simulate
