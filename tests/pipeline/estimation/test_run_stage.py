@@ -13,11 +13,12 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
-from navreplay.ingest.meta import DatasetMeta, SensorMeta, write_meta
-from navreplay.ingest.tables import Provenance, read_table, write_table
+from navreplay.ingest.meta import SensorMeta
+from navreplay.ingest.tables import read_table
 from navreplay.pipeline.cli import main
 from navreplay.pipeline.params import read_yaml
 from tests.pipeline.estimation.conftest import REPO
+from tests.pipeline.scenarios.drives import write_tables
 
 
 @pytest.fixture(scope="module")
@@ -25,12 +26,7 @@ def tables_dir(
     tmp_path_factory: pytest.TempPathFactory, drive60: tuple[dict[str, pa.Table], SensorMeta]
 ) -> Path:
     tables, sensors = drive60
-    out = tmp_path_factory.mktemp("tables")
-    for name, table in tables.items():
-        write_table(out / f"{name}.parquet", name, table, Provenance.create(name))
-    rows = {name: t.num_rows for name, t in tables.items()}
-    write_meta(out, DatasetMeta("drive60", "gps", (), rows, sensors=sensors))
-    return out
+    return write_tables(tmp_path_factory.mktemp("tables"), tables, "drive60", sensors)
 
 
 def params_file(tmp_path: Path, edit: dict[str, Any]) -> Path:

@@ -8,28 +8,15 @@ import copy
 import json
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import pytest
 import yaml
 
-from navreplay.ingest.meta import DatasetMeta, SensorMeta, write_meta
-from navreplay.ingest.schema import TableName
-from navreplay.ingest.tables import Provenance, write_table
+from navreplay.ingest.meta import SensorMeta
 from navreplay.pipeline.cli import main
 from navreplay.pipeline.params import load_params, read_yaml
 from navreplay.pipeline.synth import car
-from tests.pipeline.scenarios.drives import REPO
-
-WINDOWS = {
-    "placement": "random",
-    "length_s": 10.0,
-    "count": 2,
-    "seed": 1,
-    "earliest_s": 15.0,
-    "min_gap_s": 10.0,
-    "tail_s": 5.0,
-}
+from tests.pipeline.scenarios.drives import REPO, short_window_scenarios, write_tables
 
 
 @pytest.fixture(scope="module")
@@ -37,21 +24,15 @@ def car_tables(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 60 s speed ramp (vehicle, gnss, truth tables)."""
     p = load_params(REPO / "params.yaml").synth
     drive = car.synthesize(replace(p.car_speed_ramp, ramp_s=45.0, hold_s=15.0), p.seed).tables
-    out = tmp_path_factory.mktemp("car")
-    for name in ("vehicle", "gnss", "truth"):
-        table = TableName(name)
-        write_table(out / f"{name}.parquet", table, drive[name], Provenance.create(table))
-    write_meta(out, DatasetMeta("car60", "utc", (), {}, sensors=SensorMeta(wheelbase_m=2.7)))
-    return out
+    tables = {name: drive[name] for name in ("vehicle", "gnss", "truth")}
+    sensors = SensorMeta(wheelbase_m=2.7)
+    return write_tables(tmp_path_factory.mktemp("car"), tables, "car60", sensors, "utc")
 
 
 @pytest.fixture(scope="module")
 def params_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """params.yaml with 10 s outage windows that fit the 60 s drive."""
-    data: dict[str, Any] = copy.deepcopy(read_yaml(REPO / "params.yaml"))
-    for name, spec in data["scenarios"]["named"].items():
-        if "windows" in spec:
-            data["scenarios"]["named"][name] = dict(spec, windows=WINDOWS)
+    data = short_window_scenarios(copy.deepcopy(read_yaml(REPO / "params.yaml")))
     path = tmp_path_factory.mktemp("params") / "params.yaml"
     path.write_text(yaml.safe_dump(data))
     return path

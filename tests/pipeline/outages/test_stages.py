@@ -8,49 +8,30 @@ import csv
 import json
 import shutil
 from pathlib import Path
-from typing import Any
 
 import pyarrow.parquet as pq
 import pytest
 import yaml
 
 from navreplay.ingest.meta import DatasetMeta, read_meta, write_meta
-from navreplay.ingest.tables import Provenance, read_table, write_table
+from navreplay.ingest.tables import read_table
 from navreplay.pipeline.cli import main
 from navreplay.pipeline.outages.tables import SAT_REDUCTION_COLUMNS
 from navreplay.pipeline.params import read_yaml
-from tests.pipeline.scenarios.drives import REPO, drive
-
-WINDOWS = {
-    "placement": "random",
-    "length_s": 10.0,
-    "count": 2,
-    "seed": 1,
-    "earliest_s": 15.0,
-    "min_gap_s": 10.0,
-    "tail_s": 5.0,
-}
+from tests.pipeline.scenarios.drives import REPO, drive, short_window_scenarios, write_tables
 
 
 @pytest.fixture(scope="module")
 def tables_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     tables, sensors = drive(90.0)
-    out = tmp_path_factory.mktemp("tables")
-    for name, table in tables.items():
-        write_table(out / f"{name}.parquet", name, table, Provenance.create(name))
-    rows = {name: t.num_rows for name, t in tables.items()}
-    write_meta(out, DatasetMeta("drive90", "gps", (), rows, sensors=sensors))
-    return out
+    return write_tables(tmp_path_factory.mktemp("tables"), tables, "drive90", sensors)
 
 
 @pytest.fixture(scope="module")
 def params_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """params.yaml with the scenarios and the Monte Carlo sized for a 90 s drive."""
-    data: dict[str, Any] = copy.deepcopy(read_yaml(REPO / "params.yaml"))
-    named = data["scenarios"]["named"]
-    for name, spec in named.items():
-        if "windows" in spec:
-            named[name] = dict(spec, windows=WINDOWS)
+    data = short_window_scenarios(copy.deepcopy(read_yaml(REPO / "params.yaml")))
+    for spec in data["scenarios"]["named"].values():
         for fault in spec.get("faults", []):
             fault["at_s"] = 40.0
     data["run"]["scenarios"] = ["nominal", "outage_60s", "sats_0", "sats_3", "f11_nan_field"]

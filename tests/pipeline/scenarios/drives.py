@@ -15,7 +15,8 @@ from typing import Any
 
 import pyarrow as pa
 
-from navreplay.ingest.meta import SensorMeta
+from navreplay.ingest.meta import DatasetMeta, SensorMeta, write_meta
+from navreplay.ingest.tables import Provenance, write_table
 from navreplay.pipeline.estimation.core.windows import NS
 from navreplay.pipeline.outages.montecarlo import Case, Start, run_montecarlo
 from navreplay.pipeline.params import Params, load_params
@@ -24,6 +25,38 @@ from navreplay.pipeline.synth.seoul_campus import simulate
 
 REPO = Path(__file__).resolve().parents[3]
 Tables = dict[str, pa.Table]
+
+#: outage windows of 10 s that fit a drive of a minute or more (params.yaml's need >= 210 s)
+SHORT_WINDOWS = {
+    "placement": "random",
+    "length_s": 10.0,
+    "count": 2,
+    "seed": 1,
+    "earliest_s": 15.0,
+    "min_gap_s": 10.0,
+    "tail_s": 5.0,
+}
+
+
+def write_tables(
+    out: Path, tables: Tables, dataset: str, sensors: SensorMeta, time_base: str = "gps"
+) -> Path:
+    """``tables`` as a dataset's tables directory ``out`` (canonical Parquet and meta.json)."""
+    for name, table in tables.items():
+        write_table(out / f"{name}.parquet", name, table, Provenance.create(name))
+    rows = {name: t.num_rows for name, t in tables.items()}
+    write_meta(out, DatasetMeta(dataset, time_base, (), rows, sensors=sensors))
+    return out
+
+
+def short_window_scenarios(data: dict[str, Any]) -> dict[str, Any]:
+    """params.yaml data (edited in place and returned) whose windowed scenarios use
+    ``SHORT_WINDOWS``."""
+    named = data["scenarios"]["named"]
+    for name, spec in named.items():
+        if "windows" in spec:
+            named[name] = dict(spec, windows=SHORT_WINDOWS)
+    return data
 
 
 @lru_cache(maxsize=1)
