@@ -18,7 +18,7 @@ from typing import Literal
 
 from navreplay.ingest.config import ImuNoise
 from navreplay.ingest.typed import FieldError
-from navreplay.pipeline.estimation.core.checks import _positive
+from navreplay.pipeline.estimation.core.checks import positive
 from navreplay.pipeline.estimation.ins.fuzzy import FuzzyParams
 
 Estimator = Literal["ekf", "ukf"]
@@ -60,7 +60,7 @@ class InitParams:
     clock_drift_sigma_mps: float = 1.0
 
     def __post_init__(self) -> None:
-        _positive(self, *(f.name for f in fields(self)))
+        positive(self, *(f.name for f in fields(self)))
 
 
 @dataclass(frozen=True)
@@ -104,8 +104,8 @@ class GnssNoiseParams:
     elevation_mask_deg: float = 10.0
 
     def __post_init__(self) -> None:
-        _positive(self, "pos_error_corr_time_s", allow_zero=True)
-        _positive(
+        positive(self, "pos_error_corr_time_s", allow_zero=True)
+        positive(
             self,
             "pos_sigma_floor_m",
             "pos_sigma_default_m",
@@ -136,7 +136,7 @@ class ClockParams:
     drift_psd_m2ps3: float = 0.04
 
     def __post_init__(self) -> None:
-        _positive(self, "bias_psd_m2ps", "drift_psd_m2ps3", allow_zero=True)
+        positive(self, "bias_psd_m2ps", "drift_psd_m2ps3", allow_zero=True)
 
 
 @dataclass(frozen=True)
@@ -167,8 +167,8 @@ class GatingParams:
     def __post_init__(self) -> None:
         if not 0.5 < self.probability < 1.0:
             raise FieldError("probability", "must be within (0.5, 1)")
-        _positive(self, "timeout_s", "reset_pos_sigma_m", "reset_vel_sigma_mps")
-        _positive(self, "reset_clock_sigma_m")
+        positive(self, "timeout_s", "reset_pos_sigma_m", "reset_vel_sigma_mps")
+        positive(self, "reset_clock_sigma_m")
 
 
 @dataclass(frozen=True)
@@ -203,8 +203,8 @@ class StepParams:
     gap_gyro_psd_rad2ps: float = 0.05
 
     def __post_init__(self) -> None:
-        _positive(self, "step_s", "max_rk4_step_s", "imu_gap_s", "imu_gap_max_s")
-        _positive(self, "gap_accel_psd_m2ps3", "gap_gyro_psd_rad2ps", allow_zero=True)
+        positive(self, "step_s", "max_rk4_step_s", "imu_gap_s", "imu_gap_max_s")
+        positive(self, "gap_accel_psd_m2ps3", "gap_gyro_psd_rad2ps", allow_zero=True)
         if not 1 <= self.substeps <= 100:
             raise FieldError("substeps", "must be within 1..100")
         if self.imu_gap_max_s < self.imu_gap_s:
@@ -231,7 +231,7 @@ class DivergenceParams:
     max_speed_mps: float = 200.0
 
     def __post_init__(self) -> None:
-        _positive(self, "max_pos_sigma_m", "max_speed_mps")
+        positive(self, "max_pos_sigma_m", "max_speed_mps")
 
 
 @dataclass(frozen=True)
@@ -252,7 +252,7 @@ class NhcParams:
     rate_hz: float = 10.0
 
     def __post_init__(self) -> None:
-        _positive(self, "sigma_lateral_mps", "sigma_vertical_mps", "rate_hz")
+        positive(self, "sigma_lateral_mps", "sigma_vertical_mps", "rate_hz")
 
 
 @dataclass(frozen=True)
@@ -272,7 +272,7 @@ class UkfParams:
     def __post_init__(self) -> None:
         if not 0.0 < self.alpha <= 1.0:
             raise FieldError("alpha", "must be within (0, 1]")
-        _positive(self, "beta", "kappa", allow_zero=True)
+        positive(self, "beta", "kappa", allow_zero=True)
 
 
 @dataclass(frozen=True)

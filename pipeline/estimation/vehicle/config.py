@@ -13,16 +13,10 @@ from dataclasses import dataclass, fields
 from typing import Literal
 
 from navreplay.ingest.typed import FieldError
+from navreplay.pipeline.estimation.core.checks import positive
 from navreplay.pipeline.synth.bicycle import VehicleParams
 
 VEHICLE_FILTERS = ("vehicle_kinematic", "vehicle_dynamic", "vehicle_switched", "vehicle_imm")
-
-
-def _positive(obj: object, *names: str, allow_zero: bool = False) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        if not (value >= 0 if allow_zero else value > 0):
-            raise FieldError(name, "must be >= 0" if allow_zero else "must be > 0")
 
 
 @dataclass(frozen=True)
@@ -49,8 +43,8 @@ class VehicleNoiseParams:
     position_psd_m2ps: float = 0.01
 
     def __post_init__(self) -> None:
-        _positive(self, "wheel_speed_sigma_mps", "steer_sigma_rad", "yaw_rate_sigma_radps")
-        _positive(
+        positive(self, "wheel_speed_sigma_mps", "steer_sigma_rad", "yaw_rate_sigma_radps")
+        positive(
             self, "speed_psd_m2ps3", "slip_psd_rad2ps", "heading_psd_rad2ps", "position_psd_m2ps"
         )
 
@@ -79,8 +73,8 @@ class VehicleGnssParams:
     use_course: bool = True
 
     def __post_init__(self) -> None:
-        _positive(self, "pos_sigma_floor_m", "pos_sigma_default_m", "vel_sigma_floor_mps")
-        _positive(self, "vel_sigma_default_mps", "course_min_speed_mps")
+        positive(self, "pos_sigma_floor_m", "pos_sigma_default_m", "vel_sigma_floor_mps")
+        positive(self, "vel_sigma_default_mps", "course_min_speed_mps")
 
 
 @dataclass(frozen=True)
@@ -96,7 +90,7 @@ class SwitchingParams:
     speed_down_mps: float = 6.0
 
     def __post_init__(self) -> None:
-        _positive(self, "speed_up_mps", "speed_down_mps")
+        positive(self, "speed_up_mps", "speed_down_mps")
         if self.speed_down_mps >= self.speed_up_mps:
             raise FieldError("speed_down_mps", "must be below speed_up_mps (hysteresis)")
 
@@ -121,7 +115,7 @@ class ImmParams:
         for name in ("p_stay_kinematic", "p_stay_dynamic", "mu0_dynamic"):
             if not 0.0 < getattr(self, name) < 1.0:
                 raise FieldError(name, "must be within (0, 1)")
-        _positive(self, "likelihood_floor")
+        positive(self, "likelihood_floor")
 
 
 @dataclass(frozen=True)
@@ -145,7 +139,7 @@ class VehicleInitParams:
     heading_sigma_floor_rad: float = 0.02
 
     def __post_init__(self) -> None:
-        _positive(self, *(f.name for f in fields(self)))
+        positive(self, *(f.name for f in fields(self)))
 
 
 @dataclass(frozen=True)
@@ -182,6 +176,6 @@ class VehicleFilterParams:
     max_pos_sigma_m: float = 1.0e4
 
     def __post_init__(self) -> None:
-        _positive(self, "max_step_s", "output_interval_s", "max_pos_sigma_m", "gate_timeout_s")
+        positive(self, "max_step_s", "output_interval_s", "max_pos_sigma_m", "gate_timeout_s")
         if not 0.5 < self.gate_probability < 1.0:
             raise FieldError("gate_probability", "must be within (0.5, 1)")
