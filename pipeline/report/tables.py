@@ -3,7 +3,7 @@
 - ``metrics_rows``: one row per run (filter x scenario) from its ``metrics.json``, plus the
   error against the reference when the run's metrics have none (real logs: the GNSS fixes).
 - ``window_rows``: one row per run and outage window. The window metrics the run wrote
-  (``metrics.json`` ``outage_windows``, from ``pipeline.estimation.outage_metrics``: the one
+  (``metrics.json`` ``outage_windows``, from ``pipeline.estimation.core.windows``: the one
   implementation of architecture section 5) are taken as they are; a run without them (an
   older run, a hand-made window list) gets them measured here with the same definitions:
   error at the window's end, max, mean and RMS of the 3-D error inside it, no re-alignment

@@ -11,7 +11,7 @@ filters is an extra float column under the truth table's name where it has one
 ``innovations.parquet``: one row per gated block: ``t_ns``, ``stream`` (``gnss_pos`` m,
 ``gnss_heading`` rad, ``yaw_rate`` rad/s, ``speed`` m/s, ``steer`` rad), ``dim``, ``nis``,
 ``gate``, ``accepted``, ``innov_0..2``, ``innov_sigma_0..2`` (NaN past ``dim``), as the INS
-filters' file (``pipeline.estimation.outputs``).
+filters' file (``pipeline.estimation.ins.outputs``).
 
 ``events.parquet``: ``t_ns``, ``kind`` (``gate_reject``, ``gate_reset``, ``cov_repair``,
 ``divergence``, ``input_gap``, ``no_steer_command``, ``no_gnss_heading``), ``stream``,

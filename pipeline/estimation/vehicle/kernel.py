@@ -9,7 +9,7 @@ One loop serves the four filters, selected by ``VehicleSettings.mode``:
 - ``MODE_IMM``: an interacting multiple model filter of both EKFs (Markov switching matrix,
   mixing, model likelihoods; the same arithmetic as filterpy's ``IMMEstimator``).
 
-Array layouts (filled by ``pipeline.estimation.vehicle_replay``):
+Array layouts (filled by ``pipeline.estimation.vehicle.replay``):
 
 - ``stops`` (S, ``VS_COLS``): time (ns), vehicle-sample index (-1 = none), fix index (-1 =
   none), output flag. Between stops the state is predicted with the last vehicle input held

@@ -7,7 +7,7 @@ Rows are grouped into *blocks*, the units of gating: a fix's position (3 rows, 2
 fix), its velocity (3, or 2 when the receiver gives speed and course only), one satellite's
 pseudorange and rate (1-2), the NHC pair (2).
 
-Array layouts shared with ``pipeline.estimation.inputs`` (which fills them) and the kernels:
+Array layouts shared with ``pipeline.estimation.ins.inputs`` (which fills them) and the kernels:
 
 - ``fix`` (M, ``FIX_COLS``): latitude, longitude (rad), altitude (m), NED velocity (m/s),
   horizontal, vertical and speed 1-sigma, position dimension (0 = unusable, 2 = horizontal,
