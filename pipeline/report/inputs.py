@@ -6,8 +6,8 @@
   ``ingest.api`` documents its structure), and the ``truth`` and ``gnss`` tables if present;
 - every run under ``runs_dir``: any directory holding a ``metrics.json`` (layout free, e.g.
   ``runs/<filter>/<scenario>/``), with its ``estimate.parquet`` and ``innovations.parquet``
-  (written by ``navreplay run``, ``pipeline.estimation.core.contract.write_run``). The run's filter and scenario
-  come from ``metrics.json`` (``filter``, ``scenario``). A run whose ``status`` is
+  (written by ``navreplay run``, ``estimation.core.contract.write_run``). The run's filter and
+  scenario come from ``metrics.json`` (``filter``, ``scenario``). A run whose ``status`` is
   ``skipped`` carries a ``reason`` and no tables. Outage windows come from
   ``metrics.json`` ``outage_windows`` (or ``windows``): a list of objects with either
   ``start_ns`` (or ``start_t_ns``, as the scenario engine writes it) and ``end_ns`` or
