@@ -26,7 +26,6 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.readers.asof import AsofJoin, Left
@@ -38,7 +37,6 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.mavlink._mavscan import partial_record_defect
 from navreplay.ingest.readers.mavlink.dfclock import DfSurvey, instances, survey
 from navreplay.ingest.readers.mavlink.dfformat import DfFormat
 from navreplay.ingest.readers.mavlink.dfmsgs import (
@@ -243,21 +241,8 @@ class DataFlashReader(LogReader):
             dmg.note(f"message type {u.name} skipped: its FMT at offset {u.offset}: {u.reason}")
         for offset, name in formats.redefined:
             dmg.note(f"FMT at offset {offset} redefines {name}: later records use the new layout")
-        if stats.garbage_runs:
-            dmg.count("garbage_runs", stats.garbage_runs)
-            dmg.count("garbage_bytes", stats.garbage_bytes)
-            listed = ", ".join(f"{at} (+{n})" for at, n in stats.garbage_listed)
-            dmg.record(
-                Defect(
-                    Completeness.BAD_DATA_SKIPPED,
-                    f"{stats.garbage_runs} runs of bytes that are not DataFlash records "
-                    f"({stats.garbage_bytes} bytes) skipped; at offsets {listed}",
-                    offset=stats.garbage_listed[0][0],
-                    bytes_skipped=stats.garbage_bytes,
-                )
-            )
-        if stats.partial_offset is not None:
-            dmg.record(partial_record_defect(stats.partial_offset, stats.partial_bytes))
+        stats.record_garbage(dmg, "DataFlash records")
+        stats.record_partial(dmg)
 
 
 def _parse_key(key: str) -> tuple[DfStream, int] | None:
