@@ -47,6 +47,7 @@ from navreplay.ingest.readers.mavlink.dfmsgs import (
     finish_gnss,
 )
 from navreplay.ingest.readers.mavlink.dfscan import Formats, Records, ScanStats, scan_blocks
+from navreplay.ingest.readers.mavlink.mavclock import note_week_rollover
 from navreplay.ingest.readers.mavlink.mavmsgs import Converted
 from navreplay.ingest.schema import FixType, TableName
 
@@ -232,11 +233,8 @@ class DataFlashReader(LogReader):
         dmg.count("records_framed", stats.records)
         s.tracker.note_resets(dmg, reboot="reboot", clock="TimeUS")
         if s.week_shift:
-            dmg.count("gps_week_rollover_corrected", s.gps_rows)
-            dmg.note(
-                f"GPS week rollover: {s.gps_rows} GPS records corrected by +{s.week_shift} "
-                f"weeks, snapped to the epoch nearest {s.reference}"
-            )
+            how = f", snapped to the epoch nearest {s.reference}"
+            note_week_rollover(dmg, s.gps_rows, "GPS records", s.week_shift, how)
         for u in s.unusable:
             dmg.note(f"message type {u.name} skipped: its FMT at offset {u.offset}: {u.reason}")
         for offset, name in formats.redefined:

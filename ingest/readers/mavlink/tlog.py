@@ -45,7 +45,7 @@ from navreplay.ingest.readers.base import (
     StreamInfo,
 )
 from navreplay.ingest.readers.mavlink._mavscan import VALID
-from navreplay.ingest.readers.mavlink.mavclock import ROLLOVER_NS
+from navreplay.ingest.readers.mavlink.mavclock import ROLLOVER_NS, note_week_rollover
 from navreplay.ingest.readers.mavlink.mavdialect import load_dialect
 from navreplay.ingest.readers.mavlink.mavmsgs import BY_NAME, Extras, MavStream
 from navreplay.ingest.readers.mavlink.tlogclock import (
@@ -290,11 +290,8 @@ class TlogReader(LogReader):
             dmg.note(f"{other} convertible packets from senders other than the vehicle ignored")
         s.tracker.note_resets(dmg, reboot="vehicle reboot", clock="time since boot")
         if s.rollover_rows:
-            dmg.count("gps_week_rollover_corrected", s.rollover_rows)
-            dmg.note(
-                f"GPS week rollover: {s.rollover_rows} vehicle UTC values corrected by "
-                f"+{s.rollover_weeks} weeks (reference: the tlog stamps)"
-            )
+            how = " (reference: the tlog stamps)"
+            note_week_rollover(dmg, s.rollover_rows, "vehicle UTC values", s.rollover_weeks, how)
         stats.record_garbage(
             dmg, "MAVLink packets", ", resynchronised on the next packet with a valid CRC"
         )
