@@ -40,7 +40,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from navreplay.ingest.arrays import F64
 from navreplay.ingest.atomic import atomic_path
 from navreplay.ingest.errors import IngestError
-from navreplay.ingest.schema import from_columns
+from navreplay.ingest.schema import NAV_SOLUTION_FIELDS, from_columns
 
 UINT8_MAX = 255
 UINT16_MAX = 65535
@@ -302,20 +302,7 @@ def write_tlog(
 
 def _truth_fields(truth: pa.Table, truth_imu: pa.Table | None, path: Path) -> dict[str, F64]:
     n = truth.num_rows
-    out = {
-        c: np.nan_to_num(_col(truth, c))
-        for c in (
-            "lat_deg",
-            "lon_deg",
-            "alt_m",
-            "vel_n_mps",
-            "vel_e_mps",
-            "vel_d_mps",
-            "roll_rad",
-            "pitch_rad",
-            "yaw_rad",
-        )
-    }
+    out = {c: np.nan_to_num(_col(truth, c)) for c in NAV_SOLUTION_FIELDS}
     if truth_imu is not None:
         same = truth_imu.num_rows == n and np.array_equal(
             truth_imu.column("t_ns").to_numpy(), truth.column("t_ns").to_numpy()
