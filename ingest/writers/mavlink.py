@@ -29,8 +29,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Iterator
 from pathlib import Path
-from types import TracebackType
-from typing import IO, Any, Self
+from typing import IO, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -38,7 +37,7 @@ import pyarrow as pa
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from navreplay.ingest.arrays import F64
-from navreplay.ingest.atomic import atomic_path
+from navreplay.ingest.atomic import AtomicWriter
 from navreplay.ingest.errors import IngestError
 from navreplay.ingest.schema import NAV_SOLUTION_FIELDS, from_columns
 
@@ -52,7 +51,7 @@ MAV_TYPE_GROUND_ROVER = mavlink.MAV_TYPE_GROUND_ROVER
 HIGHRES_IMU_ACC_GYRO = 0x3F
 
 
-class TlogWriter:
+class TlogWriter(AtomicWriter):
     """Write a tlog atomically: the file appears complete at ``path`` on success only.
 
     Use as a context manager; ``write(t_unix_us, msg)`` appends one stamped packet, where
@@ -67,15 +66,11 @@ class TlogWriter:
         self.path = Path(path)
         self.mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self.packets = 0
-        self._ctx: Any = None
         self._fh: IO[bytes] | None = None
         self._last_us = -1
 
-    def __enter__(self) -> Self:
-        self._ctx = atomic_path(self.path)
-        tmp = self._ctx.__enter__()
+    def _start(self, tmp: Path) -> None:
         self._fh = tmp.open("wb")
-        return self
 
     def write(self, t_unix_us: int, msg: mavlink.MAVLink_message) -> None:
         """Append ``msg`` stamped ``t_unix_us``; stamps must not decrease."""
@@ -93,16 +88,10 @@ class TlogWriter:
         self._fh.write(_STAMP.pack(t_unix_us) + packet)
         self.packets += 1
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def _finish(self, ok: bool) -> None:
         if self._fh is not None:
             self._fh.close()
             self._fh = None
-        self._ctx.__exit__(exc_type, exc, tb)
 
 
 def _us(table: pa.Table, name: str, path: Path) -> npt.NDArray[np.int64]:
