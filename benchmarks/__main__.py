@@ -2,7 +2,8 @@
 
 Every module ``benchmarks/bench_<name>.py`` is a benchmark. It defines ``run(options)`` that
 prints its own side-by-side table (ours vs the reference, in the same run), and optionally
-``add_arguments(parser)`` for its options (prefix them with the benchmark name). Adding a
+declares its options, prefixed with the benchmark name, as a list ``OPTIONS`` of
+``benchmarks._options.Option`` or adds them in ``add_arguments(parser)``. Adding a
 benchmark is adding a module; nothing here changes.
 """
 
@@ -34,6 +35,8 @@ def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__)
     parser.add_argument("names", nargs="*", metavar="NAME", help=f"of: {', '.join(registry)}")
     for module in registry.values():
+        for option in getattr(module, "OPTIONS", ()):
+            option.add_to(parser)
         if hasattr(module, "add_arguments"):
             module.add_arguments(parser)
     options = parser.parse_args(argv)

@@ -19,24 +19,25 @@ import textwrap
 import time
 from pathlib import Path
 
+from benchmarks._options import Option
 from benchmarks._table import print_table
 from tests.ingest.roslogs import imu_data, imu_payloads, msgdef
 
 PAYLOAD_BYTES = 9 + 22 + 324  # MCAP message record around a 324-byte CDR Imu
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
+OPTIONS = [
+    Option(
         "--memory-log-mb",
-        type=int,
-        default=256,
-        help="size of the ingest_memory log in MB (2048 for the 2 GB target; default 256)",
-    )
-    parser.add_argument(
+        "size of the ingest_memory log in MB (2048 for the 2 GB target; default 256)",
+        int,
+        256,
+    ),
+    Option(
         "--memory-no-reference",
-        action="store_true",
-        help="skip the rosbags loop's memory on the same file (slow for multi-GB logs)",
-    )
+        "skip the rosbags loop's memory on the same file (slow for multi-GB logs)",
+    ),
+]
 
 
 def write_log(path: Path, target_bytes: int, batch: int = 500_000) -> int:

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 
+from benchmarks._options import Option
 from benchmarks._table import print_table, timed
 from tests.ingest.mavlogs import write_dataflash_drive, write_tlog_drive
 
@@ -35,13 +36,14 @@ TLOG_TYPES += ["ATTITUDE", "SIMSTATE", "SYSTEM_TIME"]
 DF_TYPES = ["IMU", "GPS", "GPA", "XKF1", "ORGN"]
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
+OPTIONS = [
+    Option(
         "--mavlink-seconds",
-        type=float,
-        default=300.0,
-        help="duration of the generated tlog and DataFlash drives (default 300 s)",
-    )
+        "duration of the generated tlog and DataFlash drives (default 300 s)",
+        float,
+        300.0,
+    ),
+]
 
 
 def plain_pymavlink(path: Path, types: list[str] | None) -> int:

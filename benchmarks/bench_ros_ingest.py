@@ -17,6 +17,7 @@ from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 
+from benchmarks._options import Option
 from benchmarks._table import print_table, timed
 from tests.ingest.roslogs import (
     Stream,
@@ -29,14 +30,14 @@ from tests.ingest.roslogs import (
     write_mcap,
 )
 
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
+OPTIONS = [
+    Option(
         "--ros-imu-messages",
-        type=int,
-        default=200_000,
-        help="IMU messages in the ros_ingest drive (default 200000 = 1000 s at 200 Hz)",
-    )
+        "IMU messages in the ros_ingest drive (default 200000 = 1000 s at 200 Hz)",
+        int,
+        200_000,
+    ),
+]
 
 
 def _drive(ros1: bool, n: int) -> list[Stream]:

@@ -16,9 +16,11 @@ import os
 import re
 import secrets
 import shutil
+from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from types import TracebackType
+from typing import Any, Self
 
 _TMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{8}\.tmp$")
 
@@ -83,6 +85,39 @@ def atomic_path(target: str | Path) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+class AtomicWriter(ABC):
+    """A file writer used as a context manager: its file appears at ``path`` only when the
+    ``with`` block succeeds (``atomic_path``). ``_start`` opens the temporary file, ``_finish``
+    closes it (``ok``: the block succeeded); an error in ``_finish`` also discards the file."""
+
+    path: Path
+    _ctx: Any = None
+
+    @abstractmethod
+    def _start(self, tmp: Path) -> None: ...
+
+    @abstractmethod
+    def _finish(self, ok: bool) -> None: ...
+
+    def __enter__(self) -> Self:
+        self._ctx = atomic_path(self.path)
+        self._start(self._ctx.__enter__())
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        try:
+            self._finish(exc_type is None)
+        except BaseException as close_err:
+            self._ctx.__exit__(type(close_err), close_err, close_err.__traceback__)
+            raise
+        self._ctx.__exit__(exc_type, exc, tb)
 
 
 def atomic_write_bytes(target: str | Path, data: bytes) -> None:

@@ -131,6 +131,8 @@ _NAV_SOLUTION = (
     _f("pitch_rad", "pitch of body FRD w.r.t. NED, rad", nullable=True),
     _f("yaw_rad", "yaw (heading from north, clockwise) of body FRD, rad", nullable=True),
 )
+#: The navigation solution's fields after ``t_ns`` (position, NED velocity, attitude), in order.
+NAV_SOLUTION_FIELDS = tuple(c.name for c in _NAV_SOLUTION[1:])
 
 SPECS: Mapping[TableName, TableSpec] = {
     TableName.IMU: TableSpec(

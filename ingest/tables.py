@@ -17,13 +17,12 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
-from types import TracebackType
-from typing import Any, Self
+from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from navreplay.ingest.atomic import atomic_path, dumps_json
+from navreplay.ingest.atomic import AtomicWriter, dumps_json
 from navreplay.ingest.errors import (
     CorruptLogError,
     IngestError,
@@ -163,7 +162,7 @@ class Provenance:
             raise ProvenanceError(f"provenance record is malformed: {err}", path=path) from err
 
 
-class TableWriter:
+class TableWriter(AtomicWriter):
     """Stream a canonical table to Parquet, chunk by chunk, appearing atomically on success.
 
     Use as a context manager; each ``write`` validates its chunk (schema, and key order also
@@ -190,13 +189,10 @@ class TableWriter:
         self._schema: pa.Schema | None = None
         self._writer: pq.ParquetWriter | None = None
         self._last: tuple[Any, ...] | None = None
-        self._ctx: Any = None
         self._tmp: Path | None = None
 
-    def __enter__(self) -> Self:
-        self._ctx = atomic_path(self.path)
-        self._tmp = self._ctx.__enter__()
-        return self
+    def _start(self, tmp: Path) -> None:
+        self._tmp = tmp
 
     def write(self, table: pa.Table) -> None:
         """Append a chunk; it must share the columns of the first chunk and follow its keys."""
@@ -250,14 +246,9 @@ class TableWriter:
             use_dictionary=dictionary,
         )
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def _finish(self, ok: bool) -> None:
         try:
-            if exc_type is None:
+            if ok:
                 if self._writer is None:
                     self._open(spec(self.name).arrow_schema())
                 assert self._writer is not None
@@ -265,12 +256,8 @@ class TableWriter:
             elif self._writer is not None:
                 with contextlib.suppress(Exception):
                     self._writer.close()
-        except BaseException as close_err:
-            self._ctx.__exit__(type(close_err), close_err, close_err.__traceback__)
-            raise
         finally:
             self._tmp = None
-        self._ctx.__exit__(exc_type, exc, tb)
 
 
 def write_table(

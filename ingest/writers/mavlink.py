@@ -29,8 +29,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Iterator
 from pathlib import Path
-from types import TracebackType
-from typing import IO, Any, Self
+from typing import IO, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -38,9 +37,9 @@ import pyarrow as pa
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from navreplay.ingest.arrays import F64
-from navreplay.ingest.atomic import atomic_path
+from navreplay.ingest.atomic import AtomicWriter
 from navreplay.ingest.errors import IngestError
-from navreplay.ingest.schema import from_columns
+from navreplay.ingest.schema import NAV_SOLUTION_FIELDS, from_columns
 
 UINT8_MAX = 255
 UINT16_MAX = 65535
@@ -52,7 +51,7 @@ MAV_TYPE_GROUND_ROVER = mavlink.MAV_TYPE_GROUND_ROVER
 HIGHRES_IMU_ACC_GYRO = 0x3F
 
 
-class TlogWriter:
+class TlogWriter(AtomicWriter):
     """Write a tlog atomically: the file appears complete at ``path`` on success only.
 
     Use as a context manager; ``write(t_unix_us, msg)`` appends one stamped packet, where
@@ -67,15 +66,11 @@ class TlogWriter:
         self.path = Path(path)
         self.mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self.packets = 0
-        self._ctx: Any = None
         self._fh: IO[bytes] | None = None
         self._last_us = -1
 
-    def __enter__(self) -> Self:
-        self._ctx = atomic_path(self.path)
-        tmp = self._ctx.__enter__()
+    def _start(self, tmp: Path) -> None:
         self._fh = tmp.open("wb")
-        return self
 
     def write(self, t_unix_us: int, msg: mavlink.MAVLink_message) -> None:
         """Append ``msg`` stamped ``t_unix_us``; stamps must not decrease."""
@@ -93,16 +88,10 @@ class TlogWriter:
         self._fh.write(_STAMP.pack(t_unix_us) + packet)
         self.packets += 1
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def _finish(self, ok: bool) -> None:
         if self._fh is not None:
             self._fh.close()
             self._fh = None
-        self._ctx.__exit__(exc_type, exc, tb)
 
 
 def _us(table: pa.Table, name: str, path: Path) -> npt.NDArray[np.int64]:
@@ -302,20 +291,7 @@ def write_tlog(
 
 def _truth_fields(truth: pa.Table, truth_imu: pa.Table | None, path: Path) -> dict[str, F64]:
     n = truth.num_rows
-    out = {
-        c: np.nan_to_num(_col(truth, c))
-        for c in (
-            "lat_deg",
-            "lon_deg",
-            "alt_m",
-            "vel_n_mps",
-            "vel_e_mps",
-            "vel_d_mps",
-            "roll_rad",
-            "pitch_rad",
-            "yaw_rad",
-        )
-    }
+    out = {c: np.nan_to_num(_col(truth, c)) for c in NAV_SOLUTION_FIELDS}
     if truth_imu is not None:
         same = truth_imu.num_rows == n and np.array_equal(
             truth_imu.column("t_ns").to_numpy(), truth.column("t_ns").to_numpy()

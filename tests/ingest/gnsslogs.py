@@ -19,6 +19,7 @@ Accel/Gyro rows are the synthesizer's IMU in phone axes (``phone = (y, x, -z)_FR
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -110,73 +111,16 @@ def write_gnsslogger(path: Path, synth: Any, *, imu: bool = True) -> dict[str, i
         offset = float(d_ns - whole + BIAS_NS)
         unc = float(pr_std[k] / C_MPS * 1e9)
         svid = int(sv[k][1:])
-        line = _raw(
-            utc_ms,
-            hw,
-            full_bias,
-            svid,
-            offset,
-            16399,
-            rx_sv,
-            unc,
-            float(cn0[k]),
-            float(prr[k]),
-            float(prr_std[k]),
-            L1_HZ,
-            1,
-        )
+        raw = partial(_raw, utc_ms, hw, full_bias)  # the epoch's clock fields
+        cn0_k, prr_k, prr_std_k = float(cn0[k]), float(prr[k]), float(prr_std[k])
+        line = raw(svid, offset, 16399, rx_sv, unc, cn0_k, prr_k, prr_std_k, L1_HZ, 1)
         body.append((int(t[k]), 0, line))
         counts["gps"] += 1
         if k == t.size - 1 or t[k + 1] != t[k]:  # once per epoch, after its GPS rows
-            body.append(
-                (
-                    int(t[k]),
-                    1,
-                    _raw(
-                        utc_ms,
-                        hw,
-                        full_bias,
-                        7,
-                        0.0,
-                        16399,
-                        rx_sv,
-                        10.0,
-                        30.0,
-                        1.0,
-                        0.1,
-                        "1.60256250E9",
-                        3,
-                    ),
-                )
-            )
-            body.append(
-                (
-                    int(t[k]),
-                    2,
-                    _raw(utc_ms, hw, full_bias, 30, 0.0, 1, 123, 10.0, 30.0, 1.0, 0.1, L1_HZ, 1),
-                )
-            )
-            body.append(
-                (
-                    int(t[k]),
-                    3,
-                    _raw(
-                        utc_ms,
-                        hw,
-                        full_bias,
-                        svid,
-                        offset,
-                        16399,
-                        rx_sv,
-                        unc,
-                        40.0,
-                        1.0,
-                        0.1,
-                        L5_HZ,
-                        1,
-                    ),
-                )
-            )
+            glonass = raw(7, 0.0, 16399, rx_sv, 10.0, 30.0, 1.0, 0.1, "1.60256250E9", 3)
+            no_tow = raw(30, 0.0, 1, 123, 10.0, 30.0, 1.0, 0.1, L1_HZ, 1)
+            l5 = raw(svid, offset, 16399, rx_sv, unc, 40.0, 1.0, 0.1, L5_HZ, 1)
+            body += [(int(t[k]), order, x) for order, x in enumerate([glonass, no_tow, l5], 1)]
             counts["glonass"] += 1
             counts["tow_not_decoded"] += 1
             counts["l5"] += 1

@@ -342,6 +342,17 @@ def read_imu(path: Path, *, strict: bool = False) -> tuple[dict[str, np.ndarray]
     return cols, damage
 
 
+def assert_imu_reads_back(path: Path, data: ImuData) -> None:
+    """The ``/imu/data`` stream of the ROS log at ``path`` holds ``data`` exactly (in the
+    source, FLU, axes: the sink converts), and the read found the log complete."""
+    cols, damage = read_imu(path)
+    np.testing.assert_array_equal(cols["t_ns"], data.t_ns)
+    for i, axis in enumerate("xyz"):
+        np.testing.assert_array_equal(cols[f"acc_{axis}_mps2"], data.acc[:, i])
+        np.testing.assert_array_equal(cols[f"gyro_{axis}_radps"], data.gyro[:, i])
+    assert damage.completeness == ["complete"]
+
+
 def read_truncated(
     path: Path, original: bytes, data: ImuData, stream: Stream
 ) -> tuple[int, Defect]:

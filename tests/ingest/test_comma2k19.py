@@ -22,9 +22,7 @@ from navreplay.ingest.ecef import c_ned_ecef
 from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
 from navreplay.ingest.gpstime import GPS_EPOCH_UNIX_NS, NS_PER_S, NS_PER_WEEK
 
-SEGMENT = (
-    Path(__file__).resolve().parents[3] / "shared" / "data" / "comma2k19_example_segment"
-) / "original"
+from .commacsv import DERIVED, SEGMENT, fix_mapping
 
 WEEK, TOW0, BOOT0 = 2100, 3600.0, 1000.0
 LAT0, LON0, ALT0 = 37.7, -122.4, 30.0
@@ -360,22 +358,13 @@ def test_real_reference_is_the_camera_pose(
 
 
 def test_real_derived_csv_copy_carries_the_same_fixes(tmp_path: Path) -> None:
-    derived = SEGMENT.parent / "derived_csv"
-    if not derived.is_dir():
-        pytest.skip(f"shared data not present at {derived}")
+    if not DERIVED.is_dir():
+        pytest.skip(f"shared data not present at {DERIVED}")
     cfg = parse_dataset_config({"id": "q", "gnss": {"topic": "GNSS/live_gnss_qcom"}})
     seg = ingest([SEGMENT], tmp_path / "seg", config=cfg)
     assert seg.tables["gnss"] == 30
-    mapping = {
-        "path": "gnss_fix_qcom.csv",
-        "table": "gnss",
-        "time_column": "t_boot_s",
-        "time_unit": "s",
-        "constants": {"fix_type": 3},
-        "columns": {"lat_deg": "lat_deg", "lon_deg": "lon_deg", "alt_m": "altitude_m"},
-    }
-    csv_cfg = parse_dataset_config({"id": "q", "csv": [mapping]})
-    ingest([derived / "gnss_fix_qcom.csv"], tmp_path / "csv", config=csv_cfg, config_dir=derived)
+    csv_cfg = parse_dataset_config({"id": "q", "csv": [fix_mapping("qcom")]})
+    ingest([DERIVED / "gnss_fix_qcom.csv"], tmp_path / "csv", config=csv_cfg, config_dir=DERIVED)
     a = pd.read_parquet(tmp_path / "seg" / "gnss.parquet")
     b = pd.read_parquet(tmp_path / "csv" / "gnss.parquet")
     np.testing.assert_allclose(

@@ -14,8 +14,7 @@ from navreplay.ingest.api import IngestOptions, ingest
 from navreplay.ingest.config import DatasetConfig, parse_dataset_config
 from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
 
-SHARED = Path(__file__).resolve().parents[3] / "shared" / "data"
-COMMA = SHARED / "comma2k19_example_segment" / "derived_csv"
+from .commacsv import DERIVED, fix_mapping
 
 WHEEL = {"speed_mps": "v", "yaw_rate_radps": "r"}
 
@@ -133,8 +132,8 @@ def test_csv_with_canonical_header_needs_no_mapping(tmp_path: Path) -> None:
 
 
 def test_comma2k19_csv_drive_ingests(tmp_path: Path) -> None:
-    if not COMMA.is_dir():
-        pytest.skip(f"shared data not present at {COMMA}")
+    if not DERIVED.is_dir():
+        pytest.skip(f"shared data not present at {DERIVED}")
     frd = {
         f"{k}_{a}_{u}": f"{k}_{b}_{u}"
         for k, u in (("acc", "mps2"), ("gyro", "radps"))
@@ -151,22 +150,15 @@ def test_comma2k19_csv_drive_ingests(tmp_path: Path) -> None:
                     "time_unit": "s",
                     "columns": frd,
                 },
-                {
-                    "path": "gnss_fix_ublox.csv",
-                    "table": "gnss",
-                    "time_column": "t_boot_s",
-                    "time_unit": "s",
-                    "constants": {"fix_type": 3},
-                    "columns": {"lat_deg": "lat_deg", "lon_deg": "lon_deg", "alt_m": "altitude_m"},
-                },
+                fix_mapping("ublox"),
             ],
         }
     )
     result = ingest(
-        [COMMA / "imu.csv", COMMA / "gnss_fix_ublox.csv"],
+        [DERIVED / "imu.csv", DERIVED / "gnss_fix_ublox.csv"],
         tmp_path / "out",
         config=cfg,
-        config_dir=COMMA,
+        config_dir=DERIVED,
     )
     assert result.tables == {"imu": 6256, "gnss": 579}
     tables = result.report["tables"]

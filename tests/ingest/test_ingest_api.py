@@ -14,8 +14,8 @@ import pyarrow.parquet as pq
 import pytest
 from rosbags.typesys import get_types_from_msg
 
-from navreplay.ingest.api import REPORT_NAME, IngestOptions, ingest
-from navreplay.ingest.config import DatasetConfig, parse_dataset_config
+from navreplay.ingest.api import REPORT_NAME, IngestOptions, IngestResult, ingest
+from navreplay.ingest.config import parse_dataset_config
 from navreplay.ingest.errors import ConfigError, IngestError
 from navreplay.ingest.meta import read_meta
 from navreplay.ingest.schema import spec
@@ -182,10 +182,14 @@ def test_split_files_of_one_drive_merge_in_time_order(tmp_path: Path) -> None:
     assert result.report["tables"]["imu"]["files"] == ["part_0.mcap", "part_1.mcap"]
 
 
-def _fix_csv(tmp_path: Path, t_ns: np.ndarray, *, time_base: str) -> tuple[Path, DatasetConfig]:
-    """A receiver's fixes at ``t_ns`` (ns on ``time_base``) as ``fix.csv``, and its mapping."""
+def _imu_with_gps_fixes(tmp_path: Path, n: int, *, time_base: str) -> IngestResult:
+    """Ingest ``n`` IMU messages (an MCAP on UTC) with a receiver's fixes every 50th IMU stamp
+    on GPS time, in ``fix.csv`` whose dataset.yaml mapping claims ``time_base``."""
+    data = imu_data(n)
+    log = write_mcap(tmp_path / "a.mcap", [imu_stream(data)])
+    t_gps = data.t_ns[::50] - GPS_EPOCH_UNIX_NS + 18 * NS_PER_S
     csv = tmp_path / "fix.csv"
-    csv.write_text("t,lat,lon,h\n" + "".join(f"{t},37.5,127.0,50.0\n" for t in t_ns.tolist()))
+    csv.write_text("t,lat,lon,h\n" + "".join(f"{t},37.5,127.0,50.0\n" for t in t_gps.tolist()))
     mapping = {
         "path": "fix.csv",
         "table": "gnss",
@@ -195,16 +199,13 @@ def _fix_csv(tmp_path: Path, t_ns: np.ndarray, *, time_base: str) -> tuple[Path,
         "constants": {"fix_type": 3},
         "columns": {"lat_deg": "lat", "lon_deg": "lon", "alt_m": "h"},
     }
-    return csv, parse_dataset_config({"id": "x", "csv": [mapping]})
+    cfg = parse_dataset_config({"id": "x", "csv": [mapping]})
+    return ingest([log, csv], tmp_path / "out", config=cfg, config_dir=tmp_path)
 
 
 def test_utc_and_gps_time_streams_are_reconciled_with_leap_seconds(tmp_path: Path) -> None:
     # ROS stamps are UTC; a receiver log on GPS time joins them: the dataset is on GPS time.
-    data = imu_data(500)
-    log = write_mcap(tmp_path / "a.mcap", [imu_stream(data)])
-    t_gps = data.t_ns[::50] - GPS_EPOCH_UNIX_NS + 18 * NS_PER_S
-    csv, cfg = _fix_csv(tmp_path, t_gps, time_base="gps")
-    result = ingest([log, csv], tmp_path / "out", config=cfg, config_dir=tmp_path)
+    result = _imu_with_gps_fixes(tmp_path, 500, time_base="gps")
     tb = result.report["time_base"]
     assert tb["base"] == "gps"
     assert tb["leap_seconds"] == 18
@@ -217,11 +218,7 @@ def test_utc_and_gps_time_streams_are_reconciled_with_leap_seconds(tmp_path: Pat
 
 def test_files_on_mismatched_clocks_are_flagged(tmp_path: Path) -> None:
     # The receiver file claims UTC but is stamped on GPS time since 1980: far apart.
-    data = imu_data(200)
-    log = write_mcap(tmp_path / "a.mcap", [imu_stream(data)])
-    t_gps = data.t_ns[::50] - GPS_EPOCH_UNIX_NS + 18 * NS_PER_S
-    csv, cfg = _fix_csv(tmp_path, t_gps, time_base="utc")
-    result = ingest([log, csv], tmp_path / "out", config=cfg, config_dir=tmp_path)
+    result = _imu_with_gps_fixes(tmp_path, 200, time_base="utc")
     (warning,) = result.report["warnings"]
     assert "do not overlap" in warning
     assert "fix.csv" in warning

@@ -36,8 +36,9 @@ record types not used (``Mag``, ``Status``, ``Nav`` ...) are counted in ``counte
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -101,41 +102,57 @@ class _Records:
         k = self.index(*names)
         if k is None:
             return np.full(len(self.rows), np.nan)
-        text = np.char.strip(np.array([r[k] for r in self.rows], dtype=str))
+        text = self._text(k)
         text[text == ""] = "nan"
-        try:
-            return np.asarray(text.astype(np.float64), dtype=np.float64)
-        except ValueError:
-            out = np.full(text.size, np.nan)
-            for i, v in enumerate(text.tolist()):
-                try:
-                    out[i] = float(v)
-                except ValueError:
-                    self.unreadable.add((i, k))
-            return out
+        out, _ = self._parse(text, k, np.float64, np.nan, float)
+        return out
 
     def ints(self, *names: str) -> tuple[I64, npt.NDArray[np.bool_]]:
         """Exact int64 values (``FullBiasNanos`` needs all 19 digits) and where present."""
         k = self.index(*names)
         if k is None:
             return np.zeros(len(self.rows), np.int64), np.zeros(len(self.rows), bool)
-        text = np.char.strip(np.array([r[k] for r in self.rows], dtype=str))
+        text = self._text(k)
         present = text != ""
         text[~present] = "0"
+        out, unreadable = self._parse(text, k, np.int64, 0, _int)
+        present[unreadable] = False
+        return out, present
+
+    def _text(self, k: int) -> npt.NDArray[np.str_]:
+        return np.char.strip(np.array([r[k] for r in self.rows], dtype=str))
+
+    def _parse(
+        self,
+        text: npt.NDArray[np.str_],
+        k: int,
+        dtype: type[np.float64] | type[np.int64],
+        fill: float,
+        parse: Callable[[str], float],
+    ) -> tuple[npt.NDArray[Any], list[int]]:
+        """Column ``k``'s ``text`` as ``dtype``, and which rows are unreadable (``fill``,
+        counted). numpy parses the whole column at once; only if that fails is each value
+        parsed on its own with ``parse``."""
         try:
-            return np.asarray(text.astype(np.int64), dtype=np.int64), present
+            return np.asarray(text.astype(dtype), dtype=dtype), []
         except ValueError:
-            out = np.zeros(text.size, np.int64)
+            out = np.full(text.size, fill, dtype)
+            unreadable: list[int] = []
             for i, v in enumerate(text.tolist()):
                 try:
-                    out[i] = int(v)
+                    out[i] = parse(v)
                 except ValueError:
-                    try:
-                        out[i] = int(float(v))
-                    except ValueError:
-                        self.unreadable.add((i, k))
-                        present[i] = False
-            return out, present
+                    self.unreadable.add((i, k))
+                    unreadable.append(i)
+            return out, unreadable
+
+
+def _int(v: str) -> int:
+    """An integer field, also when written as a float (``"12.0"``)."""
+    try:
+        return int(v)
+    except ValueError:
+        return int(float(v))
 
 
 class GnssLoggerReader(LogReader):

@@ -43,11 +43,11 @@ import numpy as np
 import numpy.typing as npt
 
 from navreplay.ingest.arrays import F64, I64
-from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Format
 from navreplay.ingest.ecef import geodetic_from_ecef
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.gnss.ephemeris import C_MPS, rotate_earth
+from navreplay.ingest.readers._lines import BadLines, partial_line_defect
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
@@ -65,7 +65,6 @@ _TYPES: dict[str, tuple[TableName, int, str | None, str]] = {
     "point3": (TableName.TRUTH, 13, "ned", "ego ECEF position"),
 }
 _SYSTEMS = {1: "G", 2: "S", 4: "R", 8: "E", 16: "J", 32: "C"}
-_MAX_LISTED = 20
 TIME_NOTE = (
     "libRSF stamps count seconds from the start of the run; the files carry no absolute epoch "
     "(time base recorder)"
@@ -78,17 +77,6 @@ class _Chunk:
 
     numbers: list[int] = field(default_factory=list)
     fields: list[list[str]] = field(default_factory=list)
-
-
-@dataclass
-class _Bad:
-    lines: list[int] = field(default_factory=list)
-    first: str = ""
-
-    def add(self, number: int, reason: str) -> None:
-        if not self.lines:
-            self.first = f"line {number}: {reason}"
-        self.lines.append(number)
 
 
 class LibrsfReader(LogReader):
@@ -138,7 +126,7 @@ class LibrsfReader(LogReader):
         if not wanted:
             return
         chunks = {name: _Chunk() for name in wanted}
-        bad = _Bad()
+        bad = BadLines()
         partial: int | None = None
         with self.file.open("rb") as fh:
             for number, raw in enumerate(fh, start=1):
@@ -164,7 +152,7 @@ class LibrsfReader(LogReader):
                 yield from self._convert(name, chunk, bad)
         self._report(bad, partial)
 
-    def _convert(self, name: str, chunk: _Chunk, bad: _Bad) -> Iterator[Batch]:
+    def _convert(self, name: str, chunk: _Chunk, bad: BadLines) -> Iterator[Batch]:
         values, ok = _parse(chunk.fields)
         numbers = np.asarray(chunk.numbers, np.int64)
         for r in np.flatnonzero(~ok).tolist():
@@ -180,26 +168,11 @@ class LibrsfReader(LogReader):
         else:
             yield _truth(t_ns, values, numbers)
 
-    def _report(self, bad: _Bad, partial: int | None) -> None:
+    def _report(self, bad: BadLines, partial: int | None) -> None:
         if bad.lines:
-            shown = ", ".join(str(n) for n in bad.lines[:_MAX_LISTED])
-            more = len(bad.lines) - _MAX_LISTED
-            self.damage.record(
-                Defect(
-                    Completeness.BAD_DATA_SKIPPED,
-                    f"{len(bad.lines)} malformed lines skipped (lines {shown}"
-                    f"{f' and {more} more' if more > 0 else ''}; first: {bad.first})",
-                    offset=bad.lines[0],
-                )
-            )
+            self.damage.record(bad.defect())
         if partial is not None:
-            self.damage.record(
-                Defect(
-                    Completeness.PARTIAL_RECORD_DROPPED,
-                    f"line {partial} (the last) has no newline: a truncated write, dropped",
-                    offset=partial,
-                )
-            )
+            self.damage.record(partial_line_defect(partial))
 
 
 def _ns(t_s: float) -> int:

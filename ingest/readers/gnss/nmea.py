@@ -45,6 +45,7 @@ import numpy as np
 from navreplay.ingest.arrays import Bools
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.readers._lines import listed, partial_line_defect
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
@@ -64,7 +65,6 @@ from navreplay.ingest.readers.gnss._nmea import (
 from navreplay.ingest.schema import FixType, TableName
 from navreplay.ingest.timebase import NS_PER_S, TimeBase, utc_to_gps_ns
 
-_MAX_LISTED = 20
 _DAY_NS = 86_400 * NS_PER_S
 _HALF_DAY_S = 43_200.0
 _QUALITY = {
@@ -343,7 +343,7 @@ class NmeaReader(LogReader):
                 Defect(
                     Completeness.CHECKSUM_MISMATCH,
                     f"{len(rejects.checksum)} sentences with a wrong checksum skipped "
-                    f"(lines {_listed(rejects.checksum)})",
+                    f"(lines {listed(rejects.checksum)})",
                     offset=rejects.checksum[0],
                 )
             )
@@ -352,18 +352,12 @@ class NmeaReader(LogReader):
                 Defect(
                     Completeness.BAD_DATA_SKIPPED,
                     f"{len(rejects.garbage)} lines that are not NMEA sentences (no '$' "
-                    f"or no checksum) skipped (lines {_listed(rejects.garbage)})",
+                    f"or no checksum) skipped (lines {listed(rejects.garbage)})",
                     offset=rejects.garbage[0],
                 )
             )
         if rejects.partial is not None:
-            d.record(
-                Defect(
-                    Completeness.PARTIAL_RECORD_DROPPED,
-                    f"line {rejects.partial} (the last) has no newline: a truncated write, dropped",
-                    offset=rejects.partial,
-                )
-            )
+            d.record(partial_line_defect(rejects.partial))
 
 
 @dataclass
@@ -442,9 +436,3 @@ def _config_date(text: str | None) -> tuple[int, int, int] | None:
         return None
     y, m, d = (int(p) for p in text.split("-"))
     return (y, m, d)
-
-
-def _listed(lines: list[int]) -> str:
-    shown = ", ".join(str(n) for n in lines[:_MAX_LISTED])
-    more = len(lines) - _MAX_LISTED
-    return shown + (f" and {more} more" if more > 0 else "")

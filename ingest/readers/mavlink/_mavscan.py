@@ -115,6 +115,14 @@ def _frame_tlog(  # noqa: PLR0911, PLR0912 (one compiled framing check, early ex
 
 
 @njit(cache=True, nogil=True)
+def _end_gap(gap_pos: I64, gap_len: I64, ng: int, start: int, stop: int) -> int:  # pragma: no cover
+    """Store the garbage run ``start..stop`` (absolute offsets) as gap ``ng``; the new count."""
+    gap_pos[ng] = start
+    gap_len[ng] = stop - start
+    return ng + 1
+
+
+@njit(cache=True, nogil=True)
 def scan_tlog(
     buf: U8,
     end: int,
@@ -147,9 +155,7 @@ def scan_tlog(
         status, size = _frame_tlog(buf, p, end, crc_extra, min_us, max_us)
         if garbage_start >= 0:
             if status == VALID:
-                gap_pos[ng] = garbage_start
-                gap_len[ng] = base + p - garbage_start
-                ng += 1
+                ng = _end_gap(gap_pos, gap_len, ng, garbage_start, base + p)
                 garbage_start = -1
             elif status == _NEED_MORE and not final:
                 return n, ng, p, garbage_start, END_OK
@@ -180,9 +186,7 @@ def scan_tlog(
         garbage_start = base + p
         p += 1
     if garbage_start >= 0 and final:
-        gap_pos[ng] = garbage_start
-        gap_len[ng] = base + end - garbage_start
-        ng += 1
+        ng = _end_gap(gap_pos, gap_len, ng, garbage_start, base + end)
         garbage_start = -1
     return n, ng, end, garbage_start, END_OK
 
@@ -208,7 +212,7 @@ def _df_chain(buf: U8, s: int, end: int, fmt_len: I32) -> bool:  # pragma: no co
 
 
 @njit(cache=True, nogil=True)
-def scan_dataflash(  # noqa: PLR0912, PLR0915 (one compiled state machine; calls cost per record)
+def scan_dataflash(  # noqa: PLR0912 (one compiled state machine; calls cost per record)
     buf: U8,
     end: int,
     final: bool,
@@ -246,9 +250,7 @@ def scan_dataflash(  # noqa: PLR0912, PLR0915 (one compiled state machine; calls
             if q < end and (q + 3 > end or _df_known(buf, q, fmt_len) == 0):
                 p += 1
                 continue
-            gap_pos[ng] = garbage_start
-            gap_len[ng] = base + p - garbage_start
-            ng += 1
+            ng = _end_gap(gap_pos, gap_len, ng, garbage_start, base + p)
             garbage_start = -1
         if length == 0:
             garbage_start = base + p
@@ -278,9 +280,7 @@ def scan_dataflash(  # noqa: PLR0912, PLR0915 (one compiled state machine; calls
             fmt_len[buf[p + 3]] = buf[p + 4]
         p += length
     if garbage_start >= 0 and final:
-        gap_pos[ng] = garbage_start
-        gap_len[ng] = base + end - garbage_start
-        ng += 1
+        ng = _end_gap(gap_pos, gap_len, ng, garbage_start, base + end)
         garbage_start = -1
     return n, ng, end, garbage_start, END_OK
 

@@ -26,7 +26,6 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.readers.asof import AsofJoin, Left
@@ -38,7 +37,6 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.mavlink._mavscan import partial_record_defect
 from navreplay.ingest.readers.mavlink.dfclock import DfSurvey, instances, survey
 from navreplay.ingest.readers.mavlink.dfformat import DfFormat
 from navreplay.ingest.readers.mavlink.dfmsgs import (
@@ -49,6 +47,7 @@ from navreplay.ingest.readers.mavlink.dfmsgs import (
     finish_gnss,
 )
 from navreplay.ingest.readers.mavlink.dfscan import Formats, Records, ScanStats, scan_blocks
+from navreplay.ingest.readers.mavlink.mavclock import note_week_rollover
 from navreplay.ingest.readers.mavlink.mavmsgs import Converted
 from navreplay.ingest.schema import FixType, TableName
 
@@ -234,30 +233,14 @@ class DataFlashReader(LogReader):
         dmg.count("records_framed", stats.records)
         s.tracker.note_resets(dmg, reboot="reboot", clock="TimeUS")
         if s.week_shift:
-            dmg.count("gps_week_rollover_corrected", s.gps_rows)
-            dmg.note(
-                f"GPS week rollover: {s.gps_rows} GPS records corrected by +{s.week_shift} "
-                f"weeks, snapped to the epoch nearest {s.reference}"
-            )
+            how = f", snapped to the epoch nearest {s.reference}"
+            note_week_rollover(dmg, s.gps_rows, "GPS records", s.week_shift, how)
         for u in s.unusable:
             dmg.note(f"message type {u.name} skipped: its FMT at offset {u.offset}: {u.reason}")
         for offset, name in formats.redefined:
             dmg.note(f"FMT at offset {offset} redefines {name}: later records use the new layout")
-        if stats.garbage_runs:
-            dmg.count("garbage_runs", stats.garbage_runs)
-            dmg.count("garbage_bytes", stats.garbage_bytes)
-            listed = ", ".join(f"{at} (+{n})" for at, n in stats.garbage_listed)
-            dmg.record(
-                Defect(
-                    Completeness.BAD_DATA_SKIPPED,
-                    f"{stats.garbage_runs} runs of bytes that are not DataFlash records "
-                    f"({stats.garbage_bytes} bytes) skipped; at offsets {listed}",
-                    offset=stats.garbage_listed[0][0],
-                    bytes_skipped=stats.garbage_bytes,
-                )
-            )
-        if stats.partial_offset is not None:
-            dmg.record(partial_record_defect(stats.partial_offset, stats.partial_bytes))
+        stats.record_garbage(dmg, "DataFlash records")
+        stats.record_partial(dmg)
 
 
 def _parse_key(key: str) -> tuple[DfStream, int] | None:

@@ -22,7 +22,8 @@ import numpy as np
 import numpy.typing as npt
 
 from navreplay.ingest.arrays import I64, U8
-from navreplay.ingest.readers.mavlink._mavscan import END_PARTIAL, gather, scan_dataflash
+from navreplay.ingest.readers.mavlink._blocks import BlockStats, scan_file
+from navreplay.ingest.readers.mavlink._mavscan import gather, scan_dataflash
 from navreplay.ingest.readers.mavlink.dfformat import (
     FMT_FORMAT,
     FMT_LENGTH,
@@ -35,7 +36,6 @@ from navreplay.ingest.readers.mavlink.dfformat import (
 )
 
 BLOCK_BYTES = 8 << 20
-MAX_LISTED = 20
 
 _EMPTY = np.empty(0, np.int64)
 
@@ -163,15 +163,10 @@ def _format(raw: bytes) -> tuple[int, str, tuple[str, ...], DfFormat | None, str
 
 
 @dataclass
-class ScanStats:
-    """Garbage and truncation found by one scan."""
+class ScanStats(BlockStats):
+    """Garbage and truncation found by one scan, and the records framed."""
 
     records: int = 0
-    garbage_runs: int = 0
-    garbage_bytes: int = 0
-    garbage_listed: list[tuple[int, int]] = field(default_factory=list)
-    partial_offset: int | None = None
-    partial_bytes: int = 0
 
 
 def scan_blocks(
@@ -179,40 +174,22 @@ def scan_blocks(
 ) -> Iterator[Records]:
     """Yield the records of ``path`` block by block (``BLOCK_BYTES`` unless given), feeding
     ``formats`` and ``stats``."""
-    block_bytes = block_bytes or BLOCK_BYTES
-    size = path.stat().st_size
     fmt_len = np.zeros(256, np.int32)
     fmt_len[FMT_TYPE] = FMT_LENGTH
-    base = 0
-    garbage = -1
-    carry = np.empty(0, np.uint8)
-    with path.open("rb") as fh:
-        while True:
-            fresh = np.frombuffer(fh.read(block_bytes), np.uint8)
-            buf = np.concatenate([carry, fresh]) if len(carry) else fresh
-            final = base + len(buf) >= size
-            slots = len(buf) // 3 + 2
-            pos = np.empty(slots, np.int64)
-            typ = np.empty(slots, np.uint8)
-            gap_pos = np.empty(slots // 2 + 2, np.int64)
-            gap_len = np.empty(slots // 2 + 2, np.int64)
-            n, ng, stop, garbage, end = scan_dataflash(
-                buf, len(buf), final, base, garbage, fmt_len, pos, typ, gap_pos, gap_len
-            )
-            rec = Records(buf, pos[:n].copy(), pos[:n] + base, typ[:n].copy())
-            stats.records += n
-            for at, length in zip(gap_pos[:ng].tolist(), gap_len[:ng].tolist(), strict=True):
-                stats.garbage_runs += 1
-                stats.garbage_bytes += length
-                if len(stats.garbage_listed) < MAX_LISTED:
-                    stats.garbage_listed.append((at, length))
-            formats.observe(rec)
-            if n:
-                yield rec
-            if final:
-                if end == END_PARTIAL:
-                    stats.partial_offset = base + stop
-                    stats.partial_bytes = len(buf) - stop
-                return
-            carry = buf[stop:].copy()
-            base += stop
+
+    def scan(buf: U8, base: int, final: bool, garbage: int) -> tuple[Records | None, int, int, int]:
+        slots = len(buf) // 3 + 2
+        pos = np.empty(slots, np.int64)
+        typ = np.empty(slots, np.uint8)
+        gap_pos = np.empty(slots // 2 + 2, np.int64)
+        gap_len = np.empty(slots // 2 + 2, np.int64)
+        n, ng, stop, garbage, end = scan_dataflash(
+            buf, len(buf), final, base, garbage, fmt_len, pos, typ, gap_pos, gap_len
+        )
+        rec = Records(buf, pos[:n].copy(), pos[:n] + base, typ[:n].copy())
+        stats.records += n
+        stats.add_gaps(gap_pos[:ng], gap_len[:ng])
+        formats.observe(rec)
+        return (rec if n else None), stop, garbage, end
+
+    yield from scan_file(path, block_bytes or BLOCK_BYTES, stats, scan)

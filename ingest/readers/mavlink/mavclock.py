@@ -123,3 +123,9 @@ def unroll_gps_week(week: I64, tow_ns: I64, reference_gps_ns: int) -> tuple[I64,
     if k <= 0:
         return week, 0
     return week + k * ROLLOVER_WEEKS, k * ROLLOVER_WEEKS
+
+
+def note_week_rollover(damage: DamageLog, rows: int, what: str, weeks: int, how: str) -> None:
+    """Count and describe ``rows`` ``what`` moved forward by ``weeks`` GPS weeks (``how``)."""
+    damage.count("gps_week_rollover_corrected", rows)
+    damage.note(f"GPS week rollover: {rows} {what} corrected by +{weeks} weeks{how}")

@@ -44,8 +44,8 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.mavlink._mavscan import VALID, partial_record_defect
-from navreplay.ingest.readers.mavlink.mavclock import ROLLOVER_NS
+from navreplay.ingest.readers.mavlink._mavscan import VALID
+from navreplay.ingest.readers.mavlink.mavclock import ROLLOVER_NS, note_week_rollover
 from navreplay.ingest.readers.mavlink.mavdialect import load_dialect
 from navreplay.ingest.readers.mavlink.mavmsgs import BY_NAME, Extras, MavStream
 from navreplay.ingest.readers.mavlink.tlogclock import (
@@ -290,32 +290,13 @@ class TlogReader(LogReader):
             dmg.note(f"{other} convertible packets from senders other than the vehicle ignored")
         s.tracker.note_resets(dmg, reboot="vehicle reboot", clock="time since boot")
         if s.rollover_rows:
-            dmg.count("gps_week_rollover_corrected", s.rollover_rows)
-            dmg.note(
-                f"GPS week rollover: {s.rollover_rows} vehicle UTC values corrected by "
-                f"+{s.rollover_weeks} weeks (reference: the tlog stamps)"
-            )
-        self._garbage(stats)
-        self._bad_packets(stats)
-        if stats.partial_offset is not None:
-            dmg.record(partial_record_defect(stats.partial_offset, stats.partial_bytes))
-
-    def _garbage(self, stats: ScanStats) -> None:
-        if not stats.garbage_runs:
-            return
-        self.damage.count("garbage_runs", stats.garbage_runs)
-        self.damage.count("garbage_bytes", stats.garbage_bytes)
-        listed = ", ".join(f"{at} (+{n})" for at, n in stats.garbage_listed)
-        self.damage.record(
-            Defect(
-                Completeness.BAD_DATA_SKIPPED,
-                f"{stats.garbage_runs} runs of bytes that are not MAVLink packets "
-                f"({stats.garbage_bytes} bytes) skipped, resynchronised on the next packet with "
-                f"a valid CRC; at offsets {listed}",
-                offset=stats.garbage_listed[0][0],
-                bytes_skipped=stats.garbage_bytes,
-            )
+            how = " (reference: the tlog stamps)"
+            note_week_rollover(dmg, s.rollover_rows, "vehicle UTC values", s.rollover_weeks, how)
+        stats.record_garbage(
+            dmg, "MAVLink packets", ", resynchronised on the next packet with a valid CRC"
         )
+        self._bad_packets(stats)
+        stats.record_partial(dmg)
 
     def _bad_packets(self, stats: ScanStats) -> None:
         name = self.dialect.msg_name

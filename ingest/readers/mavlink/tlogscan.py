@@ -20,13 +20,13 @@ import numpy as np
 import numpy.typing as npt
 
 from navreplay.ingest.arrays import I64, U8
-from navreplay.ingest.readers.mavlink._mavscan import END_PARTIAL, MAVLINK_V2, VALID, scan_tlog
+from navreplay.ingest.readers.mavlink._blocks import BlockStats, scan_file
+from navreplay.ingest.readers.mavlink._mavscan import MAVLINK_V2, VALID, scan_tlog
 from navreplay.ingest.readers.mavlink.mavdialect import Dialect
 
 BLOCK_BYTES = 8 << 20
 MIN_STAMP_US = 946_684_800 * 10**6  # 2000-01-01
 MAX_STAMP_US = 4_102_444_800 * 10**6  # 2100-01-01
-MAX_LISTED = 20
 
 _AR8 = np.arange(8, dtype=np.int64)
 
@@ -66,29 +66,19 @@ class Packets:
 
 
 @dataclass
-class ScanStats:
+class ScanStats(BlockStats):
     """Damage and counts accumulated over one scan of the file."""
 
     packets: int = 0
-    garbage_runs: int = 0
-    garbage_bytes: int = 0
-    garbage_listed: list[tuple[int, int]] = field(default_factory=list)
     bad_crc: Counter[int] = field(default_factory=Counter)
     bad_crc_first: int | None = None
     unknown: Counter[int] = field(default_factory=Counter)
     valid: Counter[int] = field(default_factory=Counter)
     lost_by_source: Counter[int] = field(default_factory=Counter)
-    partial_offset: int | None = None
-    partial_bytes: int = 0
     _last_seq: dict[int, int] = field(default_factory=dict)
 
-    def observe(self, p: Packets, gaps: list[tuple[int, int]]) -> None:
+    def observe(self, p: Packets) -> None:
         self.packets += len(p)
-        for at, n in gaps:
-            self.garbage_runs += 1
-            self.garbage_bytes += n
-            if len(self.garbage_listed) < MAX_LISTED:
-                self.garbage_listed.append((at, n))
         ok = p.flag == VALID
         self.valid.update(_counts(p.msgid[ok]))
         bad = p.flag == 1
@@ -152,45 +142,30 @@ def scan_blocks(
 ) -> Iterator[Packets]:
     """Yield the packets of ``path`` block by block (``BLOCK_BYTES`` unless given); ``stats``
     collects the damage."""
-    block_bytes = block_bytes or BLOCK_BYTES
-    size = path.stat().st_size
-    base = 0
-    garbage = -1
-    carry = np.empty(0, np.uint8)
-    with path.open("rb") as fh:
-        while True:
-            fresh = np.frombuffer(fh.read(block_bytes), np.uint8)
-            buf = np.concatenate([carry, fresh]) if len(carry) else fresh
-            final = base + len(buf) >= size
-            slots = len(buf) // 16 + 2
-            pos = np.empty(slots, np.int64)
-            flag = np.empty(slots, np.int8)
-            gap_pos = np.empty(slots, np.int64)
-            gap_len = np.empty(slots, np.int64)
-            n, ng, stop, garbage, end = scan_tlog(
-                buf,
-                len(buf),
-                final,
-                base,
-                garbage,
-                dialect.crc_extra,
-                MIN_STAMP_US,
-                MAX_STAMP_US,
-                pos,
-                flag,
-                gap_pos,
-                gap_len,
-            )
-            packets = packet_fields(buf, pos[:n], flag[:n], base)
-            stats.observe(
-                packets, list(zip(gap_pos[:ng].tolist(), gap_len[:ng].tolist(), strict=True))
-            )
-            if n:
-                yield packets
-            if final:
-                if end == END_PARTIAL:
-                    stats.partial_offset = base + stop
-                    stats.partial_bytes = len(buf) - stop
-                return
-            carry = buf[stop:].copy()
-            base += stop
+
+    def scan(buf: U8, base: int, final: bool, garbage: int) -> tuple[Packets | None, int, int, int]:
+        slots = len(buf) // 16 + 2
+        pos = np.empty(slots, np.int64)
+        flag = np.empty(slots, np.int8)
+        gap_pos = np.empty(slots, np.int64)
+        gap_len = np.empty(slots, np.int64)
+        n, ng, stop, garbage, end = scan_tlog(
+            buf,
+            len(buf),
+            final,
+            base,
+            garbage,
+            dialect.crc_extra,
+            MIN_STAMP_US,
+            MAX_STAMP_US,
+            pos,
+            flag,
+            gap_pos,
+            gap_len,
+        )
+        packets = packet_fields(buf, pos[:n], flag[:n], base)
+        stats.add_gaps(gap_pos[:ng], gap_len[:ng])
+        stats.observe(packets)
+        return (packets if n else None), stop, garbage, end
+
+    yield from scan_file(path, block_bytes or BLOCK_BYTES, stats, scan)

@@ -28,9 +28,9 @@ import numpy.typing as npt
 import pyarrow as pa
 
 from navreplay.ingest.config import CsvSource
-from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import ConfigError, CorruptLogError, UnsupportedFormatError
+from navreplay.ingest.readers._lines import BadLines, listed, partial_line_defect
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
@@ -44,7 +44,6 @@ from navreplay.ingest.timebase import TimeBase
 
 _UNIT_NS = {"ns": 1, "us": 1_000, "ms": 1_000_000, "s": 1_000_000_000}
 _WS = re.compile(r"\s+")
-_MAX_LISTED = 20
 
 
 class CsvReader(LogReader):
@@ -144,7 +143,7 @@ class CsvReader(LogReader):
                     stats.headers.append(number)
                     continue
                 if len(fields) != len(header):
-                    stats.bad(number, f"{len(fields)} fields, the header has {len(header)}")
+                    stats.bad.add(number, f"{len(fields)} fields, the header has {len(header)}")
                     continue
                 lines.append(fields)
                 numbers.append(number)
@@ -196,7 +195,7 @@ class CsvReader(LogReader):
             ok = ok_t & ok_v
             for r in np.flatnonzero(~ok).tolist():
                 bad_col = src.time_column if not ok_t[r] else _first_bad(cells[r, 1:], src)
-                stats.bad(numbers[r], f"column {bad_col!r} is not a number")
+                stats.bad.add(numbers[r], f"column {bad_col!r} is not a number")
             columns: dict[str, np.ndarray] = {"t_ns": t_ns[ok]}
             nulls: dict[str, npt.NDArray[np.bool_]] = {}
             table_spec = spec(src.table)
@@ -234,25 +233,11 @@ class CsvReader(LogReader):
         d.count("empty_cells", stats.empty_cells)
         if stats.headers:
             d.count("repeated_header_lines", len(stats.headers))
-            d.note(f"repeated header lines skipped at lines {_listed(stats.headers)}")
-        if stats.bad_lines:
-            first = stats.bad_lines[0]
-            d.record(
-                Defect(
-                    Completeness.BAD_DATA_SKIPPED,
-                    f"{len(stats.bad_lines)} malformed lines skipped (lines "
-                    f"{_listed(stats.bad_lines)}; first: {stats.first_reason})",
-                    offset=first,
-                )
-            )
+            d.note(f"repeated header lines skipped at lines {listed(stats.headers)}")
+        if stats.bad.lines:
+            d.record(stats.bad.defect())
         if stats.partial is not None:
-            d.record(
-                Defect(
-                    Completeness.PARTIAL_RECORD_DROPPED,
-                    f"line {stats.partial} (the last) has no newline: a truncated write, dropped",
-                    offset=stats.partial,
-                )
-            )
+            d.record(partial_line_defect(stats.partial))
 
 
 class _LineStats:
@@ -260,19 +245,8 @@ class _LineStats:
         self.comments = 0
         self.empty_cells = 0
         self.headers: list[int] = []
-        self.bad_lines: list[int] = []
-        self.first_reason = ""
+        self.bad = BadLines()
         self.partial: int | None = None
-
-    def bad(self, line: int, reason: str) -> None:
-        if not self.bad_lines:
-            self.first_reason = f"line {line}: {reason}"
-        self.bad_lines.append(line)
-
-
-def _listed(lines: list[int]) -> str:
-    shown = ", ".join(str(n) for n in lines[:_MAX_LISTED])
-    return shown + (f" and {len(lines) - _MAX_LISTED} more" if len(lines) > _MAX_LISTED else "")
 
 
 def _split(text: str, delimiter: str) -> list[str]:

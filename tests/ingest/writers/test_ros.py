@@ -14,7 +14,7 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
 from navreplay.ingest.gpstime import NS_PER_S, gps_from_calendar
-from navreplay.ingest.schema import from_columns
+from navreplay.ingest.schema import NAV_SOLUTION_FIELDS, from_columns
 from navreplay.ingest.writers import ros, rosserial
 
 T0 = gps_from_calendar("2026-11-18T02:30:00")
@@ -49,19 +49,7 @@ def tables() -> dict[str, pa.Table]:
         "num_sats": np.array([7, 7, 2, 8], dtype=np.int16),
     }
     truth: dict[str, Any] = {"t_ns": t_imu}
-    for name in (
-        "lat_deg",
-        "lon_deg",
-        "alt_m",
-        "vel_n_mps",
-        "vel_e_mps",
-        "vel_d_mps",
-        "roll_rad",
-        "pitch_rad",
-        "yaw_rad",
-        "acc_bias_x_mps2",
-        "clock_bias_m",
-    ):
+    for name in (*NAV_SOLUTION_FIELDS, "acc_bias_x_mps2", "clock_bias_m"):
         truth[name] = rng.normal(0.0, 1.0, N_IMU)
     return {
         "imu": from_columns("imu", imu),
