@@ -71,6 +71,16 @@ PEAK_RSS = (
 )
 
 
+#: the measured process: ingest of one log, printing the IMU rows it wrote
+INGEST_CODE = textwrap.dedent(
+    """
+    from pathlib import Path
+    from navreplay.ingest.api import ingest
+    print(ingest([Path({log!r})], Path({out!r})).tables["imu"])
+    """
+)
+
+
 def _child(code: str) -> tuple[str, float, float]:
     """Run ``code`` in a fresh interpreter: (its stdout, peak RSS MB, wall s)."""
     script = code + PEAK_RSS
@@ -94,16 +104,9 @@ def run(options: argparse.Namespace) -> None:
         )
         small = tmp / "small.mcap"
         write_log(small, 1 << 20)
-        ingest_code = textwrap.dedent(
-            """
-            from pathlib import Path
-            from navreplay.ingest.api import navreplay.ingest
-            print(ingest([Path({log!r})], Path({out!r})).tables["imu"])
-            """
-        )
         rows: list[list[object]] = []
         for label, log in (("ingest, 1 MB log (fixed cost)", small), ("ingest", big)):
-            out, rss, wall = _child(ingest_code.format(log=str(log), out=str(tmp / "out")))
+            out, rss, wall = _child(INGEST_CODE.format(log=str(log), out=str(tmp / "out")))
             rows.append([label, f"{log.stat().st_size / (1 << 20):,.0f} MB", int(out), rss, wall])
         if not options.memory_no_reference:
             ref = textwrap.dedent(
