@@ -254,6 +254,21 @@ def window_metrics(
     return out
 
 
+def ned_error(lat: F64, lon: F64, h: F64, ref_lat: F64, ref_lon: F64, ref_h: F64) -> F64:
+    """(K, 3) reference minus estimate in metres north, east, down at the estimate's
+    (``lat``, ``lon`` rad, ``h`` m); small offsets."""
+    s2 = np.sin(lat) ** 2
+    rn = A / np.sqrt(1.0 - E2 * s2)
+    rm = rn * (1.0 - E2) / (1.0 - E2 * s2)
+    return np.column_stack(
+        [
+            (ref_lat - lat) * (rm + h),
+            np.angle(np.exp(1j * (ref_lon - lon))) * (rn + h) * np.cos(lat),
+            -(ref_h - h),
+        ]
+    )
+
+
 def _geodetic(table: pa.Table, t_ns: I64 | None = None) -> tuple[I64, F64, F64, F64]:
     """(t, lat rad, lon rad, h m) of a table's finite positions (interpolated to ``t_ns``
     inside its span when given)."""
@@ -299,16 +314,9 @@ def table_track(
         return None
     if t.size == 0 or e_t.size != t.size:
         return None
-    s2 = np.sin(e_lat) ** 2
-    rn = A / np.sqrt(1.0 - E2 * s2)
-    rm = rn * (1.0 - E2) / (1.0 - E2 * s2)
-    err = np.column_stack(
-        [
-            (lat - e_lat) * (rm + e_h),
-            np.angle(np.exp(1j * (lon - e_lon))) * (rn + e_h) * np.cos(e_lat),
-            np.zeros(t.size) if planar else -(h - e_h),
-        ]
-    )
+    err = ned_error(e_lat, e_lon, e_h, lat, lon, h)
+    if planar:
+        err[:, 2] = 0.0
     t_est = np.asarray(estimate.column("t_ns").to_numpy(), dtype=np.int64)
     near = np.clip(np.searchsorted(t_est, t), 0, t_est.size - 1)
     sig = np.column_stack(

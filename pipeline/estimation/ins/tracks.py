@@ -20,12 +20,12 @@ from navreplay.pipeline.estimation.core.windows import (
     Window,
     WindowMetricsParams,
     local_ned,
+    ned_error,
     window_metrics,
 )
 from navreplay.pipeline.estimation.ins.models import ins
 from navreplay.pipeline.estimation.ins.replay import RunResult
 from navreplay.pipeline.estimation.ins.truth import error_states
-from navreplay.pipeline.nav.earth import E2, A
 from navreplay.pipeline.nav.rotations import quat_to_dcm
 
 
@@ -66,17 +66,8 @@ def fixes_track(
     near = np.clip(np.searchsorted(result.t_ns, t), 0, max(result.t_ns.size - 1, 0))
     lever = np.asarray(lever_b, dtype=np.float64)
     arm = np.array([quat_to_dcm(x[j, ins.X_Q : ins.X_Q + 4]) @ lever for j in near]).reshape(-1, 3)
-    s2 = np.sin(lat) ** 2
-    rn = A / np.sqrt(1.0 - E2 * s2)
-    rm = rn * (1.0 - E2) / (1.0 - E2 * s2)
     f_lat, f_lon = np.radians(cols["lat_deg"][ok]), np.radians(cols["lon_deg"][ok])
-    err = np.column_stack(
-        [
-            (f_lat - lat) * (rm + h) - arm[:, 0],
-            np.angle(np.exp(1j * (f_lon - lon))) * (rn + h) * np.cos(lat) - arm[:, 1],
-            -(cols["alt_m"][ok] - h) - arm[:, 2],
-        ]
-    )
+    err = ned_error(lat, lon, h, f_lat, f_lon, cols["alt_m"][ok]) - arm
     P = result.P[near] if result.P.size else np.zeros((0, 3, 3))
     sig = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2)[:, :3], 0.0, None))
     ref, org = local_ned(f_lat, f_lon, cols["alt_m"][ok], origin)
