@@ -102,7 +102,7 @@ def ensure_pd(P: F64, n: int, L: F64) -> tuple[bool, bool, float]:
     return False, True, total
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def mat_mul_into(A: F64, B: F64, rows: int, inner: int, cols: int, out: F64) -> None:
     """``out[:rows, :cols] = A[:rows, :inner] B[:inner, :cols]``, each entry summed in the
     order of ``inner``."""

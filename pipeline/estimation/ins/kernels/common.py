@@ -116,7 +116,7 @@ def check_state(X: F64, P: F64, scale: F64, s: Settings) -> int:
     return STATUS_OK
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def reset_timed_out(
     t_ns: int, P: F64, g: GatedBlocks, reject_since: I64, scale: F64, cfg: Settings, log: RunLog
 ) -> bool:
@@ -131,7 +131,7 @@ def reset_timed_out(
     return bool(reset.sum() > 0)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def close_gating(t_ns: int, g: GatedBlocks, gate: F64, buf: EpochBuffers, log: RunLog) -> int:
     """An INS epoch's final gating decisions: record the innovations and rejections, advance
     the rejection clocks (``buf.reject_since``) and write the accepted rows into
