@@ -12,6 +12,10 @@ data it cannot use. Each filter replays under each scenario (``pipeline.outages.
 scenario engine applies outage windows, k-satellite windows or faults to the tables first);
 a scenario the log cannot support (e.g. k satellites without raw observables) or a run that
 fails is skipped with its reason, and the others go on.
+
+Outage scenarios are fitted to the log first (``pipeline.scenarios.fit``): a log too short
+for a scenario's windows gets fewer or shorter ones, each change stated in ``notes``; the
+``outages`` asked for (``--outage 30s``, ``30s@45s``) are added as scenarios of their own.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pyarrow.parquet as pq
 
@@ -32,6 +36,10 @@ from navreplay.pipeline.errors import DivergenceError, ParamsError, PipelineErro
 from navreplay.pipeline.estimation.ins.config import FILTER_KINDS
 from navreplay.pipeline.params import Params
 from navreplay.pipeline.report.render import RenderedReport
+
+if TYPE_CHECKING:
+    from navreplay.pipeline.estimation.core.contract import RunInputs
+    from navreplay.pipeline.scenarios.config import ScenariosParams
 
 Progress = Callable[[str], None]
 
@@ -53,6 +61,7 @@ class AnalysisResult:
     report: RenderedReport
     skipped: list[Skipped] = field(default_factory=list)
     seconds: float = 0.0
+    notes: list[str] = field(default_factory=list)
 
 
 def _has_sat_positions(tables_dir: Path) -> bool:
@@ -105,11 +114,13 @@ def analyze(
     *,
     filters: Sequence[str] | None = None,
     scenarios: Sequence[str] | None = None,
+    outages: Sequence[str] = (),
     config: DatasetConfig | None = None,
     config_dir: Path | None = None,
     progress: Progress = lambda _: None,
 ) -> AnalysisResult:
-    """Ingest, run and report one log (see the module docstring)."""
+    """Ingest, run and report one log (see the module docstring); ``outages`` are
+    ``--outage`` texts (``pipeline.scenarios.fit.parse_outage``)."""
     from navreplay.pipeline.estimation.core.contract import RunInputs, write_run
     from navreplay.pipeline.estimation.ins.run import INPUTS
     from navreplay.pipeline.outages.runs import run_scenarios
@@ -118,11 +129,7 @@ def analyze(
 
     t_start = time.perf_counter()
     filters = list(filters or params.run.filters)
-    scenarios = list(scenarios or params.run.scenarios)
-    unknown = [sc for sc in scenarios if sc not in params.scenarios.named]
-    if unknown:
-        known = ", ".join(params.scenarios.named)
-        raise ParamsError("scenarios.named", f"no scenario {unknown} (known: {known})")
+    named, scenarios, extra = _scenarios(params, scenarios, outages)
     tables_dir = out_dir / "tables"
     progress(f"ingest {', '.join(str(p) for p in logs)}")
     options = IngestOptions(
@@ -135,8 +142,13 @@ def analyze(
     progress(f"ingest done: {rows}")
     runnable, skipped = plan(tables_dir, filters)
     runs_dir = out_dir / "runs"
+    inputs = RunInputs.read(tables_dir, INPUTS) if runnable else None
+    notes: list[str] = []
+    if inputs is not None:
+        named, scenarios, notes = _fit(inputs, named, scenarios, extra, runnable, skipped, runs_dir)
+        for note in notes:
+            progress(f"note: {note}")
     todo = [(f, s) for f in runnable for s in scenarios]
-    inputs = RunInputs.read(tables_dir, INPUTS) if todo else None
     for i, (f, sc) in enumerate(todo, start=1):
         assert inputs is not None  # read above whenever there is something to run
         run_dir = runs_dir / f / sc
@@ -145,7 +157,7 @@ def analyze(
         section = params.filters.get(f)
         try:
             ((_, out, applied),) = run_scenarios(
-                inputs, f, section, params.scenarios, [sc], params.run.backend
+                inputs, f, section, named, [sc], params.run.backend
             )
         except (DivergenceError, PipelineError) as err:
             s = Skipped(f, sc, f"failed: {err}")
@@ -153,7 +165,7 @@ def analyze(
             write_skip(run_dir, s)
             progress(f"  {f} under {sc}: {err}")
             continue
-        if params.scenarios.get(sc).windows is not None and not applied.outage_windows:
+        if named.get(sc).windows is not None and not applied.outage_windows:
             s = Skipped(f, sc, "none of the scenario's outage windows fits in this log")
             skipped.append(s)
             write_skip(run_dir, s)
@@ -173,7 +185,50 @@ def analyze(
         params_hash=params_hash(to_plain(params)),
         title=f"navreplay analysis: {', '.join(p.name for p in logs)}",
     )
-    return AnalysisResult(tables_dir, report, skipped, time.perf_counter() - t_start)
+    return AnalysisResult(tables_dir, report, skipped, time.perf_counter() - t_start, notes)
+
+
+def _scenarios(
+    params: Params, scenarios: Sequence[str] | None, outages: Sequence[str]
+) -> tuple[ScenariosParams, list[str], list[str]]:
+    """The scenarios section with the outages asked for added, the scenarios to run and the
+    names of those outages."""
+    from navreplay.pipeline.scenarios.fit import with_outages
+
+    names = list(scenarios or params.run.scenarios)
+    try:
+        named, extra = with_outages(params.scenarios, [*params.scenarios.fit.outages, *outages])
+    except ValueError as err:
+        raise ParamsError("scenarios.fit.outages", str(err)) from err
+    names += [sc for sc in extra if sc not in names]
+    unknown = [sc for sc in names if sc not in named.named]
+    if unknown:
+        known = ", ".join(named.named)
+        raise ParamsError("scenarios.named", f"no scenario {unknown} (known: {known})")
+    return named, names, extra
+
+
+def _fit(
+    inputs: RunInputs,
+    named: ScenariosParams,
+    scenarios: list[str],
+    extra: list[str],
+    runnable: list[str],
+    skipped: list[Skipped],
+    runs_dir: Path,
+) -> tuple[ScenariosParams, list[str], list[str]]:
+    """The scenarios fitted to the log (``scenarios.fit``), those that still run and the
+    notes; a scenario none of whose windows fits is skipped (and written) for every filter."""
+    from navreplay.pipeline.scenarios.fit import fit_scenarios
+
+    fitted = fit_scenarios(inputs.tables, named, scenarios, as_many_as_fit=extra)
+    for sc, why in fitted.unfit.items():
+        for f in runnable:
+            s = Skipped(f, sc, why)
+            skipped.append(s)
+            write_skip(runs_dir / f / sc, s)
+    kept = [sc for sc in scenarios if sc not in fitted.unfit]
+    return fitted.scenarios, kept, list(fitted.notes)
 
 
 def _one_line(m: dict[str, Any]) -> str:

@@ -62,6 +62,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "run the speed benchmarks against reference backends",
     ),
     "where-reports": ("navreplay.pipeline.stages.where_reports", "list the generated reports"),
+    "params": (
+        "navreplay.pipeline.stages.params",
+        "print the parameters in force (built-in defaults, ./params.yaml or --params over them)",
+    ),
 }
 
 

@@ -3,11 +3,20 @@
 Every knob of the pipeline lives in ``params.yaml``; stages read it through ``load_params``.
 Unknown or misspelled keys, wrong types, duplicated keys and missing sections are errors
 (``ParamsError``) naming the dotted key path.
+
+The package carries the built-in defaults: the repository's ``params.yaml``, installed as
+``navreplay/pipeline/params.yaml`` (in the checkout a link to it), so every command works from
+any directory and from a wheel. A parameter file a user gives (``--params``, or
+``./params.yaml`` when present) is laid over them: its mappings merge key by key, anything
+else (a list, a number) replaces the default. A file holding only ``run: {filters:
+[lc_ekf]}`` changes that and nothing else; a complete file (the repository's own) replaces
+everything. ``navreplay params`` prints the result.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -29,7 +38,10 @@ from navreplay.pipeline.synth.fwekf import FwekfReferenceParams
 from navreplay.pipeline.synth.seoul_params import SeoulCampusParams
 from navreplay.pipeline.synth.tractor import TractorStraightParams
 
-DEFAULT_PARAMS = Path("params.yaml")
+#: The parameter file a command uses, when present in its working directory, without --params.
+LOCAL_PARAMS = Path("params.yaml")
+#: The built-in defaults (installed with the package).
+BUILTIN_PARAMS = Path(__file__).with_name("params.yaml")
 _ID_RE = re.compile(r"^[a-z][a-z0-9_]*$")
 
 
@@ -214,9 +226,53 @@ def parse_params(data: object, *, source: str | None = None) -> Params:
     return load_dataclass(Params, data, source=source, error=ParamsError)
 
 
-def load_params(path: str | Path = DEFAULT_PARAMS) -> Params:
-    """Load and check ``params.yaml``."""
-    return parse_params(read_yaml(path), source=str(path))
+def params_source(path: str | Path | None = None) -> Path | None:
+    """The user's parameter file a command reads: ``path`` when given, else
+    ``./params.yaml`` when present; None means the built-in defaults alone."""
+    if path is not None:
+        return Path(path)
+    return LOCAL_PARAMS if LOCAL_PARAMS.is_file() else None
+
+
+def params_label(path: str | Path | None = None) -> str:
+    """The name errors give the parameters ``load_params(path)`` reads."""
+    source = params_source(path)
+    return str(source) if source is not None else f"built-in defaults ({BUILTIN_PARAMS})"
+
+
+def overlay(base: Any, over: Any) -> Any:
+    """``over`` laid over ``base``: mappings merge key by key, anything else replaces."""
+    if isinstance(base, Mapping) and isinstance(over, Mapping):
+        merged = dict(base)
+        for key, value in over.items():
+            merged[key] = overlay(base[key], value) if key in base else value
+        return merged
+    return over
+
+
+def effective_params(path: str | Path | None = None) -> tuple[dict[str, Any], str]:
+    """The parameters as plain data (the user's file over the built-in defaults, see the
+    module docstring) and a description of where they came from."""
+    defaults = read_yaml(BUILTIN_PARAMS)
+    source = params_source(path)
+    if source is None:
+        return defaults, f"built-in defaults ({BUILTIN_PARAMS})"
+    data = read_yaml(source)
+    if data is None:
+        data = {}
+    if not isinstance(data, Mapping):
+        raise ParamsError(
+            "", "must be a mapping of sections (run:, filters:, ...)", source=str(source)
+        )
+    return overlay(defaults, data), f"{source} over the built-in defaults"
+
+
+def load_params(path: str | Path | None = None) -> Params:
+    """Load and check the parameters: ``path`` (or ``./params.yaml`` when present) laid over
+    the built-in defaults."""
+    data, _ = effective_params(path)
+    source = params_source(path)
+    return parse_params(data, source=str(source if source is not None else BUILTIN_PARAMS))
 
 
 def section(params: Params, dotted: str) -> Any:

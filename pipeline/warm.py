@@ -122,7 +122,7 @@ def warm_here(names: Sequence[str], params: Params) -> None:
 
 
 def warm(
-    params_path: Path,
+    params_path: Path | None,
     names: Sequence[str] | None = None,
     *,
     jobs: int = 2,
@@ -141,7 +141,8 @@ def warm(
 
     def one(group: tuple[str, ...]) -> WarmResult:
         cmd = [sys.executable, "-m", "navreplay.pipeline.cli", "-q", "warm", "--in-process"]
-        cmd += ["--params", str(params_path)]
+        if params_path is not None:
+            cmd += ["--params", str(params_path)]
         for name in group:
             cmd += ["--filter", name]
         t0 = time.perf_counter()

@@ -109,3 +109,7 @@ def test_nothing_imports_the_folders_by_their_own_names() -> None:
                     if name.split(".")[0] in FOLDERS
                 ]
     assert not found, "import navreplay.pipeline / navreplay.ingest instead:\n" + "\n".join(found)
+
+
+def test_the_built_in_params_are_in_the_wheel(wheel: zipfile.ZipFile) -> None:
+    assert wheel.read("navreplay/pipeline/params.yaml") == (REPO / "params.yaml").read_bytes()

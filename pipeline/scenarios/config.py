@@ -173,6 +173,35 @@ class ScenarioSpec:
 
 
 @dataclass(frozen=True)
+class FitParams:
+    """``scenarios.fit``: how ``navreplay analyze`` fits outage scenarios to a log too short
+    for them (``scenarios.fit`` module).
+
+    Attributes:
+        settle_s: least GNSS-aided time before a window, from the first fix, s.
+        tail_s: least GNSS-aided time after the last window, s.
+        lengths_s: shorter window lengths to fall back on, s.
+        max_windows: most windows an ``--outage LEN`` scenario places.
+        outages: outage scenarios analyze runs besides its ``--scenarios`` (the ``--outage``
+            syntax: ``30s``, ``30s@45s``).
+    """
+
+    settle_s: float = 30.0
+    tail_s: float = 10.0
+    lengths_s: tuple[float, ...] = (10.0, 30.0, 60.0)
+    max_windows: int = 5
+    outages: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if min(self.settle_s, self.tail_s) < 0:
+            raise FieldError("settle_s", "settle_s and tail_s must be >= 0")
+        if any(x <= 0 for x in self.lengths_s):
+            raise FieldError("lengths_s", "every length must be > 0")
+        if self.max_windows < 1:
+            raise FieldError("max_windows", "must be >= 1")
+
+
+@dataclass(frozen=True)
 class ScenariosParams:
     """The ``scenarios`` section.
 
@@ -181,11 +210,13 @@ class ScenariosParams:
             partial outage; match the filters' ``gnss.elevation_mask_deg``.
         metrics: the outage-window metric definitions.
         named: scenario name -> spec; ``nominal`` must be there.
+        fit: fitting outage scenarios to short logs (``analyze``).
     """
 
     selection_mask_deg: float
     metrics: WindowMetricsParams
     named: Mapping[str, ScenarioSpec]
+    fit: FitParams = FitParams()
 
     def __post_init__(self) -> None:
         if "nominal" not in self.named:

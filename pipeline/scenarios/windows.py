@@ -49,12 +49,19 @@ def place_windows(spec: WindowsSpec, t0_ns: int, t_end_ns: int) -> list[tuple[in
     return [(t0_ns + round(s * NS), t0_ns + round((s + length) * NS)) for s in sorted(starts)]
 
 
+def random_fit(length_s: float, min_gap_s: float, earliest_s: float, latest_s: float) -> int:
+    """How many windows of ``length_s``, ``min_gap_s`` apart, fit in ``[earliest_s, latest_s]``."""
+    room = latest_s - earliest_s
+    if room < length_s:
+        return 0
+    return int(np.floor((room - length_s) / (length_s + min_gap_s))) + 1
+
+
 def random_starts(spec: WindowsSpec, latest_s: float) -> list[float]:
     """Up to ``spec.count`` window starts drawn uniformly (see ``place_windows``)."""
     pitch = spec.length_s + spec.min_gap_s
     room = latest_s - spec.earliest_s
-    fit = int(np.floor((room - spec.length_s) / pitch)) + 1 if room >= spec.length_s else 0
-    n = min(spec.count, fit)
+    n = min(spec.count, random_fit(spec.length_s, spec.min_gap_s, spec.earliest_s, latest_s))
     if n < spec.count:
         log.warning(
             "only %d of %d windows of %.0f s (%.0f s apart) fit in [%.1f, %.1f] s",

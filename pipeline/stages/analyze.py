@@ -6,9 +6,20 @@ summary at the end: where the report is, the key metrics, what was skipped and w
 warnings of the ingest audit. Filters that do not fit (no IMU, no fixes, no satellite orbits)
 are skipped with the reason.
 
+Outage scenarios are fitted to the log: on a log too short for a scenario's windows (the
+defaults want some 10 minutes) fewer or shorter windows are placed where the log has GNSS,
+and the summary says what was changed. `--outage` adds outages of your own.
+
+Parameters: the built-in defaults, with ./params.yaml (when present) or --params laid over
+them; `navreplay params` prints them.
+
+Exit status: 0 when at least one filter ran, 2 for bad input or parameters, 3 when no filter
+could run on the log (the report and the summary say why).
+
 examples:
   navreplay analyze flight.bin --out analysis/flight
   navreplay analyze drive.mcap --filters lc_ekf,tc_ukf_nhc --scenarios nominal,outage_60s --out a/
+  navreplay analyze flight.bin --outage 30s --outage 20s@45s --out a/
 """
 
 from __future__ import annotations
@@ -18,6 +29,9 @@ import sys
 from pathlib import Path
 
 from navreplay.pipeline.stages.options import add_out, add_params
+
+#: The exit status when no filter could run on the log.
+EXIT_NOTHING_RAN = 3
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -34,6 +48,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--scenarios",
         metavar="X,Y",
         help="comma-separated scenario names (default: run.scenarios in params.yaml)",
+    )
+    parser.add_argument(
+        "--outage",
+        action="append",
+        default=[],
+        metavar="LEN[@START]",
+        help="also run a complete GNSS outage: LEN (as many windows as fit, e.g. 30s) or "
+        "LEN@START (one window, START seconds after the first IMU sample, e.g. 30s@45s); repeat "
+        "for several",
     )
     parser.add_argument(
         "--dataset-config",
@@ -66,25 +89,32 @@ def run(args: argparse.Namespace) -> int:
         params,
         filters=_split(args.filters),
         scenarios=_split(args.scenarios),
+        outages=args.outage,
         config=config,
         config_dir=args.dataset_config.parent if args.dataset_config else None,
         progress=_progress,
     )
     lines = [f"navreplay analyze: done in {res.seconds:.1f} s", f"  report: {res.report.index}"]
-    ran = [r for r in res.report.runs if r["status"] == "ok"]
+    ran = [r for r in res.report.runs if r["status"] not in ("skipped", "not_aligned")]
+    if not ran:
+        lines.append("  no filter could run on this log:")
+    for r in res.report.runs:
+        if r["status"] == "not_aligned":
+            lines.append(f"  {r['filter']:<12} {r['scenario']:<18} not aligned: {r.get('reason')}")
     for r in ran:
         ref = r.get("reference") or "-"
+        status = "" if r["status"] == "ok" else f" ({r['status'].upper()}: {r.get('reason')})"
         lines.append(
-            f"  {r['filter']:<12} {r['scenario']:<12} horizontal RMS "
+            f"  {r['filter']:<12} {r['scenario']:<18} horizontal RMS "
             f"{fmt(r.get('pos_err_h_rms_m')) or '-':>8} m (vs {ref}), 3-D max "
             f"{fmt(r.get('pos_err_3d_max_m')) or '-':>8} m, "
-            f"{fmt(r.get('realtime_factor')) or '-'}x real time"
+            f"{fmt(r.get('realtime_factor')) or '-'}x real time{status}"
         )
-    if not ran:
-        lines.append("  no filter could run on this log (see skipped)")
     for s in res.skipped:
         lines.append(f"  skipped {s.filter} / {s.scenario}: {s.reason}")
+    for note in res.notes:
+        lines.append(f"  note: {note}")
     for w in res.report.warnings:
         lines.append(f"  warning (ingest audit): {w}")
     print("\n".join(lines))
-    return 0
+    return 0 if ran else EXIT_NOTHING_RAN

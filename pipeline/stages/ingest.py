@@ -58,11 +58,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="fail on any recoverable defect (truncation, corrupt chunk, "
         "reordered or dropped samples) instead of salvaging",
     )
-    add_params(
-        parser,
-        "parameter file (default: params.yaml if present, else built-in defaults)",
-        default=None,
-    )
+    add_params(parser, "ingest.strict, ingest.reorder_window_s and ingest.gap_factor")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -80,13 +76,10 @@ def run(args: argparse.Namespace) -> int:
             logs = input_paths(config, args.dataset_config)
     if not logs:
         raise ParamsError("logs", "no LOG given and no dataset descriptor listing `logs`")
-    params_path = args.params if args.params is not None else Path("params.yaml")
-    strict, window_s, gap_factor, params = args.strict, 1.0, 5.0, None
-    if params_path.is_file() or args.params is not None:
-        loaded = load_params(params_path)
-        strict = strict or loaded.ingest.strict
-        window_s, gap_factor = loaded.ingest.reorder_window_s, loaded.ingest.gap_factor
-        params = {"reorder_window_s": window_s, "gap_factor": gap_factor}
+    loaded = load_params(args.params)
+    strict = args.strict or loaded.ingest.strict
+    window_s, gap_factor = loaded.ingest.reorder_window_s, loaded.ingest.gap_factor
+    params = {"reorder_window_s": window_s, "gap_factor": gap_factor}
     options = IngestOptions(
         strict=strict,
         reorder_window_s=window_s,

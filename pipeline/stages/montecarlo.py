@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         run_montecarlo,
         windows_table,
     )
-    from navreplay.pipeline.params import load_params
+    from navreplay.pipeline.params import load_params, params_label
     from navreplay.pipeline.scenarios.apply import log_span
 
     params = load_params(args.params)
@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         section = params.filters.get(args.filter)
     except KeyError as err:
         raise ParamsError(
-            f"filters.{args.filter}", str(err.args[0]), source=str(args.params)
+            f"filters.{args.filter}", str(err.args[0]), source=params_label(args.params)
         ) from err
     if args.skip_unfit:
         from navreplay.pipeline.analyze import plan as fit_plan
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
             o.seeds, o.windows_per_seed, t0, t_end, o.earliest_s, longest, o.tail_s
         )
     except ValueError as err:
-        raise ParamsError("outages.earliest_s", str(err), source=str(args.params)) from err
+        raise ParamsError("outages.earliest_s", str(err), source=params_label(args.params)) from err
     rows, timing = run_montecarlo(
         inputs.tables,
         inputs.sensors,

@@ -5,17 +5,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-PARAMS_HELP = "parameter file (default: params.yaml)"
+PARAMS_HELP = (
+    "parameter file laid over the built-in defaults (default: ./params.yaml when present, "
+    "else the built-in defaults alone; `navreplay params` prints the effective ones)"
+)
 
 
-def add_params(
-    parser: argparse.ArgumentParser,
-    help: str = PARAMS_HELP,
-    *,
-    default: Path | None = Path("params.yaml"),
-) -> None:
-    """``--params FILE``: the parameter file (``args.params``)."""
-    parser.add_argument("--params", type=Path, default=default, help=help)
+def add_params(parser: argparse.ArgumentParser, help: str = "") -> None:
+    """``--params FILE``: the parameter file (``args.params``; None: see ``PARAMS_HELP``)."""
+    text = f"{help}: {PARAMS_HELP}" if help else PARAMS_HELP
+    parser.add_argument("--params", type=Path, default=None, metavar="FILE", help=text)
 
 
 def add_dir(

@@ -10,7 +10,9 @@ column for each), innovations.parquet (NIS per update), events.parquet (gate rej
 resets, skipped inputs) and metrics.json (accuracy, consistency, cost; per outage window the
 drift metrics; the scenario and its windows under `windows`; for fault scenarios the
 catalogue's pass criteria under `fault_checks`). A diverging filter exits with status 2 and
-writes nothing, unless its params say on_divergence: flag.
+writes nothing, unless its params say on_divergence: flag. A filter that never aligned (a
+static or bench log, no fix, no motion) writes its run with status not_aligned and the reason,
+and exits with status 3.
 
 With one --scenario, DIR is the run directory. With several, or `--scenario all` (the
 scenarios of params.yaml `run.scenarios`), DIR holds one run directory per scenario,
@@ -33,6 +35,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from navreplay.pipeline.errors import ParamsError
+from navreplay.pipeline.stages.options import add_params
+
+#: The exit status when the filter never aligned (its run is written, status not_aligned).
+EXIT_NOT_ALIGNED = 3
 
 if TYPE_CHECKING:
     from navreplay.pipeline.estimation.core.contract import Backend
@@ -62,12 +68,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="scenario name from params.yaml scenarios.named (default: nominal); repeat for "
         "several, or `all` for those of run.scenarios (DIR then holds one folder per scenario)",
     )
-    parser.add_argument(
-        "--params",
-        type=Path,
-        default=Path("params.yaml"),
-        help="parameter file (default: params.yaml)",
-    )
+    add_params(parser)
     parser.add_argument(
         "--backend",
         choices=("numba", "filterpy"),
@@ -104,12 +105,13 @@ def _run(
     from navreplay.pipeline.estimation.families import family_of
     from navreplay.pipeline.estimation.ins.run import INS
     from navreplay.pipeline.outages.runs import run_scenarios
+    from navreplay.pipeline.params import params_label
 
     try:
         family = family_of(args.filter)
     except KeyError as err:
         raise ParamsError(
-            f"filters.{args.filter}", str(err.args[0]), source=str(args.params)
+            f"filters.{args.filter}", str(err.args[0]), source=params_label(args.params)
         ) from err
     for name in names:
         if name not in params.scenarios.named:
@@ -117,7 +119,7 @@ def _run(
             raise ParamsError(
                 "scenarios.named",
                 f"no scenario {name!r} (known: {known}, all)",
-                source=str(args.params),
+                source=params_label(args.params),
             )
     single = len(asked) == 1 and asked != ["all"]
     section = params.filters.section(args.filter)
@@ -134,20 +136,26 @@ def _run(
     runs = run_scenarios(
         inputs, args.filter, section, params.scenarios, names, backend, params.run.workers
     )
+    statuses = []
     if single:
         for name, out, applied in runs:
             write_run(args.out, out, section, name, applied.metadata()["windows"])
             _summary(args.filter, backend, name, out.metrics, args.out)
-        return 0
-    with atomic_directory(args.out) as tmp:
-        for name, out, applied in runs:
-            write_run(tmp / name, out, section, name, applied.metadata()["windows"])
-            _summary(args.filter, backend, name, out.metrics, args.out / name)
-    return 0
+            statuses.append(out.metrics["status"])
+    else:
+        with atomic_directory(args.out) as tmp:
+            for name, out, applied in runs:
+                write_run(tmp / name, out, section, name, applied.metadata()["windows"])
+                _summary(args.filter, backend, name, out.metrics, args.out / name)
+                statuses.append(out.metrics["status"])
+    return EXIT_NOT_ALIGNED if "not_aligned" in statuses else 0
 
 
 def _summary(filt: str, backend: str, scenario: str, m: dict[str, Any], out: Path) -> None:
     text = f"{filt} ({backend}) {scenario}: {m['status']}, {m['epochs']} epochs"
+    if m["status"] == "not_aligned":
+        print(f"{text}: {m.get('failure')} -> {out}")
+        return
     if m.get("truth"):
         text += f", horizontal RMS {m['pos_err_h_rms_m']:.2f} m"
     wins = [w for w in m.get("outage_windows", []) if w["err_end_m"] is not None]

@@ -30,11 +30,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help="warm only this filter; repeat for several (default: every filter)",
     )
-    add_params(
-        parser,
-        "parameter file: the filters' settings and the warm-up drives' synthesizers "
-        "(default: params.yaml)",
-    )
+    add_params(parser, "the filters' settings and the warm-up drives' synthesizers")
     parser.add_argument(
         "--jobs",
         type=int,
@@ -52,14 +48,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from navreplay.pipeline.params import load_params
+    from navreplay.pipeline.params import load_params, params_label
     from navreplay.pipeline.warm import WarmResult, groups, warm, warm_here
 
     params = load_params(args.params)
     try:
         todo = groups(args.filter)
     except KeyError as err:
-        raise ParamsError("--filter", str(err.args[0]), source=str(args.params)) from err
+        raise ParamsError("--filter", str(err.args[0]), source=params_label(args.params)) from err
     if args.in_process:
         warm_here([n for g in todo for n in g], params)
         return 0

@@ -12,7 +12,17 @@ import yaml
 
 from navreplay.ingest.typed import KeyPathError, load_dataclass
 from navreplay.pipeline.errors import ParamsError
-from navreplay.pipeline.params import Params, load_params, parse_params, read_yaml, section
+from navreplay.pipeline.params import (
+    BUILTIN_PARAMS,
+    Params,
+    load_params,
+    overlay,
+    params_label,
+    params_source,
+    parse_params,
+    read_yaml,
+    section,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -175,3 +185,71 @@ def test_a_family_run_names_a_known_dataset_filter_and_scenario(
     with pytest.raises(ParamsError, match=expect) as err:
         parse_params(raw)
     assert err.value.key_path == f"run.family_runs[1].{key}"
+
+
+# --- the built-in defaults and files laid over them ------------------------------------------
+
+
+def test_the_built_in_defaults_are_the_repository_params() -> None:
+    """The package carries the repository's params.yaml (a link in the checkout, a copy in a
+    wheel): the two cannot drift apart."""
+    assert BUILTIN_PARAMS.read_bytes() == (REPO / "params.yaml").read_bytes()
+
+
+def test_without_a_file_the_built_in_defaults_apply(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)  # no params.yaml here
+    assert params_source(None) is None
+    assert load_params() == load_params(REPO / "params.yaml")
+    assert "built-in defaults" in params_label()
+
+
+def test_a_partial_file_changes_only_its_keys(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    (tmp_path / "params.yaml").write_text(
+        "run:\n  filters: [lc_ekf]\nfilters:\n  lc_ekf:\n    gnss: {elevation_mask_deg: 15.0}\n"
+    )
+    monkeypatch.chdir(tmp_path)  # ./params.yaml is used when present
+    params, defaults = load_params(), load_params(REPO / "params.yaml")
+    assert params.run.filters == ("lc_ekf",)  # a list replaces
+    assert params.run.scenarios == defaults.run.scenarios  # its neighbours stay
+    assert params.filters.get("lc_ekf").gnss.elevation_mask_deg == 15.0  # mappings merge
+    assert params.filters.get("lc_ekf").init == defaults.filters.get("lc_ekf").init
+    assert params.filters.get("tc_ekf") == defaults.filters.get("tc_ekf")
+    assert params.scenarios == defaults.scenarios
+
+
+def test_a_partial_file_is_checked_and_named_in_errors(tmp_path: Path) -> None:
+    path = tmp_path / "mine.yaml"
+    path.write_text("run:\n  filtres: [lc_ekf]\n")
+    with pytest.raises(ParamsError, match=r"mine\.yaml: run\.filtres: unknown key"):
+        load_params(path)
+    path.write_text("- just a list\n")
+    with pytest.raises(ParamsError, match=r"mine\.yaml: .*must be a mapping"):
+        load_params(path)
+
+
+def test_overlay_merges_mappings_and_replaces_the_rest() -> None:
+    base = {"a": {"x": 1, "y": [1, 2]}, "b": 2}
+    assert overlay(base, {"a": {"y": [3]}, "c": 4}) == {"a": {"x": 1, "y": [3]}, "b": 2, "c": 4}
+    assert overlay(base, {"a": 5}) == {"a": 5, "b": 2}
+    assert base == {"a": {"x": 1, "y": [1, 2]}, "b": 2}  # not modified
+
+
+def test_navreplay_params_prints_what_loads_back(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from navreplay.pipeline.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    mine = tmp_path / "mine.yaml"
+    mine.write_text("run:\n  filters: [tc_ukf]\n")
+    assert main(["params", "--params", str(mine)]) == 0
+    printed = capsys.readouterr().out
+    assert printed.startswith(f"# navreplay parameters: {mine} over the built-in defaults")
+    (tmp_path / "effective.yaml").write_text(printed)
+    assert load_params(tmp_path / "effective.yaml") == load_params(mine)
+    assert main(["params", "--section", "run.filters"]) == 0
+    assert "run.filters: [lc_ekf, tc_ekf, tc_ukf, tc_ukf_nhc]" in capsys.readouterr().out

@@ -275,6 +275,14 @@ def run_filter(
                 )
             log.warning("filter %s diverged: %s", name, failure)
             break
+    if not alignments and status == "ok":
+        status = "not_aligned"
+        failure = (
+            f"the filter never aligned: none of the log's {len(imu_data.segments)} IMU "
+            f"segment(s) has a GNSS epoch at >= {params.init.align_speed_mps:g} m/s horizontal "
+            "speed to start from (a static or bench log, no GNSS fix, or no motion)"
+        )
+        log.warning("filter %s: %s", name, failure)
     events.sort(key=lambda e: e.t_ns)
     return RunResult(
         filter=name,

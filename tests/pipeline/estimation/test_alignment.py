@@ -71,3 +71,7 @@ def test_a_vehicle_that_never_moves_is_not_aligned(
     r = run_filter(still, sensors, "lc_ekf", filters.lc_ekf)
     assert r.t_ns.size == 0
     assert [e.kind for e in r.events] == ["no_alignment"]
+    # never "ok" with nothing estimated: the status and its reason say why
+    assert r.status == "not_aligned"
+    assert r.failure is not None
+    assert "never aligned" in r.failure
