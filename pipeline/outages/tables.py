@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from navreplay.pipeline.estimation.core.integrity import FINISHED
 from navreplay.pipeline.nav.earth import F64
 from navreplay.pipeline.outages.config import OutagesParams
 from navreplay.pipeline.outages.stats import delta_reduction, mean_interval, paired_reduction
@@ -73,8 +74,8 @@ def _paired(
     keys = sorted(
         k
         for k in set(base) & set(cand)
-        if base[k]["status"] == "ok"
-        and cand[k]["status"] == "ok"
+        if base[k]["status"] in FINISHED
+        and cand[k]["status"] in FINISHED
         and base[k][key] is not None
         and cand[k][key] is not None
     )
@@ -130,7 +131,7 @@ def _num(x: float) -> float | None:
 
 
 def _mean_of(rows: Mapping[Any, dict[str, Any]], key: str) -> float | None:
-    v = [r[key] for r in rows.values() if r[key] is not None and r["status"] == "ok"]
+    v = [r[key] for r in rows.values() if r[key] is not None and r["status"] in FINISHED]
     return float(np.mean(v)) if v else None
 
 
@@ -139,7 +140,9 @@ def drift_vs_length(windows: Mapping[str, pa.Table], params: OutagesParams) -> l
     out = []
     for i, name in enumerate(params.filters):
         for j, length in enumerate(params.lengths_s):
-            rows = [r for r in _select(windows[name], length, 0).values() if r["status"] == "ok"]
+            rows = [
+                r for r in _select(windows[name], length, 0).values() if r["status"] in FINISHED
+            ]
 
             def col(key: str, rows: list[dict[str, Any]] = rows) -> F64:
                 return np.array([r[key] for r in rows if r[key] is not None], dtype=np.float64)

@@ -46,14 +46,14 @@ def overview(data: DatasetInputs, rows: Sequence[Row]) -> str:
                 f"{h.esc(r['status'])}: {h.esc(r.get('reason') or 'no reason given')}</li>"
                 for r in skipped
             )
-            parts.append(f"<h3>Not run or not finished</h3><ul>{items}</ul>")
+            parts.append(f"<h3>Not run, not finished or not consistent</h3><ul>{items}</ul>")
     else:
         parts.append(h.para("No filter runs for this dataset yet.", "note"))
     return "".join(parts)
 
 
 def _status_cls(key: str) -> Any:
-    return lambda r: {"ok": "ok", None: ""}.get(r.get(key), "bad")
+    return lambda r: {"ok": "ok", "inconsistent": "warn", None: ""}.get(r.get(key), "bad")
 
 
 _METRIC_COLS = (
@@ -75,9 +75,7 @@ _METRIC_COLS = (
 def metrics(rows: Sequence[Row]) -> str:
     if not rows:
         return ""
-    return h.table(
-        rows, _METRIC_COLS, cls={"status": lambda r: "ok" if r["status"] == "ok" else "bad"}
-    ) + h.para(
+    return h.table(rows, _METRIC_COLS, cls={"status": _status_cls("status")}) + h.para(
         "RMS and max over the whole run; NEES over position, velocity and attitude "
         "(its expected value is the dof). The full list is in tables/runs.csv.",
         "note",

@@ -33,6 +33,7 @@ from scipy import stats
 
 from navreplay.ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
 from navreplay.ingest.tables import git_commit, package_version
+from navreplay.pipeline.estimation.core.integrity import FINISHED
 from navreplay.pipeline.report import html as h
 from navreplay.pipeline.report import tables as tb
 from navreplay.pipeline.report.experiments import SAT_REDUCTION_NAME, read_csv
@@ -88,7 +89,7 @@ def _cells(results: Sequence[DatasetResult]) -> dict[tuple[str, str], dict[str, 
     runs: dict[tuple[str, str], dict[str, Row]] = {}
     for d in results:
         for r in d.runs:
-            if r.get("status") == "ok" and (_finite(r.get(METRIC)) or _finite(r.get(METRIC_H))):
+            if r.get("status") in FINISHED and (_finite(r.get(METRIC)) or _finite(r.get(METRIC_H))):
                 runs.setdefault((d.dataset, str(r["scenario"])), {})[str(r["filter"])] = r
     cells: dict[tuple[str, str], dict[str, float]] = {}
     for key, by_filter in sorted(runs.items()):
@@ -162,7 +163,8 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
         {"run": f"{d.dataset}/{r['filter']}/{r['scenario']}", "dataset": d.dataset, **r}
         for d in results
         for r in d.runs
-        if r.get("status") == "ok" and (r.get(METRIC) is not None or r.get(METRIC_H) is not None)
+        if r.get("status") in FINISHED
+        and (r.get(METRIC) is not None or r.get(METRIC_H) is not None)
     ]
     red_rows: list[Row] = []
     for d in results:
@@ -173,7 +175,7 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
         {
             "dataset": d.dataset,
             "runs": len(d.runs),
-            "ok": sum(r.get("status") == "ok" for r in d.runs),
+            "ok": sum(r.get("status") in FINISHED for r in d.runs),
             "filters": len({r["filter"] for r in d.runs}),
             "report": f"../{d.path.name}/index.html",
         }

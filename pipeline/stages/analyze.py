@@ -13,8 +13,13 @@ and the summary says what was changed. `--outage` adds outages of your own.
 Parameters: the built-in defaults, with ./params.yaml (when present) or --params laid over
 them; `navreplay params` prints them.
 
-Exit status: 0 when at least one filter ran, 2 for bad input or parameters, 3 when no filter
-could run on the log (the report and the summary say why).
+Every run has a status: ok; inconsistent (it finished, but its innovations are larger than
+its covariance says: read its figures with care); diverged (its estimate left the
+measurements, or its state became invalid); not_aligned (it never started). The integrity
+monitor (pipeline/estimation/core/integrity.py) decides the first three.
+
+Exit status: 0 when at least one filter finished (ok or inconsistent), 2 for bad input or
+parameters, 3 when none could (the report and the first lines of the summary say why).
 
 examples:
   navreplay analyze flight.bin --out analysis/flight
@@ -78,6 +83,7 @@ def _progress(line: str) -> None:
 def run(args: argparse.Namespace) -> int:
     from navreplay.ingest.config import load_dataset_config
     from navreplay.pipeline.analyze import analyze
+    from navreplay.pipeline.estimation.core.integrity import FINISHED
     from navreplay.pipeline.params import load_params
     from navreplay.pipeline.report.tables import fmt
 
@@ -95,12 +101,13 @@ def run(args: argparse.Namespace) -> int:
         progress=_progress,
     )
     lines = [f"navreplay analyze: done in {res.seconds:.1f} s", f"  report: {res.report.index}"]
-    ran = [r for r in res.report.runs if r["status"] not in ("skipped", "not_aligned")]
+    ran = [r for r in res.report.runs if r["status"] in FINISHED]
     if not ran:
         lines.append("  no filter could run on this log:")
     for r in res.report.runs:
-        if r["status"] == "not_aligned":
-            lines.append(f"  {r['filter']:<12} {r['scenario']:<18} not aligned: {r.get('reason')}")
+        if r["status"] not in (*FINISHED, "skipped"):
+            state = str(r["status"]).replace("_", " ")
+            lines.append(f"  {r['filter']:<12} {r['scenario']:<18} {state}: {r.get('reason')}")
     for r in ran:
         ref = r.get("reference") or "-"
         status = "" if r["status"] == "ok" else f" ({r['status'].upper()}: {r.get('reason')})"

@@ -10,9 +10,13 @@ column for each), innovations.parquet (NIS per update), events.parquet (gate rej
 resets, skipped inputs) and metrics.json (accuracy, consistency, cost; per outage window the
 drift metrics; the scenario and its windows under `windows`; for fault scenarios the
 catalogue's pass criteria under `fault_checks`). A diverging filter exits with status 2 and
-writes nothing, unless its params say on_divergence: flag. A filter that never aligned (a
-static or bench log, no fix, no motion) writes its run with status not_aligned and the reason,
-and exits with status 3.
+writes nothing, unless its params say on_divergence: flag. The integrity monitor
+(pipeline/estimation/core/integrity.py) then checks the run against its own innovations: a run
+whose estimate left the measurements is diverged, one whose innovations are larger than its
+covariance says is inconsistent (metrics.json `integrity` has the tests per stream). A filter
+that never aligned (a static or bench log, no fix, no motion) writes its run with status
+not_aligned and the reason. A run that is diverged or not_aligned exits with status 3 (0 with
+--keep-going).
 
 With one --scenario, DIR is the run directory. With several, or `--scenario all` (the
 scenarios of params.yaml `run.scenarios`), DIR holds one run directory per scenario,
@@ -37,8 +41,9 @@ from typing import TYPE_CHECKING, Any
 from navreplay.pipeline.errors import ParamsError
 from navreplay.pipeline.stages.options import add_params
 
-#: The exit status when the filter never aligned (its run is written, status not_aligned).
-EXIT_NOT_ALIGNED = 3
+#: The exit status when a run never aligned or diverged (it is written, with the status and
+#: the reason).
+EXIT_NOTHING_USABLE = 3
 
 if TYPE_CHECKING:
     from navreplay.pipeline.estimation.core.contract import Backend
@@ -76,6 +81,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--out", type=Path, required=True, metavar="DIR", help="output directory of the run"
+    )
+    parser.add_argument(
+        "--keep-going",
+        action="store_true",
+        help="exit 0 when a run diverged or never aligned (its status and reason are in its "
+        "metrics.json and the report) instead of 3; the dvc stages use this, so that the "
+        "reports show such a run instead of the pipeline stopping",
     )
     parser.add_argument(
         "--skip-unfit",
@@ -148,12 +160,13 @@ def _run(
                 write_run(tmp / name, out, section, name, applied.metadata()["windows"])
                 _summary(args.filter, backend, name, out.metrics, args.out / name)
                 statuses.append(out.metrics["status"])
-    return EXIT_NOT_ALIGNED if "not_aligned" in statuses else 0
+    failed = {"not_aligned", "diverged"} & set(statuses)
+    return EXIT_NOTHING_USABLE if failed and not args.keep_going else 0
 
 
 def _summary(filt: str, backend: str, scenario: str, m: dict[str, Any], out: Path) -> None:
     text = f"{filt} ({backend}) {scenario}: {m['status']}, {m['epochs']} epochs"
-    if m["status"] == "not_aligned":
+    if m["status"] in ("not_aligned", "diverged"):
         print(f"{text}: {m.get('failure')} -> {out}")
         return
     if m.get("truth"):
@@ -165,4 +178,6 @@ def _summary(filt: str, backend: str, scenario: str, m: dict[str, Any], out: Pat
     if "fault_checks_passed" in m:
         text += f", fault criteria {'passed' if m['fault_checks_passed'] else 'FAILED'}"
     text += f", {m['realtime_factor']:.0f}x real time -> {out}"
+    if m["status"] != "ok":
+        text += f"\n  {m['status']}: {m.get('failure')}"
     print(text)

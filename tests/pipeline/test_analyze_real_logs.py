@@ -16,10 +16,18 @@ import pytest
 from navreplay.pipeline.cli import main
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+# log -> (path, reference, bound on the horizontal RMS in m, status). The ArduCopter flight is
+# inconsistent: on a multirotor the heading at alignment comes from the GNSS course, which is
+# not its heading, and the velocity innovations say so (the alignment issue).
 LOGS = {
-    "robot_localization_mcap": ("robot_localization/derived/test1_ros1.mcap", "gnss", 10.0),
-    "comma2k19": ("comma2k19_example_segment/original", "truth", 6.0),
-    "ardupilot_bin": ("uob_flightlab_ardupilot_bin/2023-07-06_10-12-18.bin", "gnss", 15.0),
+    "robot_localization_mcap": ("robot_localization/derived/test1_ros1.mcap", "gnss", 10.0, "ok"),
+    "comma2k19": ("comma2k19_example_segment/original", "truth", 6.0, "ok"),
+    "ardupilot_bin": (
+        "uob_flightlab_ardupilot_bin/2023-07-06_10-12-18.bin",
+        "gnss",
+        15.0,
+        "inconsistent",
+    ),
 }
 
 
@@ -28,7 +36,7 @@ LOGS = {
 def test_analyze_reports_a_real_log(
     name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    rel, reference, max_rms_m = LOGS[name]
+    rel, reference, max_rms_m, status = LOGS[name]
     log = DATA / rel
     if not log.exists():
         pytest.skip(f"{log} absent (../shared/data is not beside the checkout)")
@@ -44,7 +52,7 @@ def test_analyze_reports_a_real_log(
     runs = {(r["filter"], r["scenario"]): r for r in
             json.loads((out / "report" / "tables" / "runs.json").read_text())}  # fmt: skip
     lc = runs[("lc_ekf", "nominal")]
-    assert lc["status"] == "ok"
+    assert lc["status"] == status
     assert lc["reference"] == reference
     assert 0.05 < lc["pos_err_h_rms_m"] < max_rms_m
     assert runs[("tc_ekf", "nominal")]["status"] == "skipped"

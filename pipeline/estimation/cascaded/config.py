@@ -41,11 +41,12 @@ variant, reported beside the default.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Literal
 
 from navreplay.ingest.typed import FieldError
 from navreplay.pipeline.control.lqr import YawSteerModel
+from navreplay.pipeline.estimation.core.integrity import IntegrityParams
 
 Estimator = Literal["ekf", "ukf", "hybrid"]
 
@@ -306,6 +307,7 @@ class CascadedFilterParams:
         hybrid: the hybrid's split (``cascaded_hybrid`` only).
         gating, step, divergence: as for the INS filters.
         convergence_band: the bias convergence bands of this filter's metrics.
+        integrity: the integrity monitor's tests (``core.integrity``).
     """
 
     model: YawSteerModel
@@ -319,6 +321,7 @@ class CascadedFilterParams:
     linearization: LinearizationParams | None = None
     ukf: UnscentedParams | None = None
     hybrid: HybridParams | None = None
+    integrity: IntegrityParams = field(default_factory=IntegrityParams)
 
 
 def check_sections(sections: dict[str, CascadedFilterParams]) -> None:

@@ -50,7 +50,9 @@ class CascadedFamily:
         metrics["dataset"] = inputs.dataset
         metrics["frame_origin"] = to_plain(inp.frame)
         estimate, innovations = estimate_table(result, inp.frame), innovations_table(result)
-        return RunOutput.decode(result, estimate, innovations, metrics, inputs.sources)
+        return RunOutput.decode(
+            result, estimate, innovations, metrics, inputs.sources, section.integrity
+        )
 
     def track(self, run: RunOutput, inputs: RunInputs) -> ErrorTrack | None:
         """Planar errors read from ``estimate.parquet`` (``windows.table_track``)."""

@@ -33,6 +33,7 @@ from navreplay.ingest.meta import META_NAME, SensorMeta, read_meta
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.tables import Provenance, read_table, write_table
 from navreplay.ingest.typed import to_plain
+from navreplay.pipeline.estimation.core.integrity import IntegrityParams, assess
 from navreplay.pipeline.estimation.core.windows import ErrorTrack
 
 log = logging.getLogger(__name__)
@@ -115,10 +116,18 @@ class RunOutput:
         innovations: pa.Table,
         metrics: dict[str, Any],
         sources: tuple[Path, ...],
+        integrity: IntegrityParams,
     ) -> RunOutput:
         """A family's run from its result, its estimate and innovation tables (the events
-        table is the same for every family) and its metrics."""
+        table is the same for every family) and its metrics, with the integrity monitor's
+        verdict (``core.integrity``) under ``integrity``: a run that ended ``ok`` but no
+        longer agrees with its measurements takes the monitor's status and reason."""
         tables = RunTables(estimate, innovations, events_table(result.events))
+        verdict = assess(innovations, integrity)
+        metrics = dict(metrics, integrity=verdict.to_json())
+        if metrics.get("status") == "ok" and verdict.status != "ok":
+            metrics["status"], metrics["failure"] = verdict.status, verdict.reason
+            log.warning("filter %s: %s: %s", result.filter, verdict.status, verdict.reason)
         return cls(tables, metrics, sources, result)
 
     @property
@@ -131,7 +140,8 @@ class RunOutput:
 
     @property
     def status(self) -> str:
-        return self.result.status
+        """How the run ended: the family's status, or the integrity monitor's."""
+        return str(self.metrics.get("status", self.result.status))
 
 
 class Family(Protocol):

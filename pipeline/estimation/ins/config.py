@@ -13,12 +13,13 @@ lever arm; a dataset without one has the antenna at the IMU).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Literal
 
 from navreplay.ingest.config import ImuNoise
 from navreplay.ingest.typed import FieldError
 from navreplay.pipeline.estimation.core.checks import positive
+from navreplay.pipeline.estimation.core.integrity import IntegrityParams
 from navreplay.pipeline.estimation.ins.fuzzy import FuzzyParams
 
 Estimator = Literal["ekf", "ukf"]
@@ -290,6 +291,7 @@ class InsFilterParams:
         nhc: the non-holonomic constraint (required by and only by ``*_nhc`` filters).
         ukf: the unscented transform (required by and only by UKF filters).
         fuzzy: the fuzzy fading factor (required by and only by ``fwekf``, paper 004).
+        integrity: the integrity monitor's tests (``core.integrity``).
     """
 
     imu_noise: ImuNoise
@@ -302,6 +304,7 @@ class InsFilterParams:
     nhc: NhcParams | None = None
     ukf: UkfParams | None = None
     fuzzy: FuzzyParams | None = None
+    integrity: IntegrityParams = field(default_factory=IntegrityParams)
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from navreplay.pipeline.estimation.core.contract import (
     RunInputs,
     RunOutput,
 )
+from navreplay.pipeline.estimation.core.integrity import IntegrityParams
 from navreplay.pipeline.estimation.core.windows import ErrorTrack
 from navreplay.pipeline.estimation.ins.config import FILTER_KINDS, InsFilterParams
 from navreplay.pipeline.estimation.ins.metrics import compute_metrics
@@ -27,10 +28,15 @@ from navreplay.pipeline.estimation.ins.tracks import ins_track
 INPUTS = (TableName.IMU, TableName.GNSS, TableName.GNSS_OBS, TableName.TRUTH)
 
 
-def decode(result: RunResult, metrics: dict[str, Any], sources: tuple[Path, ...]) -> RunOutput:
+def decode(
+    result: RunResult,
+    metrics: dict[str, Any],
+    sources: tuple[Path, ...],
+    integrity: IntegrityParams,
+) -> RunOutput:
     """The contract's record of an INS run."""
     return RunOutput.decode(
-        result, estimate_table(result), innovations_table(result), metrics, sources
+        result, estimate_table(result), innovations_table(result), metrics, sources, integrity
     )
 
 
@@ -47,7 +53,7 @@ class InsFamily:
         result = run_filter(inputs.tables, inputs.sensors, name, section, backend=backend)
         metrics = compute_metrics(result, inputs.tables.get("truth"))
         metrics["dataset"] = inputs.dataset
-        return decode(result, metrics, inputs.sources)
+        return decode(result, metrics, inputs.sources, section.integrity)
 
     def track(self, run: RunOutput, inputs: RunInputs) -> ErrorTrack | None:
         result = run.result

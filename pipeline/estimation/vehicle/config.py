@@ -9,11 +9,12 @@ the yaw inertia).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Literal
 
 from navreplay.ingest.typed import FieldError
 from navreplay.pipeline.estimation.core.checks import positive
+from navreplay.pipeline.estimation.core.integrity import IntegrityParams
 from navreplay.pipeline.synth.bicycle import VehicleParams
 
 VEHICLE_FILTERS = ("vehicle_kinematic", "vehicle_dynamic", "vehicle_switched", "vehicle_imm")
@@ -160,6 +161,7 @@ class VehicleFilterParams:
             states it observes (bad-inputs F2), s.
         on_divergence: ``raise`` or ``flag``.
         max_pos_sigma_m: a larger horizontal position 1-sigma is a divergence, m.
+        integrity: the integrity monitor's tests (``core.integrity``).
     """
 
     vehicle: VehicleParams
@@ -174,6 +176,7 @@ class VehicleFilterParams:
     gate_timeout_s: float = 2.0
     on_divergence: Literal["raise", "flag"] = "raise"
     max_pos_sigma_m: float = 1.0e4
+    integrity: IntegrityParams = field(default_factory=IntegrityParams)
 
     def __post_init__(self) -> None:
         positive(self, "max_step_s", "output_interval_s", "max_pos_sigma_m", "gate_timeout_s")

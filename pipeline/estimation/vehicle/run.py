@@ -109,7 +109,7 @@ class VehicleFamily:
         metrics["dataset"] = inputs.dataset
         estimate = from_columns("estimator", estimate_columns(result))
         return RunOutput.decode(
-            result, estimate, innovations_table(result), metrics, inputs.sources
+            result, estimate, innovations_table(result), metrics, inputs.sources, section.integrity
         )
 
     def track(self, run: RunOutput, inputs: RunInputs) -> ErrorTrack | None:

@@ -114,7 +114,7 @@ def test_flagged_divergence_keeps_the_output_up_to_it(tables_dir: Path, tmp_path
     out = tmp_path / "run"
     rc = main(["run", str(tables_dir), "--filter", "lc_ekf", "--params", str(params),
                "--out", str(out)])  # fmt: skip
-    assert rc == 0
+    assert rc == 3  # written, and said: a diverged run is no answer
     m = json.loads((out / "metrics.json").read_text())
     assert m["status"] == "diverged"
     assert "beyond the divergence limits" in m["failure"]
