@@ -208,6 +208,24 @@ def test_observations_without_navigation_are_an_error_that_says_so(
         ingest([obs], tmp_path / "out")
 
 
+def test_navigation_without_gps_records_is_an_error_that_says_so(
+    synth: Any, tmp_path: Path
+) -> None:
+    """A BeiDou-only navigation file (Hong Kong's .19b without its .19n) places no GPS
+    satellite: refused, naming the file, what it holds and what to pass, not an empty table."""
+    obs, nav = write_pair(tmp_path, synth)
+    bds = tmp_path / "drive.19b"
+    text = nav.read_text().replace("G: GPS   ", "C: BEIDOU")
+    bds.write_text("\n".join("C" + ln[1:] if ln[:1] == "G" else ln for ln in text.splitlines()))
+    n = len(synth.ephemeris)
+    with pytest.raises(IngestError, match="no stream in the logs can fill") as err:
+        ingest([obs, bds], tmp_path / "out")
+    assert f"(drive.19b) hold no GPS ephemeris (BeiDou {n};" in str(err.value)
+    assert "pass a GPS or mixed navigation file" in str(err.value)
+    assert not (tmp_path / "out").exists()
+    assert ingest([obs, bds, nav], tmp_path / "both").tables["gnss_obs"] > 0
+
+
 def test_a_truncated_navigation_record_is_dropped_and_reported(synth: Any, tmp_path: Path) -> None:
     obs, nav = write_pair(tmp_path, synth)
     lines = nav.read_text().splitlines(keepends=True)

@@ -10,6 +10,8 @@ navigation file alone feeds no table; its inventory lists its records.
 Rows dropped and why are counted in the table's ``counters``: ``no_ephemeris`` (no valid
 record for that satellite and time), ``no_receiver_position``, ``rows_<system>_excluded``
 (systems other than GPS: no orbit model here), ``events_skipped`` (epoch flags 2-6).
+Navigation files that hold no GPS record (a BeiDou-only ``.yyb`` without its ``.yyn``) are
+refused like missing ones, the error saying what they hold and what to pass.
 
 GPS week rollover (catalogue case 35): observation epochs that lie a whole number of 1024-week
 cycles before the navigation data (a receiver that wrote the 10-bit week) are moved forward
@@ -76,7 +78,9 @@ class RinexReader(LogReader):
             return self._nav_inventory()
         head, sig, scan = self._scan()
         nav = self._load_nav()
-        if nav is not None:
+        if nav is not None and not len(nav.ephemeris):
+            table, detail = None, self._no_gps_ephemeris(nav)
+        elif nav is not None:
             self._shift_ns = _rollover_shift(scan, nav)
             if self._shift_ns < 0:  # the navigation data are the stale ones: move them
                 self._nav = _shifted(nav, -self._shift_ns)
@@ -99,6 +103,15 @@ class RinexReader(LogReader):
         )
         notes = (f"{scan.epochs} epochs, time system {head.time_system}",)
         return Inventory(self.path, self.format, (stream,), notes)
+
+    def _no_gps_ephemeris(self, nav: NavData) -> str:
+        """Why the navigation files given cannot place the satellites (no GPS record)."""
+        names = ", ".join(p.name for p in self._nav_files)
+        records = ", ".join(f"{k} {v}" for k, v in sorted(nav.records.items())) or "no records"
+        return (
+            f"the navigation files given ({names}) hold no GPS ephemeris ({records}; only GPS "
+            "has an orbit model here): pass a GPS or mixed navigation file of the same period"
+        )
 
     def _nav_inventory(self) -> Inventory:
         nav = read_nav(self.path, self.variant, self.damage)
@@ -153,6 +166,8 @@ class RinexReader(LogReader):
                 path=self.path,
                 hint="pass the .nav/.yyn file of the same period in the same ingest",
             )
+        if not len(nav.ephemeris):
+            raise IngestError(self._no_gps_ephemeris(nav), path=self.path)
         if self._shift_ns:
             weeks = abs(self._shift_ns) // NS_PER_WEEK
             which = "observation" if self._shift_ns > 0 else "navigation"
