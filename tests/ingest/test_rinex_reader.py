@@ -15,9 +15,9 @@ import pytest
 from navreplay.ingest.api import IngestOptions, ingest
 from navreplay.ingest.damage import DamageLog
 from navreplay.ingest.errors import CorruptLogError, IngestError, UnsupportedFormatError
-from navreplay.ingest.gnss.ephemeris import C_MPS, select, transmit_state
+from navreplay.ingest.gnss.ephemeris import C_MPS, Ephemeris, select, transmit_state
 from navreplay.ingest.gnss.rinexobs import from_georinex, read_obs
-from navreplay.ingest.gpstime import NS_PER_WEEK
+from navreplay.ingest.gpstime import NS_PER_S, NS_PER_WEEK, calendar_from_gps
 from navreplay.ingest.writers import rinex
 
 from .gnssfiles import (
@@ -224,6 +224,29 @@ def test_navigation_without_gps_records_is_an_error_that_says_so(
     assert "pass a GPS or mixed navigation file" in str(err.value)
     assert not (tmp_path / "out").exists()
     assert ingest([obs, bds, nav], tmp_path / "both").tables["gnss_obs"] > 0
+
+
+def test_navigation_of_another_period_is_an_error_that_gives_both_periods(
+    synth: Any, tmp_path: Path
+) -> None:
+    """Ephemerides two days after the observations serve no epoch: refused with both
+    periods, not an empty table."""
+    obs, _ = write_pair(tmp_path, synth)
+    eph = synth.ephemeris
+    later = 2 * 86_400 * NS_PER_S
+    moved = Ephemeris(
+        **{**eph._asdict(), "toe_ns": eph.toe_ns + later, "toc_ns": eph.toc_ns + later}
+    )
+    nav = tmp_path / "later.nav"
+    rinex.write_nav(nav, moved)
+    with pytest.raises(IngestError, match="no stream in the logs can fill") as err:
+        ingest([obs, nav], tmp_path / "out")
+    message = str(err.value)
+    assert "the GPS ephemerides of the navigation files given are valid from" in message
+    assert "pass the navigation file of the observations' period" in message
+    first = str(calendar_from_gps(int(synth.tables["gnss_obs"]["t_ns"][0].as_py())))[:19]
+    assert f"the observations run from {first}" in message
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_truncated_navigation_record_is_dropped_and_reported(synth: Any, tmp_path: Path) -> None:
