@@ -15,9 +15,9 @@ import pytest
 from navreplay.ingest.api import IngestOptions, ingest
 from navreplay.ingest.damage import DamageLog
 from navreplay.ingest.errors import CorruptLogError, IngestError, UnsupportedFormatError
-from navreplay.ingest.gnss.ephemeris import C_MPS, select, transmit_state
+from navreplay.ingest.gnss.ephemeris import C_MPS, Ephemeris, select, transmit_state
 from navreplay.ingest.gnss.rinexobs import from_georinex, read_obs
-from navreplay.ingest.gpstime import NS_PER_WEEK
+from navreplay.ingest.gpstime import NS_PER_S, NS_PER_WEEK, calendar_from_gps
 from navreplay.ingest.writers import rinex
 
 from .gnssfiles import (
@@ -206,6 +206,47 @@ def test_observations_without_navigation_are_an_error_that_says_so(
     obs, _ = write_pair(tmp_path, synth)
     with pytest.raises(IngestError, match="needs the RINEX navigation file"):
         ingest([obs], tmp_path / "out")
+
+
+def test_navigation_without_gps_records_is_an_error_that_says_so(
+    synth: Any, tmp_path: Path
+) -> None:
+    """A BeiDou-only navigation file (Hong Kong's .19b without its .19n) places no GPS
+    satellite: refused, naming the file, what it holds and what to pass, not an empty table."""
+    obs, nav = write_pair(tmp_path, synth)
+    bds = tmp_path / "drive.19b"
+    text = nav.read_text().replace("G: GPS   ", "C: BEIDOU")
+    bds.write_text("\n".join("C" + ln[1:] if ln[:1] == "G" else ln for ln in text.splitlines()))
+    n = len(synth.ephemeris)
+    with pytest.raises(IngestError, match="no stream in the logs can fill") as err:
+        ingest([obs, bds], tmp_path / "out")
+    assert f"(drive.19b) hold no GPS ephemeris (BeiDou {n};" in str(err.value)
+    assert "pass a GPS or mixed navigation file" in str(err.value)
+    assert not (tmp_path / "out").exists()
+    assert ingest([obs, bds, nav], tmp_path / "both").tables["gnss_obs"] > 0
+
+
+def test_navigation_of_another_period_is_an_error_that_gives_both_periods(
+    synth: Any, tmp_path: Path
+) -> None:
+    """Ephemerides two days after the observations serve no epoch: refused with both
+    periods, not an empty table."""
+    obs, _ = write_pair(tmp_path, synth)
+    eph = synth.ephemeris
+    later = 2 * 86_400 * NS_PER_S
+    moved = Ephemeris(
+        **{**eph._asdict(), "toe_ns": eph.toe_ns + later, "toc_ns": eph.toc_ns + later}
+    )
+    nav = tmp_path / "later.nav"
+    rinex.write_nav(nav, moved)
+    with pytest.raises(IngestError, match="no stream in the logs can fill") as err:
+        ingest([obs, nav], tmp_path / "out")
+    message = str(err.value)
+    assert "the GPS ephemerides of the navigation files given are valid from" in message
+    assert "pass the navigation file of the observations' period" in message
+    first = str(calendar_from_gps(int(synth.tables["gnss_obs"]["t_ns"][0].as_py())))[:19]
+    assert f"the observations run from {first}" in message
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_truncated_navigation_record_is_dropped_and_reported(synth: Any, tmp_path: Path) -> None:

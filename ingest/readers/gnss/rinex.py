@@ -10,6 +10,10 @@ navigation file alone feeds no table; its inventory lists its records.
 Rows dropped and why are counted in the table's ``counters``: ``no_ephemeris`` (no valid
 record for that satellite and time), ``no_receiver_position``, ``rows_<system>_excluded``
 (systems other than GPS: no orbit model here), ``events_skipped`` (epoch flags 2-6).
+Navigation files that hold no GPS record (a BeiDou-only ``.yyb`` without its ``.yyn``) are
+refused like missing ones, the error saying what they hold and what to pass; so are
+navigation files none of whose GPS ephemerides is valid at any observation epoch (another
+day's file), the error giving both periods.
 
 GPS week rollover (catalogue case 35): observation epochs that lie a whole number of 1024-week
 cycles before the navigation data (a receiver that wrote the 10-bit week) are moved forward
@@ -33,7 +37,7 @@ from navreplay.ingest.gnss.obsgeometry import observation_geometry
 from navreplay.ingest.gnss.rinexnav import NavData, Unreported, merge, read_nav
 from navreplay.ingest.gnss.rinexobs import ObsRows, ObsScan, Signals, read_obs
 from navreplay.ingest.gnss.rinextext import Header
-from navreplay.ingest.gpstime import NS_PER_WEEK
+from navreplay.ingest.gpstime import NS_PER_S, NS_PER_WEEK, calendar_from_gps
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
@@ -69,6 +73,7 @@ class RinexReader(LogReader):
             if d.format == Format.RINEX and d.variant.split("+")[0] == "nav"
         ]
         self._shift_ns = 0
+        self._apart: str | None = None  # why the ephemerides serve no epoch (inventory)
 
     # ---------------------------------------------------------------------------- inventory
     def inventory(self) -> Inventory:
@@ -76,11 +81,16 @@ class RinexReader(LogReader):
             return self._nav_inventory()
         head, sig, scan = self._scan()
         nav = self._load_nav()
-        if nav is not None:
+        if nav is not None and not len(nav.ephemeris):
+            table, detail = None, self._no_gps_ephemeris(nav)
+        elif nav is not None:
             self._shift_ns = _rollover_shift(scan, nav)
             if self._shift_ns < 0:  # the navigation data are the stale ones: move them
-                self._nav = _shifted(nav, -self._shift_ns)
+                self._nav = nav = _shifted(nav, -self._shift_ns)
             table, detail = TableName.GNSS_OBS, f"{sig.pseudorange} {sig.doppler} {sig.strength}"
+            self._apart = _apart(scan, nav, max(self._shift_ns, 0))
+            if self._apart is not None:
+                table, detail = None, self._apart
         else:
             table, detail = None, "needs the RINEX navigation file: pass it with the observations"
         others = {k: v for k, v in scan.rows_by_system.items() if k != "GPS"}
@@ -99,6 +109,15 @@ class RinexReader(LogReader):
         )
         notes = (f"{scan.epochs} epochs, time system {head.time_system}",)
         return Inventory(self.path, self.format, (stream,), notes)
+
+    def _no_gps_ephemeris(self, nav: NavData) -> str:
+        """Why the navigation files given cannot place the satellites (no GPS record)."""
+        names = ", ".join(p.name for p in self._nav_files)
+        records = ", ".join(f"{k} {v}" for k, v in sorted(nav.records.items())) or "no records"
+        return (
+            f"the navigation files given ({names}) hold no GPS ephemeris ({records}; only GPS "
+            "has an orbit model here): pass a GPS or mixed navigation file of the same period"
+        )
 
     def _nav_inventory(self) -> Inventory:
         nav = read_nav(self.path, self.variant, self.damage)
@@ -153,6 +172,10 @@ class RinexReader(LogReader):
                 path=self.path,
                 hint="pass the .nav/.yyn file of the same period in the same ingest",
             )
+        if not len(nav.ephemeris):
+            raise IngestError(self._no_gps_ephemeris(nav), path=self.path)
+        if self._apart is not None:
+            raise IngestError(self._apart, path=self.path)
         if self._shift_ns:
             weeks = abs(self._shift_ns) // NS_PER_WEEK
             which = "observation" if self._shift_ns > 0 else "navigation"
@@ -232,6 +255,28 @@ def _rollover_shift(scan: ObsScan, nav: NavData) -> int:
     if cycles == 0 or abs(gap - cycles * _ROLLOVER_NS) > _ROLLOVER_SLACK_NS:
         return 0
     return int(cycles) * _ROLLOVER_NS
+
+
+def _apart(scan: ObsScan, nav: NavData, ahead_ns: int) -> str | None:
+    """Why no GPS ephemeris given can serve any observation epoch (none is valid within
+    half its fit interval of them), or None when some can."""
+    eph = nav.ephemeris
+    if scan.first_t_ns is None or scan.last_t_ns is None or not len(eph):
+        return None
+    half = np.where(eph.fit_interval_h > 0, eph.fit_interval_h, 4.0) * 1800.0 * NS_PER_S
+    lo, hi = eph.toe_ns - half.astype(np.int64), eph.toe_ns + half.astype(np.int64)
+    first, last = scan.first_t_ns + ahead_ns, scan.last_t_ns + ahead_ns
+    if np.any((lo <= last) & (hi >= first)):
+        return None
+
+    def when(t: int) -> str:
+        return str(calendar_from_gps(int(t)))[:19]
+
+    return (
+        f"the GPS ephemerides of the navigation files given are valid from {when(lo.min())} "
+        f"to {when(hi.max())} GPS time, the observations run from {when(first)} to "
+        f"{when(last)}: pass the navigation file of the observations' period"
+    )
 
 
 def _shifted(nav: NavData, ns: int) -> NavData:
