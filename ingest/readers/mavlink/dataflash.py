@@ -26,6 +26,7 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 import numpy.typing as npt
 
+from navreplay.ingest.arrays import I64
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.readers.asof import AsofJoin, Left
@@ -37,10 +38,9 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.mavlink.dfclock import DfSurvey, instances, survey
+from navreplay.ingest.readers.mavlink.dfclock import DfSurvey, RecordClock, instances, survey
 from navreplay.ingest.readers.mavlink.dfformat import DfFormat
 from navreplay.ingest.readers.mavlink.dfmsgs import (
-    BY_NAME,
     JOIN_COLUMNS,
     DfExtras,
     DfStream,
@@ -82,7 +82,7 @@ class DataFlashReader(LogReader):
         s = self._survey()
         streams: list[StreamInfo] = []
         for (name, inst), count in sorted(s.counts.items()):
-            spec = BY_NAME[name]
+            spec = s.specs[name]
             first, last = s.first_us[(name, inst)], s.last_us[(name, inst)]
             t = s.to_base(np.array([first, last], np.int64), np.array([0, 0], np.int64))
             unusable = s.unusable_detail.get(name)
@@ -114,7 +114,7 @@ class DataFlashReader(LogReader):
         s = self._survey()
         wanted: dict[str, tuple[DfStream, int]] = {}
         for sel in selections:
-            found = _parse_key(sel.key)
+            found = _parse_key(sel.key, s.specs)
             if found is not None:
                 wanted[sel.key] = found
         self._check_usable(s, wanted)
@@ -126,15 +126,23 @@ class DataFlashReader(LogReader):
         }
         formats = Formats()
         stats = ScanStats()
+        clock = RecordClock()
         for rec in scan_blocks(self.file, formats, stats):
+            t_us, _ = clock.times(formats, rec)
             for key, (spec, inst) in wanted.items():
-                batches = self._batches(rec, formats, spec, inst, key, extras)
+                batches = self._batches(rec, t_us, formats, spec, inst, key, extras)
                 join = joins.get(key)
                 if join is None:
-                    yield from batches
+                    for b in batches:
+                        if spec.table != TableName.GNSS:
+                            yield b
+                            continue
+                        cols = dict(b.columns)
+                        left = Left(cols.pop("t_ns"), cols, dict(b.nulls), b.offsets)
+                        yield _gnss_batch(key, left, extras, "EPH/EPV (PX4)")
                     continue
                 if spec.join is not None:
-                    self._push_right(rec, formats, spec.join[0], spec, inst, join, extras)
+                    self._push_right(rec, t_us, formats, spec.join[0], spec, inst, join, extras)
                 for b in batches:
                     cols = dict(b.columns)
                     join.push_left(Left(cols.pop("t_ns"), cols, dict(b.nulls), b.offsets))
@@ -181,6 +189,7 @@ class DataFlashReader(LogReader):
     def _batches(
         self,
         rec: Records,
+        t_us: I64,
         formats: Formats,
         spec: DfStream,
         inst: int,
@@ -190,10 +199,10 @@ class DataFlashReader(LogReader):
         s = self._survey()
         out: list[Batch] = []
         for idx, data, fmt in self._matching(rec, formats, spec.message, spec.instance, inst):
-            conv = spec.convert(data, fmt, extras)
-            t = s.to_base(np.asarray(data["TimeUS"], np.int64), rec.offset[idx])
+            conv = spec.convert(data, fmt, extras, t_us[idx])
+            t = s.to_base(t_us[idx], rec.offset[idx])
             if spec.table == TableName.GNSS:
-                conv.columns["t_fix_ns"] = s.fix_times(data, t)
+                conv.columns["t_fix_ns"] = s.fix_times(data, fmt, t)
             cols = {"t_ns": t, **conv.columns}
             out.append(
                 Batch(
@@ -212,6 +221,7 @@ class DataFlashReader(LogReader):
     def _push_right(
         self,
         rec: Records,
+        t_us: I64,
         formats: Formats,
         name: str,
         spec: DfStream,
@@ -223,15 +233,15 @@ class DataFlashReader(LogReader):
         convert = spec.join[1]
         s = self._survey()
         for idx, data, fmt in self._matching(rec, formats, name, spec.instance, inst):
-            t = s.to_base(np.asarray(data["TimeUS"], np.int64), rec.offset[idx])
-            join.push_right(t, convert(data, fmt, extras).columns)
+            t = s.to_base(t_us[idx], rec.offset[idx])
+            join.push_right(t, convert(data, fmt, extras, t_us[idx]).columns)
 
     # -------------------------------------------------------------------------------- damage
     def _record_damage(self, stats: ScanStats, formats: Formats, s: DfSurvey) -> None:
         dmg = self.damage
         dmg.note(s.time_note())
         dmg.count("records_framed", stats.records)
-        s.tracker.note_resets(dmg, reboot="reboot", clock="TimeUS")
+        s.tracker.note_resets(dmg, reboot="reboot", clock=s.clock_name)
         if s.week_shift:
             how = f", snapped to the epoch nearest {s.reference}"
             note_week_rollover(dmg, s.gps_rows, "GPS records", s.week_shift, how)
@@ -243,22 +253,26 @@ class DataFlashReader(LogReader):
         stats.record_partial(dmg)
 
 
-def _parse_key(key: str) -> tuple[DfStream, int] | None:
+def _parse_key(key: str, specs: dict[str, DfStream]) -> tuple[DfStream, int] | None:
     name, _, rest = key.partition("[")
-    spec = BY_NAME.get(name)
+    spec = specs.get(name)
     if spec is None:
         return None
     return spec, int(rest.rstrip("]")) if rest else spec.instance
 
 
-def _gnss_batch(key: str, out: Left, extras: DfExtras) -> Batch:
+def _gnss_batch(
+    key: str, out: Left, extras: DfExtras, accuracy: str = "from GPA (same instance)"
+) -> Batch:
     """A GPS batch after its GPA join: fix epochs as t_ns, heights and accuracies finished."""
     cols = out.columns
     t = cols.pop("t_fix_ns")
     conv = Converted(cols, out.nulls)
     finish_gnss(conv, extras)
     conv.counters["no_fix"] = int((cols["fix_type"] < FixType.FIX_2D).sum())
-    info = {"time": "GPS week and ms of week of each fix", "accuracy": "from GPA (same instance)"}
+    info = {"time": "the GPS time of each fix (week and ms of week, or UTC)"}
+    if accuracy:
+        info["accuracy"] = accuracy
     return Batch(
         key,
         TableName.GNSS,
