@@ -92,7 +92,15 @@ def copter33(seconds: float = 4.0, *, gps_t: bool = True) -> DfLog:
         if i % 10 == 0:
             fix_ms = ms - 5  # the fix arrived 5 ms before this frame
             lat = -353_632_000 + i * 10
-            values = [3, TOW0_MS + (ms - BOOT0_MS), WEEK_2015, 10, 120, lat, 1_491_652_000]
+            values: list[float] = [
+                3,
+                TOW0_MS + (ms - BOOT0_MS),
+                WEEK_2015,
+                10,
+                120,
+                lat,
+                1_491_652_000,
+            ]
             values += [1000, 58_400, 300, 0]
             values += [-0.25, fix_ms] if gps_t else []
             log.write("GPS", *values)
