@@ -32,14 +32,14 @@ class UlogTopic:
         name: topic name.
         table: canonical table.
         convert: topic columns and the log's geoid undulation (m or None) -> columns.
-        join_attitude: vehicle_attitude is joined by time (roll, pitch, yaw).
+        attitude: the attitude topic joined by time (roll, pitch, yaw), or "" for none.
         detail: what ``--list`` shows.
     """
 
     name: str
     table: TableName
     convert: Callable[[Data, float | None], Converted]
-    join_attitude: bool = False
+    attitude: str = ""
     detail: str = ""
 
 
@@ -70,6 +70,12 @@ def _gps(data: Data, und: float | None) -> Converted:
         if "vel_ned_valid" in data
         else np.ones(len(lat), bool)
     )
+    vel = np.stack([_f(data, f"vel_{a}_m_s") for a in "ned"])
+    never_set = not valid_vel.any() and bool(np.any(vel != 0.0))
+    if never_set:
+        # PX4 SITL's simulated receiver (1.9) never sets the flag while its velocities match
+        # the simulator's to 0.1 m/s: a flag nobody maintains, not invalid velocities.
+        valid_vel = np.ones(len(lat), bool)
     fix = np.asarray(data["fix_type"], dtype=np.int8)
     cols = {
         "lat_deg": lat,
@@ -84,6 +90,8 @@ def _gps(data: Data, und: float | None) -> Converted:
     }
     nulls = {f"vel_{a}_mps": ~valid_vel for a in "ned"}
     counters = {"no_fix": int((fix < FixType.FIX_2D).sum())}
+    if never_set:
+        counters["vel_ned_valid_never_set_velocity_used"] = len(lat)
     if (~has_ell).any():
         counters["alt_msl_no_geoid" if und is None else "alt_msl_plus_undulation"] = int(
             (~has_ell).sum()
@@ -93,8 +101,10 @@ def _gps(data: Data, und: float | None) -> Converted:
 
 def _global_position(data: Data, und: float | None) -> Converted:
     n = len(data["timestamp"])
-    ell = "alt_ellipsoid" in data
-    alt = _f(data, "alt_ellipsoid") if ell else _f(data, "alt") + (und or 0.0)
+    # alt_ellipsoid of 0 is "not given" (PX4 SITL logs 0 there): MSL plus the log's undulation.
+    ell = _f(data, "alt_ellipsoid") if "alt_ellipsoid" in data else np.zeros(n)
+    has_ell = ell != 0.0
+    alt = np.where(has_ell, ell, _f(data, "alt") + (und or 0.0))
     cols = {"lat_deg": _f(data, "lat"), "lon_deg": _f(data, "lon"), "alt_m": alt}
     nulls = {}
     for a in "ned":
@@ -103,7 +113,8 @@ def _global_position(data: Data, und: float | None) -> Converted:
         else:
             cols[f"vel_{a}_mps"] = np.zeros(n)
             nulls[f"vel_{a}_mps"] = np.ones(n, bool)
-    counters = {} if ell or und is not None else {"alt_msl_no_geoid": n}
+    msl = int((~has_ell).sum())
+    counters = {} if not msl or und is not None else {"alt_msl_no_geoid": msl}
     return Converted(cols, nulls, counters)
 
 
@@ -165,14 +176,21 @@ TOPICS: tuple[UlogTopic, ...] = (
         "vehicle_global_position",
         TableName.ESTIMATOR,
         _global_position,
-        join_attitude=True,
+        attitude="vehicle_attitude",
         detail="EKF global position + vehicle_attitude",
     ),
     UlogTopic(
         "vehicle_local_position",
         TableName.ESTIMATOR,
         _local_position,
-        join_attitude=True,
+        attitude="vehicle_attitude",
         detail="EKF local position + vehicle_attitude",
+    ),
+    UlogTopic(
+        "vehicle_global_position_groundtruth",
+        TableName.TRUTH,
+        _global_position,
+        attitude="vehicle_attitude_groundtruth",
+        detail="simulator truth (SITL) + vehicle_attitude_groundtruth",
     ),
 )
