@@ -292,3 +292,19 @@ def test_mavlink1_tlog_with_interleaved_garbage(tmp_path: Path) -> None:
     imu = frame(tmp_path / "out", "imu")
     assert len(imu) == 300  # every RAW_IMU record survives
     assert result.tables["gnss"] == 30
+
+
+@pytest.mark.parametrize("cut", [1, 2])
+def test_dataflash_cut_inside_a_record_header_is_a_partial_record(tmp_path: Path, cut: int) -> None:
+    # The 2024 80 KiB excerpt ends in "a3 95": a record cut before its type byte.
+    data = copter33().data()
+    path = tmp_path / "cut.bin"
+    path.write_bytes(data + b"\xa3\x95"[:cut])
+    result = run(path, tmp_path / "out")
+    entry = result.report["files"][0]
+    assert entry["completeness"] == ["partial_record_dropped"]
+    assert entry["defects"][0]["reason"] == (
+        f"1 trailing partial record dropped at offset {len(data)} ({cut} bytes): the file "
+        "ends inside it"
+    )
+    assert "garbage_runs" not in entry["counters"]

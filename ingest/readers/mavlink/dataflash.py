@@ -27,7 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from navreplay.ingest.arrays import I64
-from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.detect import DATAFLASH_MAGIC, Detected, Format
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.readers.asof import AsofJoin, Left
 from navreplay.ingest.readers.base import (
@@ -249,6 +249,7 @@ class DataFlashReader(LogReader):
             dmg.note(f"message type {u.name} skipped: its FMT at offset {u.offset}: {u.reason}")
         for offset, name in formats.redefined:
             dmg.note(f"FMT at offset {offset} redefines {name}: later records use the new layout")
+        stats.trailing_header(self.file, DATAFLASH_MAGIC)
         stats.record_garbage(dmg, "DataFlash records")
         stats.record_partial(dmg)
 
