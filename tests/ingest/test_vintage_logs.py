@@ -28,6 +28,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm2
 from navreplay.ingest.api import IngestResult, ingest
 from navreplay.ingest.config import parse_dataset_config
 from navreplay.ingest.detect import Format, detect
+from navreplay.ingest.errors import UnsupportedFormatError
 from navreplay.ingest.timebase import SECONDS_PER_WEEK, utc_to_gps_ns
 
 from .mavlogs import DfLog, G
@@ -308,3 +309,19 @@ def test_dataflash_cut_inside_a_record_header_is_a_partial_record(tmp_path: Path
         "ends inside it"
     )
     assert "garbage_runs" not in entry["counters"]
+
+
+def test_dataflash_without_any_boot_clock_is_refused_with_the_reason(tmp_path: Path) -> None:
+    # Copter 3.0 (2013): IMU "ffffff" without a time column, GPS with only the GPS time.
+    log = DfLog()
+    log.fmt("FMT")
+    log.fmt("IMU", (131, "ffffff", "GyrX,GyrY,GyrZ,AccX,AccY,AccZ"))
+    log.fmt("GPS", (130, "BIBcLLeeEe", "Status,Time,NSats,HDop,Lat,Lng,RelAlt,Alt,Spd,GCrs"))
+    for i in range(100):
+        log.write("IMU", 0.0, 0.0, 0.0, 0.0, 0.0, -G)
+        if i % 10 == 0:
+            log.write("GPS", 3, TOW0_MS + i * 20, 9, 120, -353_632_000, 1_491_652_000, 0, 0, 0, 0)
+    path = log.save(tmp_path / "ac30.bin")
+    with pytest.raises(UnsupportedFormatError, match=r"none of the 110 DataFlash records carries"):
+        run(path, tmp_path / "out")
+    assert not (tmp_path / "out").exists()

@@ -28,7 +28,7 @@ import numpy.typing as npt
 
 from navreplay.ingest.arrays import I64
 from navreplay.ingest.detect import DATAFLASH_MAGIC, Detected, Format
-from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
 from navreplay.ingest.readers.asof import AsofJoin, Left
 from navreplay.ingest.readers.base import (
     Batch,
@@ -73,6 +73,16 @@ class DataFlashReader(LogReader):
                     "DataFlash log, or damaged throughout",
                     path=self.file,
                     offset=0,
+                )
+            if not found.timed_records:
+                raise UnsupportedFormatError(
+                    f"none of the {found.data_records} DataFlash records carries a time since "
+                    "boot (TimeUS, TimeMS, a GPS record's T, a PX4 TIME record): ArduPilot "
+                    "logs before Copter 3.1 (2013) time their IMU records only by their order",
+                    path=self.file,
+                    offset=0,
+                    hint="convert the log with a tool that interpolates times from the GPS "
+                    "records (pymavlink's DFReader does) to CSV and ingest that",
                 )
             self._s = found
         return self._s

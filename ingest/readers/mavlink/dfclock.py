@@ -115,6 +115,7 @@ class DfSurvey:
     gps_first: tuple[int, int] | None = None
     gps_rows: int = 0
     data_records: int = 0
+    timed_records: int = 0
     per_type: Counter[int] = field(default_factory=Counter)
     week_shift: int = 0
     last_gpstime: int = -1
@@ -243,6 +244,7 @@ def _block(s: DfSurvey, rec: Records) -> None:
         if n:
             s.per_type[type_] += n
     time_us, has_time = s.clock.times(s.formats, rec)
+    s.timed_records += int(has_time.sum())
     s.tracker.push(rec.offset[has_time], time_us[has_time] * 1000)
     for type_ in rec.types():
         idx_all = rec.of_type(type_)
