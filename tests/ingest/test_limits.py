@@ -152,3 +152,33 @@ def test_static_and_short_logs(tmp_path: Path) -> None:
     # Moving at 5 m/s for 30 s: nothing to say.
     path = _tlog(tmp_path / "drive.tlog", fix_type=3, speed_cms=500, seconds=30.0)
     assert ingest([path], tmp_path / "drive").report["limits"] == []
+
+
+def test_sensor_accel_and_gyro_make_the_imu_when_sensor_combined_is_not_logged(
+    tmp_path: Path,
+) -> None:
+    u = UlogLog()
+    u.info("sys_name", "PX4")
+    fields = (
+        "uint64_t timestamp;uint64_t timestamp_sample;uint32_t device_id;float x;float y;float z;"
+    )
+    u.format("sensor_accel", fields, "QQIfff")
+    u.format("sensor_gyro", fields, "QQIfff")
+    u.format("vehicle_gps_position", GPS_FIELDS, "QQiiiiffffffB?B")
+    for name in ("sensor_accel", "sensor_gyro", "vehicle_gps_position"):
+        u.subscribe(name)
+    for i in range(400):  # 2 s at 200 Hz, gyro 1 ms after the accelerometer
+        t = 1_000_000 + i * 5_000
+        u.data("sensor_accel", t, t, 1, 0.1, -0.2, -G)
+        u.data("sensor_gyro", t + 1_000, t + 1_000, 2, 0.01, 0.02, 0.03 + i * 1e-5)
+        if i % 40 == 0:
+            fix = (t, 0, 473_977_508, 85_456_074, 488_100, 0, 0.3, 1.0, 1.5, 0.0, 0.0, 0.0)
+            u.data("vehicle_gps_position", *fix, 3, True, 10)
+    path = tmp_path / "accel_gyro.ulg"
+    path.write_bytes(u.bytes())
+    result = ingest([path], tmp_path / "out")
+    assert result.report["tables"]["imu"]["stream"] == "sensor_accel[0]"
+    imu = pq.read_table(tmp_path / "out" / "imu.parquet").to_pandas()
+    assert len(imu) == 400
+    assert imu["acc_z_mps2"].to_numpy() == pytest.approx(-G)
+    assert imu["gyro_z_radps"].to_numpy() == pytest.approx(0.03 + np.arange(400) * 1e-5)

@@ -5,6 +5,8 @@ Streams (``topic[multi_id]``), all on the boot clock ``timestamp`` (us) until pa
 =============================  ============================================================
 sensor_combined[i]             ``gyro_rad[0..2]`` rad/s, ``accelerometer_m_s2[0..2]`` m/s^2,
                                body FRD -> imu
+sensor_accel[i]                ``x/y/z`` m/s^2 with ``sensor_gyro[i]`` ``x/y/z`` rad/s nearest
+ + sensor_gyro[i]              in time -> imu, only in a log without sensor_combined
 vehicle_gps_position[i],       ``lat/lon`` 1e-7 deg (or ``latitude_deg``...), ``alt`` mm MSL,
 sensor_gps[i]                  ``alt_ellipsoid`` mm, ``eph/epv`` m (PX4's accuracies),
                                ``s_variance_m_s`` m/s, ``vel_n/e/d_m_s``, ``fix_type``,
@@ -55,7 +57,13 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.ulog.ulogmsgs import GPS_TOPICS, TOPICS, UlogTopic, attitude_columns
+from navreplay.ingest.readers.ulog.ulogmsgs import (
+    GPS_TOPICS,
+    TOPICS,
+    UlogTopic,
+    attitude_columns,
+    gyro_columns,
+)
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
 
@@ -82,7 +90,7 @@ class UlogReader(LogReader):
         from pyulog import ULog
         from pyulog.core import ULogException
 
-        names = [*(t.name for t in TOPICS), *{t.attitude for t in TOPICS if t.attitude}]
+        names = [*(t.name for t in TOPICS), *{t.attitude or t.pair for t in TOPICS} - {""}]
         printed = io.StringIO()
         try:
             with contextlib.redirect_stdout(printed):  # pyulog prints its warnings
@@ -131,10 +139,14 @@ class UlogReader(LogReader):
     # ----------------------------------------------------------------------------- inventory
     def _datasets(self) -> Iterator[tuple[UlogTopic, Any]]:
         by_name = {t.name: t for t in TOPICS}
+        present = {d.name for d in self._load().data_list if len(d.data["timestamp"])}
         for d in sorted(self._load().data_list, key=lambda d: (d.name, d.multi_id)):
             topic = by_name.get(d.name)
-            if topic is not None and len(d.data["timestamp"]):
-                yield topic, d
+            if topic is None or not len(d.data["timestamp"]):
+                continue
+            if topic.fallback_for in present or (topic.pair and topic.pair not in present):
+                continue
+            yield topic, d
 
     def inventory(self) -> Inventory:
         streams = []
@@ -184,6 +196,9 @@ class UlogReader(LogReader):
             if topic.attitude:
                 yield self._with_attitude(key, topic, t, conv, offsets, ulog)
                 continue
+            if topic.pair:
+                yield self._with_pair(key, topic, d.multi_id, t, conv, offsets, ulog)
+                continue
             cols = {"t_ns": t, **conv.columns}
             yield Batch(key, topic.table, cols, offsets, conv.nulls, None, conv.counters, conv.info)
         self._record_damage(ulog)
@@ -196,6 +211,25 @@ class UlogReader(LogReader):
                 if len(diff):
                     return float(np.median(diff)) / 1000.0
         return None
+
+    def _with_pair(
+        self, key: str, topic: UlogTopic, multi_id: int, t: I64, conv: Any, offsets: I64, ulog: Any
+    ) -> Batch:
+        """``sensor_accel`` rows with the ``sensor_gyro`` of the same instance nearest in time
+        (null beyond ``JOIN_TOLERANCE_NS``, counted)."""
+        join = AsofJoin(("gyro_x_radps", "gyro_y_radps", "gyro_z_radps"), JOIN_TOLERANCE_NS)
+        for d in ulog.data_list:
+            if d.name == topic.pair and d.multi_id == multi_id:
+                join.push_right(self.to_base(d.data["timestamp"]), gyro_columns(d.data))
+        join.push_left(Left(t, conv.columns, conv.nulls, offsets))
+        out = join.pop(final=True)
+        assert out is not None
+        counters = dict(conv.counters)
+        missing = int(out.nulls["gyro_x_radps"].sum()) if "gyro_x_radps" in out.nulls else 0
+        if missing:
+            counters["gyro_not_within_50ms"] = missing
+        cols = {"t_ns": out.t, **out.columns}
+        return Batch(key, topic.table, cols, out.offsets, out.nulls, None, counters, conv.info)
 
     def _with_attitude(
         self, key: str, topic: UlogTopic, t: I64, conv: Any, offsets: I64, ulog: Any

@@ -33,6 +33,10 @@ class UlogTopic:
         table: canonical table.
         convert: topic columns and the log's geoid undulation (m or None) -> columns.
         attitude: the attitude topic joined by time (roll, pitch, yaw), or "" for none.
+        pair: a topic of the same instance whose converted columns are joined by time
+            (``sensor_gyro`` onto ``sensor_accel``), or "" for none.
+        fallback_for: offered only when the log has no such topic (``sensor_accel`` when
+            there is no ``sensor_combined``: selections of existing logs stay as they were).
         detail: what ``--list`` shows.
     """
 
@@ -41,6 +45,8 @@ class UlogTopic:
     convert: Callable[[Data, float | None], Converted]
     attitude: str = ""
     detail: str = ""
+    pair: str = ""
+    fallback_for: str = ""
 
 
 def _f(data: Data, name: str, per: float = 1.0) -> F64:
@@ -53,6 +59,16 @@ def _imu(data: Data, _und: float | None) -> Converted:
     cols |= {f"gyro_{a}_radps": _f(data, f"gyro_rad[{i}]") for i, a in enumerate("xyz")}
     info = {"time": "timestamp (the gyro sample; accelerometer_timestamp_relative not applied)"}
     return Converted(cols, info=info)
+
+
+def _accel(data: Data, _und: float | None) -> Converted:
+    cols = {f"acc_{a}_mps2": _f(data, a) for a in "xyz"}
+    return Converted(cols, info={"time": "sensor_accel timestamp; sensor_gyro nearest in time"})
+
+
+def gyro_columns(data: Data) -> dict[str, np.ndarray]:
+    """``sensor_gyro`` ``x/y/z`` rad/s as the IMU's gyro columns."""
+    return {f"gyro_{a}_radps": _f(data, a) for a in "xyz"}
 
 
 def _gps(data: Data, und: float | None) -> Converted:
@@ -170,6 +186,14 @@ def attitude_columns(data: Data) -> dict[str, np.ndarray]:
 
 TOPICS: tuple[UlogTopic, ...] = (
     UlogTopic("sensor_combined", TableName.IMU, _imu, detail="rad/s, m/s^2"),
+    UlogTopic(
+        "sensor_accel",
+        TableName.IMU,
+        _accel,
+        detail="m/s^2 + sensor_gyro rad/s (board frame since PX4 1.11)",
+        pair="sensor_gyro",
+        fallback_for="sensor_combined",
+    ),
     UlogTopic("vehicle_gps_position", TableName.GNSS, _gps, detail="1e-7 deg, mm"),
     UlogTopic("sensor_gps", TableName.GNSS, _gps, detail="receiver fixes"),
     UlogTopic(
