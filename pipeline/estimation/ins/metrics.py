@@ -84,9 +84,9 @@ def compute_metrics(
         {
             "truth": True,
             "pos_err_h_rms_m": _rms(pos_h),
-            "pos_err_v_rms_m": _rms(err[:, 2]),
-            "pos_err_3d_rms_m": _rms(pos_3d),
-            "pos_err_3d_max_m": float(pos_3d.max()) if pos_3d.size else None,
+            "pos_err_v_rms_m": _rms(err[:, 2]) if 2 in have else None,
+            "pos_err_3d_rms_m": _rms(pos_3d) if 2 in have else None,
+            "pos_err_3d_max_m": float(pos_3d.max()) if pos_3d.size and 2 in have else None,
             "vel_err_3d_rms_mps": _rms(np.sqrt(np.sum(err[:, 3:6] ** 2, axis=1))) if vel else None,
             "att_err_rms_rad": {a: _rms(err[:, 6 + j]) for j, a in enumerate(("n", "e", "d"))}
             if att

@@ -43,6 +43,16 @@ def test_truth_without_velocity_gives_position_metrics_and_no_velocity_metrics(
     assert bare["att_err_rms_rad"] is None
     assert bare["nees_dof"] == 3
     assert bare["pos_err_h_rms_m"] == pytest.approx(full["pos_err_h_rms_m"], rel=1e-12)
+    # SIMSTATE: latitude and longitude only, heights NaN.
+    t = tables["truth"]
+    flat = t.set_column(
+        t.schema.get_field_index("alt_m"), "alt_m", pa.array(np.full(len(t), np.nan))
+    )
+    sim = compute_metrics(r, _without(flat, VELOCITY))
+    assert sim["pos_err_h_rms_m"] == pytest.approx(full["pos_err_h_rms_m"], rel=1e-12)
+    assert sim["pos_err_v_rms_m"] is None
+    assert sim["pos_err_3d_max_m"] is None
+    assert sim["truth_missing"] == ["pos_d", "vel_n", "vel_e", "vel_d"]
 
 
 def test_outage_track_against_truth_without_velocity(
