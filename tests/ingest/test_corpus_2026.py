@@ -54,6 +54,15 @@ def test_copter33_2015_timems_log(tmp_path: Path) -> None:
     imu = frame(tmp_path, "imu")
     assert imu["t_ns"].diff().median() == 20_000_000  # TimeMS at 50 Hz
     assert imu["t_ns"].iloc[0] - gnss["t_ns"].iloc[0] == pytest.approx(0, abs=2e9)
+    # EKF1 (no ORGN in 2015): placed on the earth from the fixes, it follows them (0.73 m RMS).
+    est = frame(tmp_path, "estimator")
+    fixed = gnss[gnss["fix_type"] >= 3]
+    t = fixed["t_ns"].to_numpy()
+    inside = (t >= est["t_ns"].iloc[0]) & (t <= est["t_ns"].iloc[-1])
+    dn = (fixed["lat_deg"].to_numpy() - np.interp(t, est["t_ns"], est["lat_deg"]))[inside]
+    de = (fixed["lon_deg"].to_numpy() - np.interp(t, est["t_ns"], est["lon_deg"]))[inside]
+    rms_m = 111_320 * np.sqrt(np.mean(dn**2 + (de * np.cos(np.radians(-35.36))) ** 2))
+    assert rms_m < 1.5
 
 
 def test_px4_sdlog2_2015_log(tmp_path: Path) -> None:

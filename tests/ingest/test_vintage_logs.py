@@ -146,7 +146,12 @@ def test_timems_era_dataflash_on_gps_time(tmp_path: Path, gps_t: bool) -> None:
     assert len(est) == 40
     assert est["yaw_rad"].iloc[0] == pytest.approx(np.pi / 2)
     assert est["vel_n_mps"].iloc[0] == pytest.approx(3.0)
-    assert result.report["tables"]["estimator"]["counters"]["no_ekf_origin"] == 40
+    # No ORGN before 2016: the origin is the median of fix minus EKF offset (PN 1 m, PE 2 m,
+    # PD -3 m here), so the EKF track sits on the fixes (within their 1 m spread).
+    assert result.report["tables"]["estimator"]["counters"]["ekf_origin_estimated_from_gps"] == 40
+    assert est["lat_deg"].to_numpy() == pytest.approx(gnss["lat_deg"].median(), abs=1e-5)
+    assert est["lon_deg"].to_numpy() == pytest.approx(gnss["lon_deg"].median(), abs=1e-5)
+    assert est["alt_m"].to_numpy() == pytest.approx(584.0, abs=1e-6)
 
 
 def test_2015_log_is_not_moved_by_a_week_rollover(tmp_path: Path) -> None:

@@ -11,7 +11,9 @@
 - GPS week rollover (case 35): the first GPS time is compared with a reference date
   (``utc_date`` in dataset.yaml, else the file's modification time: a DataFlash log has no
   other clock) and moved by multiples of 1024 weeks to the epoch nearest it;
-- the EKF origins (``ORGN`` type 0) and the geoid undulation (median ``GPA.Und``).
+- the EKF origins (``ORGN`` type 0) and the geoid undulation (median ``GPA.Und``); a
+  2014-2015 log's ``EKF1`` has no ``ORGN``: its origin is estimated from the 3-D fixes
+  (``DfSurvey._estimated_origin``) and the estimator rows counted as such.
 
 The file's base is GPS when every boot segment is paired, else the recorder clock (TimeUS).
 """
@@ -29,6 +31,7 @@ from navreplay.ingest.arrays import I64
 from navreplay.ingest.readers.mavlink.dfformat import FMT_TYPE, DfFormat
 from navreplay.ingest.readers.mavlink.dfmsgs import (
     BY_NAME,
+    LOCATION_SCALING_FACTOR_INV,
     PX4_BY_NAME,
     DfExtras,
     DfStream,
@@ -46,6 +49,7 @@ from navreplay.ingest.readers.mavlink.mavclock import (
     OffsetAccumulator,
     unroll_gps_week,
 )
+from navreplay.ingest.schema import FixType
 from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
 
 WEEK_NS = SECONDS_PER_WEEK * NS_PER_S
@@ -112,6 +116,8 @@ class DfSurvey:
     pairs: OffsetAccumulator = field(default_factory=OffsetAccumulator)
     undulation_mm: OffsetAccumulator = field(default_factory=OffsetAccumulator)
     origins: list[tuple[int, float, float, float]] = field(default_factory=list)
+    fixes: list[np.ndarray] = field(default_factory=list)  # (boot us, lat, lon, MSL alt) rows
+    ekf1: list[np.ndarray] = field(default_factory=list)  # (boot us, PN, PE, PD) rows
     gps_first: tuple[int, int] | None = None
     gps_rows: int = 0
     data_records: int = 0
@@ -158,7 +164,38 @@ class DfSurvey:
             np.array([x[2] for x in o]),
             np.array([x[3] for x in o]),
         )
-        return DfExtras(None if und is None else -und * 1e-3, origin)
+        estimated = False
+        if not o:
+            found = self._estimated_origin()
+            if found is not None:
+                origin, estimated = found, True
+        return DfExtras(None if und is None else -und * 1e-3, origin, estimated)
+
+    def _estimated_origin(self) -> Origin | None:
+        """The origin of a pre-2016 EKF1 (NavEKF logged no ``ORGN``): the median over the 3-D
+        fixes of the fix minus the EKF's position offset at the fix time, inverting
+        ArduPilot's flat-earth ``Location::offset``."""
+        if not self.fixes or not self.ekf1:
+            return None
+        fix, ekf = np.concatenate(self.fixes), np.concatenate(self.ekf1)
+        ekf = ekf[np.argsort(ekf[:, 0], kind="stable")]
+        inside = (fix[:, 0] >= ekf[0, 0]) & (fix[:, 0] <= ekf[-1, 0])
+        fix = fix[inside]
+        if len(fix) < 10:
+            return None
+        pn, pe, pd = (np.interp(fix[:, 0], ekf[:, 0], ekf[:, j]) for j in (1, 2, 3))
+        lat = fix[:, 1] - pn * LOCATION_SCALING_FACTOR_INV * 1e-7
+        scale = np.maximum(
+            np.cos(np.radians(fix[:, 1] - pn * LOCATION_SCALING_FACTOR_INV * 5e-8)), 0.01
+        )
+        lon = fix[:, 2] - pe * LOCATION_SCALING_FACTOR_INV * 1e-7 / scale
+        alt = fix[:, 3] + pd
+        return Origin(
+            np.zeros(1, np.int64),
+            np.array([np.median(lat)]),
+            np.array([np.median(lon)]),
+            np.array([np.median(alt)]),
+        )
 
     def to_base(self, time_us: I64, offsets: I64) -> I64:
         """``t_ns`` of records with ``time_us`` at file ``offsets``, on the file's base."""
@@ -277,9 +314,18 @@ def _records(
             s.counts[key] += int(sel.sum())
             s.first_us.setdefault(key, int(t_us[sel][0]))
             s.last_us[key] = int(t_us[sel][-1])
-    if name not in ("GPS", "GPS2", "GPA", "GPA2", "ORGN"):
+    if name not in ("GPS", "GPS2", "GPA", "GPA2", "ORGN", "EKF1"):
         return
     data = rec.decode(idx, fmt)
+    if name == "EKF1":
+        cols = [fmt.scaled(data, c) for c in ("PN", "PE", "PD")]
+        s.ekf1.append(np.column_stack([t_us.astype(np.float64), *cols]))
+        return
+    if name == "GPS" and not s.px4:
+        ok = fix_status(data) >= FixType.FIX_3D
+        if ok.any():
+            cols = [fmt.scaled(data, c)[ok] for c in ("Lat", "Lng", "Alt")]
+            s.fixes.append(np.column_stack([t_us[ok].astype(np.float64), *cols]))
     if fmt.gps_time is not None:
         _gps(s, rec, idx, data, fmt, t_us)
     elif name in ("GPA", "GPA2") and "Und" in fmt.columns:

@@ -12,7 +12,8 @@ GPS[I]      ``Status`` (the MAVLink GPS_FIX_TYPE values), ``GWk``/``GMS`` GPS we
 XKF1[C]     EKF3 (NKF1: EKF2) core C: ``Roll``/``Pitch``/``Yaw`` deg, ``VN/VE/VD`` m/s,
             ``PN/PE/PD`` m from the EKF origin (``ORGN`` type 0, MSL height), placed on the
             earth with ArduPilot's own flat-earth offset (``Location::offset``), so the
-            result matches the autopilot's ``POS`` message
+            result matches the autopilot's ``POS`` message; ``EKF1`` (2014-2015 NavEKF, no
+            ``ORGN`` logged) from an origin estimated from the GPS fixes
 SIM         SITL truth: ``Roll/Pitch/Yaw`` deg, ``Lat/Lng`` deg, ``Alt`` m; no velocity
 ==========  ===========================================================================
 
@@ -50,10 +51,12 @@ class Origin:
 
 @dataclass(frozen=True)
 class DfExtras:
-    """Per-file facts conversions need: undulation N (ellipsoid = MSL + N) and EKF origins."""
+    """Per-file facts conversions need: undulation N (ellipsoid = MSL + N) and EKF origins
+    (``origin_estimated``: from the GPS fixes, the log having no ``ORGN``)."""
 
     undulation_m: float | None = None
     origin: Origin = field(default_factory=Origin)
+    origin_estimated: bool = False
 
 
 Convert = Callable[[np.ndarray, DfFormat, DfExtras, I64], Converted]
@@ -195,7 +198,7 @@ def _ekf(rec: np.ndarray, fmt: DfFormat, ex: DfExtras, t_us: I64) -> Converted:
         scale = np.maximum(np.cos(np.radians(o.lat_deg[k] + dlat / 2)), 0.01)
         lon = o.lon_deg[k] + pe * LOCATION_SCALING_FACTOR_INV * 1e-7 / scale
         alt_msl = o.alt_msl_m[k] - fmt.scaled(rec, "PD")
-        counters = {}
+        counters = {"ekf_origin_estimated_from_gps": n} if ex.origin_estimated else {}
     alt, more = _msl_to_ellipsoid(alt_msl, None, ex)
     cols = {
         "lat_deg": lat,
