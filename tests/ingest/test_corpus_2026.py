@@ -48,6 +48,9 @@ def test_copter33_2015_timems_log(tmp_path: Path) -> None:
     assert result.tables == {"imu": 11916, "gnss": 1198, "estimator": 2383}
     assert result.report["time_base"]["base"] == "gps"
     assert result.report["limits"] == []
+    notes = result.report["files"][0]["inventory_notes"]
+    assert notes[0].startswith("TimeMS paired with GPS week/ms")
+    assert notes[1].startswith("platform: APM:Copter V3.3-dev (ae3192b8); PX4: 60133536")
     gnss = frame(tmp_path, "gnss")
     assert (gnss["t_ns"] // WEEK_NS == 1871).all()  # November 2015, not moved by 1024 weeks
     assert gnss["lat_deg"][gnss["fix_type"] >= 3].between(-35.37, -35.36).all()  # CMAC
@@ -68,6 +71,8 @@ def test_copter33_2015_timems_log(tmp_path: Path) -> None:
 def test_px4_sdlog2_2015_log(tmp_path: Path) -> None:
     result = run("px4_sdlog2_2015_purdue.px4log", tmp_path)
     assert result.tables == {"imu": 5742, "gnss": 354}
+    notes = result.report["files"][0]["inventory_notes"]
+    assert "platform: PX4FMU_V2 44d2c4a1e5c0a044a1cbf69bc1199454f9c0238c" in notes
     assert result.report["time_base"]["base"] == "gps"
     gnss = frame(tmp_path, "gnss")
     assert gnss["lat_deg"].between(40.46, 40.47).all()  # Purdue

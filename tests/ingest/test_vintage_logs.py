@@ -121,6 +121,7 @@ def test_timems_era_dataflash_on_gps_time(tmp_path: Path, gps_t: bool) -> None:
     result = run(path, tmp_path / "out")
     notes = result.report["files"][0]["inventory_notes"]
     assert any(n.startswith("TimeMS paired with GPS week/ms") for n in notes), notes
+    assert "platform: APM:Copter V3.3 (d6053245)" in notes
     assert result.report["time_base"]["base"] == "gps"
     imu, gnss = frame(tmp_path / "out", "imu"), frame(tmp_path / "out", "gnss")
     assert len(imu) == 200

@@ -116,6 +116,8 @@ class DataFlashReader(LogReader):
                 detail = "EKF origin of XKF1/NKF1"
             streams.append(StreamInfo(name, name, count, None, None, None, s.base, detail=detail))
         notes = [s.time_note()]
+        if s.platform:
+            notes.append(f"platform: {'; '.join(s.platform)}")
         notes += [f"FMT of {u.name} at offset {u.offset}: {u.reason}" for u in s.unusable]
         return Inventory(self.path, self.format, tuple(streams), tuple(notes))
 

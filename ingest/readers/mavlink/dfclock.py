@@ -116,6 +116,7 @@ class DfSurvey:
     pairs: OffsetAccumulator = field(default_factory=OffsetAccumulator)
     undulation_mm: OffsetAccumulator = field(default_factory=OffsetAccumulator)
     origins: list[tuple[int, float, float, float]] = field(default_factory=list)
+    platform: list[str] = field(default_factory=list)  # firmware and board, from MSG/VER
     fixes: list[np.ndarray] = field(default_factory=list)  # (boot us, lat, lon, MSL alt) rows
     ekf1: list[np.ndarray] = field(default_factory=list)  # (boot us, PN, PE, PD) rows
     gps_first: tuple[int, int] | None = None
@@ -149,7 +150,7 @@ class DfSurvey:
         if self.px4:
             return "TIME.StartTime"
         names = {f.boot_clock[0] for f in self.formats.current.values() if f.boot_clock is not None}
-        return "TimeUS" if "TimeUS" in names or not names else "TimeMS"
+        return "TimeMS" if "TimeMS" in names else "TimeUS"
 
     @property
     def unusable(self) -> list[Unusable]:
@@ -314,6 +315,8 @@ def _records(
             s.counts[key] += int(sel.sum())
             s.first_us.setdefault(key, int(t_us[sel][0]))
             s.last_us[key] = int(t_us[sel][-1])
+    if name in ("MSG", "VER") and len(s.platform) < PLATFORM_LINES:
+        _platform(s, rec.decode(idx[:PLATFORM_LINES], fmt))
     if name not in ("GPS", "GPS2", "GPA", "GPA2", "ORGN", "EKF1"):
         return
     data = rec.decode(idx, fmt)
@@ -339,6 +342,20 @@ def _records(
             one = data[i : i + 1]
             lat, lon, alt = (float(fmt.scaled(one, c)[0]) for c in ("Lat", "Lng", "Alt"))
             s.origins.append((int(t_us[i]), lat, lon, alt))
+
+
+PLATFORM_LINES = 4
+
+
+def _platform(s: DfSurvey, data: np.ndarray) -> None:
+    """The log's first text messages (ArduPilot ``MSG``: firmware, board, frame) or a legacy
+    PX4 ``VER`` (``Arch``, ``FwGit``)."""
+    names = data.dtype.names or ()
+    for row in data:
+        parts = [bytes(row[n]).split(b"\0", 1)[0].decode("ascii", "replace").strip() for n in names]
+        text = " ".join(p for p in parts if p)
+        if text and len(s.platform) < PLATFORM_LINES:
+            s.platform.append(text)
 
 
 def gps_epochs(data: np.ndarray, fmt: DfFormat) -> tuple[I64, npt.NDArray[np.bool_]]:
