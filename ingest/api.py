@@ -38,6 +38,8 @@ so a stream split over several files (a split bag) continues across them.
                       segments[], nonfinite{column: {nan, inf}}},
                plausibility {...} (imu: rest, gravity, gyro bias, mounting; gnss: ranges),
                companion {...} (gnss velocity join)}
+    limits[]  {table, code, reason}   what the tables cannot give an INS/GNSS replay
+                                      (ingest.limits; logged as warnings)
     warnings[]
 """
 
@@ -56,6 +58,7 @@ from navreplay.ingest.config import DatasetConfig
 from navreplay.ingest.damage import DamageLog
 from navreplay.ingest.detect import Detected, Format, detect
 from navreplay.ingest.errors import IngestError
+from navreplay.ingest.limits import find_limits
 from navreplay.ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
 from navreplay.ingest.readers import open_reader
 from navreplay.ingest.readers.base import Inventory, LogReader, ReadContext, Selection
@@ -263,6 +266,10 @@ def _ingest(
                 warnings.append(f"time bases disagree: {a.text()}")
                 log.warning("time bases disagree: %s", a.text())
         report = _report(opened, plans, sinks, recon, options, warnings, names)
+        limits = find_limits(tmp, report["tables"], inventories)
+        report["limits"] = [lim.to_json() for lim in limits]
+        for lim in limits:
+            log.warning("%s: %s", lim.table, lim.reason)
         report["time_base"]["checks"] = checks
         report["time_base"]["alignment"] = [a.to_json() for a in aligned]
         if gnss_check is not None:

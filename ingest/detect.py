@@ -162,7 +162,9 @@ def _detect_bytes(path: Path, head: bytes) -> Detected:
             raise UnsupportedFormatError(
                 f"not a log: the content is {what} (magic {magic!r})", path=path, offset=0
             )
-    if _looks_like_tlog(head):
+    if _looks_like_tlog(head) or _tlog_start(head) is not None:
+        # _tlog_start: console text or other bytes before the first record (a GCS that wrote
+        # its log after a banner); the reader skips them as garbage and reports their offset.
         return Detected(path, Format.TLOG, one)
     text = _as_text(head)
     found = _detect_text(path, text) if text is not None else None
@@ -188,15 +190,30 @@ def _detect_rosbag(path: Path, head: bytes) -> Detected:
     return Detected(path, Format.ROS1BAG, (path,), version="2.0")
 
 
+def _tlog_start(head: bytes, chain: int = 3) -> int | None:
+    """The first offset of ``head`` where ``chain`` consecutive tlog records frame, if any
+    (a tlog behind leading garbage; pymavlink resynchronises on such records)."""
+    for pos in range(1, max(len(head) - 18, 0)):
+        if head[pos + 8] in (0xFE, 0xFD) and _tlog_chain(head, pos) >= chain:
+            return pos
+    return None
+
+
 def _looks_like_tlog(head: bytes) -> bool:
     """At least two consecutive ``[BE us timestamp][MAVLink packet]`` records (one if short)."""
-    pos = 0
+    good = _tlog_chain(head, 0, whole=True)
+    return good >= 2 or good == -1
+
+
+def _tlog_chain(head: bytes, pos: int, *, whole: bool = False) -> int:
+    """How many records (up to 3) frame one after the other from ``pos``; -1 when one record
+    exactly fills ``head`` and ``whole`` is set."""
     good = 0
     while pos + 10 <= len(head) and good < 3:
         (stamp_us,) = struct.unpack_from(">Q", head, pos)
         stx = head[pos + 8]
         if not _TLOG_MIN_US <= stamp_us <= _TLOG_MAX_US or stx not in (0xFE, 0xFD):
-            return False
+            return good
         payload = head[pos + 9]
         if stx == 0xFE:
             size = 8 + payload
@@ -207,7 +224,7 @@ def _looks_like_tlog(head: bytes) -> bool:
             size = 12 + payload + (13 if signed else 0)
         pos += 8 + size
         good += 1
-    return good >= 2 or (good == 1 and pos == len(head))
+    return -1 if whole and good == 1 and pos == len(head) else good
 
 
 def _as_text(head: bytes) -> str | None:

@@ -11,9 +11,11 @@ IMU (catalogue cases 23, 24, 26):
   E-FATAL (``PlausibilityError``) unless the descriptor says ``accel_units: g``, which scales
   by 9.80665 and is recorded in provenance. Any other magnitude is E-FATAL too.
 - Gyro units: at rest the mean rate (bias) must stay below ``REST_GYRO_MAX_RADPS``; without
-  rest the median |rate| must stay below ``MOVING_GYRO_MEDIAN_MAX_RADPS``; and no vehicle
-  exceeds ``GYRO_MAX_RADPS`` (2000 deg/s). Failing: probable deg/s, E-FATAL unless
-  ``gyro_units: degps`` (scaled to rad/s, recorded) or ``radps`` (accepted as is).
+  rest the median |rate| must stay below ``MOVING_GYRO_MEDIAN_MAX_RADPS``; and no rate
+  exceeds ``GYRO_MAX_RADPS`` (2000 deg/s, the widest full scale of MEMS gyros, plus the 25 %
+  a saturated axis can read beyond it: a tumbling copter's MPU6000 reads 35.6 rad/s).
+  Failing: probable deg/s, E-FATAL unless ``gyro_units: degps`` (scaled to rad/s, recorded)
+  or ``radps`` (accepted as is).
 - Mounting: ``mounting_rpy_deg`` from the descriptor, else levelled from gravity when the tilt
   exceeds ``MOUNTING_MIN_TILT_DEG`` (smaller tilts are the vehicle standing on a slope, not a
   mounting; they are reported and left alone).
@@ -49,7 +51,7 @@ GRAVITY_TOL_MPS2 = 0.5
 REST_ACC_STD_MPS2 = 0.2
 REST_GYRO_MAX_RADPS = 0.05
 MOVING_GYRO_MEDIAN_MAX_RADPS = 1.0
-GYRO_MAX_RADPS = math.radians(2000.0)
+GYRO_MAX_RADPS = 1.25 * math.radians(2000.0)
 MOUNTING_MIN_TILT_DEG = 10.0
 
 

@@ -96,6 +96,9 @@ class StreamInfo:
         detail: anything else worth showing (encoding, frame_id ...).
         role: ``""`` for a stream that can be a table's primary stream; ``velocity`` for a
             GNSS velocity stream joined to the fixes by time (``ingest.sink``).
+        refused: why the stream cannot feed the table it otherwise would (``table`` is then
+            None; ``ingest.limits`` reports the reason when that table stays empty), e.g. a
+            PX4 ``sensor_combined`` logged at 7.8 Hz whose samples integrate 4 ms each.
     """
 
     key: str
@@ -109,6 +112,7 @@ class StreamInfo:
     instance: int | None = None
     detail: str = ""
     role: str = ""
+    refused: str = ""
 
     @property
     def rate_hz(self) -> float | None:

@@ -144,4 +144,8 @@ def format_summary(report: dict, out_dir: Path) -> str:  # type: ignore[type-arg
         lines.append(f"  {f['name']}: {', '.join(f['completeness'])}")
         lines.extend(f"    {d['reason']}" for d in f["defects"])
     lines.extend(f"  warning: {w}" for w in report["warnings"])
+    lines.extend(
+        f"  not usable for INS/GNSS ({lim['table']}): {lim['reason']}"
+        for lim in report.get("limits", ())
+    )
     return "\n".join(lines) + "\n"

@@ -37,6 +37,7 @@ class BlockStats:
     garbage_listed: list[tuple[int, int]] = field(default_factory=list)
     partial_offset: int | None = None
     partial_bytes: int = 0
+    last_run: tuple[int, int] | None = None
 
     def add_gaps(self, gap_pos: I64, gap_len: I64) -> None:
         """Count the garbage runs at ``gap_pos`` (absolute offsets) of ``gap_len`` bytes."""
@@ -45,6 +46,26 @@ class BlockStats:
             self.garbage_bytes += length
             if len(self.garbage_listed) < MAX_LISTED:
                 self.garbage_listed.append((at, length))
+            self.last_run = (at, length)
+
+    def trailing_header(self, path: Path, header: bytes) -> None:
+        """A last garbage run that ends the file and is a prefix of a record ``header`` is a
+        record cut inside its header (the scan could not know its type): a partial record."""
+        if self.last_run is None or self.partial_offset is not None:
+            return
+        at, n = self.last_run
+        if n >= len(header) or at + n != path.stat().st_size:
+            return
+        with path.open("rb") as fh:
+            fh.seek(at)
+            if fh.read(n) != header[:n]:
+                return
+        self.garbage_runs -= 1
+        self.garbage_bytes -= n
+        if self.garbage_listed and self.garbage_listed[-1] == (at, n):
+            self.garbage_listed.pop()
+        self.last_run = None
+        self.partial_offset, self.partial_bytes = at, n
 
     def record_garbage(self, dmg: DamageLog, what: str, how: str = "") -> None:
         """Report the garbage runs, bytes that are not ``what``, skipped (``how``)."""

@@ -26,8 +26,9 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.detect import Detected, Format
-from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.arrays import I64
+from navreplay.ingest.detect import DATAFLASH_MAGIC, Detected, Format
+from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
 from navreplay.ingest.readers.asof import AsofJoin, Left
 from navreplay.ingest.readers.base import (
     Batch,
@@ -37,10 +38,9 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.mavlink.dfclock import DfSurvey, instances, survey
+from navreplay.ingest.readers.mavlink.dfclock import DfSurvey, RecordClock, instances, survey
 from navreplay.ingest.readers.mavlink.dfformat import DfFormat
 from navreplay.ingest.readers.mavlink.dfmsgs import (
-    BY_NAME,
     JOIN_COLUMNS,
     DfExtras,
     DfStream,
@@ -74,6 +74,16 @@ class DataFlashReader(LogReader):
                     path=self.file,
                     offset=0,
                 )
+            if not found.timed_records:
+                raise UnsupportedFormatError(
+                    f"none of the {found.data_records} DataFlash records carries a time since "
+                    "boot (TimeUS, TimeMS, a GPS record's T, a PX4 TIME record): ArduPilot "
+                    "logs before Copter 3.1 (2013) time their IMU records only by their order",
+                    path=self.file,
+                    offset=0,
+                    hint="convert the log with a tool that interpolates times from the GPS "
+                    "records (pymavlink's DFReader does) to CSV and ingest that",
+                )
             self._s = found
         return self._s
 
@@ -82,7 +92,7 @@ class DataFlashReader(LogReader):
         s = self._survey()
         streams: list[StreamInfo] = []
         for (name, inst), count in sorted(s.counts.items()):
-            spec = BY_NAME[name]
+            spec = s.specs[name]
             first, last = s.first_us[(name, inst)], s.last_us[(name, inst)]
             t = s.to_base(np.array([first, last], np.int64), np.array([0, 0], np.int64))
             unusable = s.unusable_detail.get(name)
@@ -106,6 +116,8 @@ class DataFlashReader(LogReader):
                 detail = "EKF origin of XKF1/NKF1"
             streams.append(StreamInfo(name, name, count, None, None, None, s.base, detail=detail))
         notes = [s.time_note()]
+        if s.platform:
+            notes.append(f"platform: {'; '.join(s.platform)}")
         notes += [f"FMT of {u.name} at offset {u.offset}: {u.reason}" for u in s.unusable]
         return Inventory(self.path, self.format, tuple(streams), tuple(notes))
 
@@ -114,7 +126,7 @@ class DataFlashReader(LogReader):
         s = self._survey()
         wanted: dict[str, tuple[DfStream, int]] = {}
         for sel in selections:
-            found = _parse_key(sel.key)
+            found = _parse_key(sel.key, s.specs)
             if found is not None:
                 wanted[sel.key] = found
         self._check_usable(s, wanted)
@@ -126,15 +138,23 @@ class DataFlashReader(LogReader):
         }
         formats = Formats()
         stats = ScanStats()
+        clock = RecordClock()
         for rec in scan_blocks(self.file, formats, stats):
+            t_us, _ = clock.times(formats, rec)
             for key, (spec, inst) in wanted.items():
-                batches = self._batches(rec, formats, spec, inst, key, extras)
+                batches = self._batches(rec, t_us, formats, spec, inst, key, extras)
                 join = joins.get(key)
                 if join is None:
-                    yield from batches
+                    for b in batches:
+                        if spec.table != TableName.GNSS:
+                            yield b
+                            continue
+                        cols = dict(b.columns)
+                        left = Left(cols.pop("t_ns"), cols, dict(b.nulls), b.offsets)
+                        yield _gnss_batch(key, left, extras, "EPH/EPV (PX4)")
                     continue
                 if spec.join is not None:
-                    self._push_right(rec, formats, spec.join[0], spec, inst, join, extras)
+                    self._push_right(rec, t_us, formats, spec.join[0], spec, inst, join, extras)
                 for b in batches:
                     cols = dict(b.columns)
                     join.push_left(Left(cols.pop("t_ns"), cols, dict(b.nulls), b.offsets))
@@ -181,6 +201,7 @@ class DataFlashReader(LogReader):
     def _batches(
         self,
         rec: Records,
+        t_us: I64,
         formats: Formats,
         spec: DfStream,
         inst: int,
@@ -190,10 +211,10 @@ class DataFlashReader(LogReader):
         s = self._survey()
         out: list[Batch] = []
         for idx, data, fmt in self._matching(rec, formats, spec.message, spec.instance, inst):
-            conv = spec.convert(data, fmt, extras)
-            t = s.to_base(np.asarray(data["TimeUS"], np.int64), rec.offset[idx])
+            conv = spec.convert(data, fmt, extras, t_us[idx])
+            t = s.to_base(t_us[idx], rec.offset[idx])
             if spec.table == TableName.GNSS:
-                conv.columns["t_fix_ns"] = s.fix_times(data, t)
+                conv.columns["t_fix_ns"] = s.fix_times(data, fmt, t)
             cols = {"t_ns": t, **conv.columns}
             out.append(
                 Batch(
@@ -212,6 +233,7 @@ class DataFlashReader(LogReader):
     def _push_right(
         self,
         rec: Records,
+        t_us: I64,
         formats: Formats,
         name: str,
         spec: DfStream,
@@ -223,15 +245,15 @@ class DataFlashReader(LogReader):
         convert = spec.join[1]
         s = self._survey()
         for idx, data, fmt in self._matching(rec, formats, name, spec.instance, inst):
-            t = s.to_base(np.asarray(data["TimeUS"], np.int64), rec.offset[idx])
-            join.push_right(t, convert(data, fmt, extras).columns)
+            t = s.to_base(t_us[idx], rec.offset[idx])
+            join.push_right(t, convert(data, fmt, extras, t_us[idx]).columns)
 
     # -------------------------------------------------------------------------------- damage
     def _record_damage(self, stats: ScanStats, formats: Formats, s: DfSurvey) -> None:
         dmg = self.damage
         dmg.note(s.time_note())
         dmg.count("records_framed", stats.records)
-        s.tracker.note_resets(dmg, reboot="reboot", clock="TimeUS")
+        s.tracker.note_resets(dmg, reboot="reboot", clock=s.clock_name)
         if s.week_shift:
             how = f", snapped to the epoch nearest {s.reference}"
             note_week_rollover(dmg, s.gps_rows, "GPS records", s.week_shift, how)
@@ -239,26 +261,31 @@ class DataFlashReader(LogReader):
             dmg.note(f"message type {u.name} skipped: its FMT at offset {u.offset}: {u.reason}")
         for offset, name in formats.redefined:
             dmg.note(f"FMT at offset {offset} redefines {name}: later records use the new layout")
+        stats.trailing_header(self.file, DATAFLASH_MAGIC)
         stats.record_garbage(dmg, "DataFlash records")
         stats.record_partial(dmg)
 
 
-def _parse_key(key: str) -> tuple[DfStream, int] | None:
+def _parse_key(key: str, specs: dict[str, DfStream]) -> tuple[DfStream, int] | None:
     name, _, rest = key.partition("[")
-    spec = BY_NAME.get(name)
+    spec = specs.get(name)
     if spec is None:
         return None
     return spec, int(rest.rstrip("]")) if rest else spec.instance
 
 
-def _gnss_batch(key: str, out: Left, extras: DfExtras) -> Batch:
+def _gnss_batch(
+    key: str, out: Left, extras: DfExtras, accuracy: str = "from GPA (same instance)"
+) -> Batch:
     """A GPS batch after its GPA join: fix epochs as t_ns, heights and accuracies finished."""
     cols = out.columns
     t = cols.pop("t_fix_ns")
     conv = Converted(cols, out.nulls)
     finish_gnss(conv, extras)
     conv.counters["no_fix"] = int((cols["fix_type"] < FixType.FIX_2D).sum())
-    info = {"time": "GPS week and ms of week of each fix", "accuracy": "from GPA (same instance)"}
+    info = {"time": "the GPS time of each fix (week and ms of week, or UTC)"}
+    if accuracy:
+        info["accuracy"] = accuracy
     return Batch(
         key,
         TableName.GNSS,

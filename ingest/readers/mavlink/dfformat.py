@@ -75,6 +75,42 @@ class DfFormat:
                 return name
         return None
 
+    @property
+    def boot_clock(self) -> tuple[str, int] | None:
+        """(column, microseconds per unit) of the record's time since boot, if it has one.
+
+        ``TimeUS`` (2015 on); ``TimeMS`` before, except in GPS records, where ``TimeMS`` is
+        the GPS millisecond of the week and ``T`` the boot time in ms; ``StartTime`` of a
+        legacy PX4 (sdlog2) ``TIME`` record, which times the records after it."""
+        cols = self.columns
+        if "TimeUS" in cols:
+            return "TimeUS", 1
+        if self.name == "TIME" and "StartTime" in cols:
+            return "StartTime", 1
+        if self.is_gps:
+            return ("T", 1000) if "T" in cols else None
+        if "TimeMS" in cols:
+            return "TimeMS", 1000
+        return None
+
+    @property
+    def is_gps(self) -> bool:
+        return self.name in ("GPS", "GPS2")
+
+    @property
+    def gps_time(self) -> tuple[str, ...] | None:
+        """Columns of the fix's own GPS time: (week, ms of week) (``GWk``/``GMS``, before 2015
+        ``Week``/``TimeMS``), or (UTC us,) (legacy PX4 ``GPSTime``); None if absent."""
+        cols = self.columns
+        if not self.is_gps:
+            return None
+        for week, ms in (("GWk", "GMS"), ("Week", "TimeMS")):
+            if week in cols and ms in cols:
+                return week, ms
+        if "GPSTime" in cols:
+            return ("GPSTime",)
+        return None
+
     def scaled(self, rec: np.ndarray, column: str) -> np.ndarray:
         """Column ``column`` of decoded records as float64 in the logged units."""
         values = np.asarray(rec[column], dtype=np.float64)

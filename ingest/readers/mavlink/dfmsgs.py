@@ -12,7 +12,8 @@ GPS[I]      ``Status`` (the MAVLink GPS_FIX_TYPE values), ``GWk``/``GMS`` GPS we
 XKF1[C]     EKF3 (NKF1: EKF2) core C: ``Roll``/``Pitch``/``Yaw`` deg, ``VN/VE/VD`` m/s,
             ``PN/PE/PD`` m from the EKF origin (``ORGN`` type 0, MSL height), placed on the
             earth with ArduPilot's own flat-earth offset (``Location::offset``), so the
-            result matches the autopilot's ``POS`` message
+            result matches the autopilot's ``POS`` message; ``EKF1`` (2014-2015 NavEKF, no
+            ``ORGN`` logged) from an origin estimated from the GPS fixes
 SIM         SITL truth: ``Roll/Pitch/Yaw`` deg, ``Lat/Lng`` deg, ``Alt`` m; no velocity
 ==========  ===========================================================================
 
@@ -29,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.arrays import F64
+from navreplay.ingest.arrays import F64, I64
 from navreplay.ingest.readers.mavlink.dfformat import DfFormat
 from navreplay.ingest.readers.mavlink.mavmsgs import Converted
 from navreplay.ingest.schema import FixType, TableName
@@ -50,13 +51,16 @@ class Origin:
 
 @dataclass(frozen=True)
 class DfExtras:
-    """Per-file facts conversions need: undulation N (ellipsoid = MSL + N) and EKF origins."""
+    """Per-file facts conversions need: undulation N (ellipsoid = MSL + N) and EKF origins
+    (``origin_estimated``: from the GPS fixes, the log having no ``ORGN``)."""
 
     undulation_m: float | None = None
     origin: Origin = field(default_factory=Origin)
+    origin_estimated: bool = False
 
 
-Convert = Callable[[np.ndarray, DfFormat, DfExtras], Converted]
+Convert = Callable[[np.ndarray, DfFormat, DfExtras, I64], Converted]
+"""Decoded records, their format, the file's extras and the records' boot time (us)."""
 
 
 @dataclass(frozen=True)
@@ -84,9 +88,10 @@ class DfStream:
         return f"{self.message}[{instance}]" if fmt.instance_column else self.message
 
 
-def _imu(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras) -> Converted:
+def _imu(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Converted:
+    gyr = "Gyr" if "GyrX" in fmt.columns else "Gyro"  # legacy PX4: GyroX
     cols = {f"acc_{a}_mps2": fmt.scaled(rec, f"Acc{a.upper()}") for a in "xyz"}
-    cols |= {f"gyro_{a}_radps": fmt.scaled(rec, f"Gyr{a.upper()}") for a in "xyz"}
+    cols |= {f"gyro_{a}_radps": fmt.scaled(rec, f"{gyr}{a.upper()}") for a in "xyz"}
     return Converted(cols)
 
 
@@ -102,24 +107,47 @@ def _msl_to_ellipsoid(alt_msl: F64, und: F64 | None, ex: DfExtras) -> tuple[F64,
     return alt_msl + n, counters
 
 
-def _gps(rec: np.ndarray, fmt: DfFormat, ex: DfExtras) -> Converted:
+def _gps(rec: np.ndarray, fmt: DfFormat, ex: DfExtras, _t: I64) -> Converted:
     speed = fmt.scaled(rec, "Spd")
     course = np.radians(fmt.scaled(rec, "GCrs"))
     fix = np.asarray(rec["Status"], dtype=np.int8)
+    n = len(rec)
     cols = {
         "lat_deg": fmt.scaled(rec, "Lat"),
         "lon_deg": fmt.scaled(rec, "Lng"),
         "alt_msl": fmt.scaled(rec, "Alt"),
         "vel_n_mps": speed * np.cos(course),
         "vel_e_mps": speed * np.sin(course),
-        "vel_d_mps": fmt.scaled(rec, "VZ"),
+        "vel_d_mps": fmt.scaled(rec, "VZ") if "VZ" in fmt.columns else np.zeros(n),
         "fix_type": fix,
         "num_sats": np.asarray(rec["NSats"], dtype=np.int16),
     }
-    return Converted(cols, counters={"no_fix": int((fix < FixType.FIX_2D).sum())})
+    nulls = {} if "VZ" in fmt.columns else {"vel_d_mps": np.ones(n, bool)}
+    return Converted(cols, nulls, counters={"no_fix": int((fix < FixType.FIX_2D).sum())})
 
 
-def _gpa(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras) -> Converted:
+def _px4_gps(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Converted:
+    """Legacy PX4 (sdlog2) ``GPS``: ``Fix``, ``Lat/Lon`` deg, ``Alt`` m MSL, ``VelN/E/D``
+    m/s, ``EPH/EPV`` m (PX4's accuracies), ``nSat``; no geoid: heights stay MSL."""
+    fix = np.asarray(rec["Fix"], dtype=np.int8)
+    n = len(rec)
+    cols = {
+        "lat_deg": fmt.scaled(rec, "Lat"),
+        "lon_deg": fmt.scaled(rec, "Lon"),
+        "alt_msl": fmt.scaled(rec, "Alt"),
+        **{f"vel_{a}_mps": fmt.scaled(rec, f"Vel{a.upper()}") for a in "ned"},
+        "fix_type": fix,
+        "num_sats": np.asarray(rec["nSat"], dtype=np.int16),
+        "h_acc_m": fmt.scaled(rec, "EPH"),
+        "v_acc_m": fmt.scaled(rec, "EPV"),
+        "speed_acc_mps": np.zeros(n),
+        "und": np.zeros(n),
+    }
+    nulls = {"speed_acc_mps": np.ones(n, bool)}
+    return Converted(cols, nulls, counters={"no_fix": int((fix < FixType.FIX_2D).sum())})
+
+
+def _gpa(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Converted:
     cols = {
         "h_acc_m": fmt.scaled(rec, "HAcc"),
         "v_acc_m": fmt.scaled(rec, "VAcc"),
@@ -155,7 +183,7 @@ def _attitude(rec: np.ndarray, fmt: DfFormat) -> dict[str, F64]:
     }
 
 
-def _ekf(rec: np.ndarray, fmt: DfFormat, ex: DfExtras) -> Converted:
+def _ekf(rec: np.ndarray, fmt: DfFormat, ex: DfExtras, t_us: I64) -> Converted:
     o = ex.origin
     n = len(rec)
     if not len(o.time_us):
@@ -163,15 +191,14 @@ def _ekf(rec: np.ndarray, fmt: DfFormat, ex: DfExtras) -> Converted:
         lat, lon, alt_msl = nan, nan, nan
         counters = {"no_ekf_origin": n}
     else:
-        t = np.asarray(rec["TimeUS"], dtype=np.int64)
-        k = np.maximum(np.searchsorted(o.time_us, t, side="right") - 1, 0)
+        k = np.maximum(np.searchsorted(o.time_us, t_us, side="right") - 1, 0)
         pn, pe = fmt.scaled(rec, "PN"), fmt.scaled(rec, "PE")
         dlat = pn * LOCATION_SCALING_FACTOR_INV * 1e-7
         lat = o.lat_deg[k] + dlat
         scale = np.maximum(np.cos(np.radians(o.lat_deg[k] + dlat / 2)), 0.01)
         lon = o.lon_deg[k] + pe * LOCATION_SCALING_FACTOR_INV * 1e-7 / scale
         alt_msl = o.alt_msl_m[k] - fmt.scaled(rec, "PD")
-        counters = {}
+        counters = {"ekf_origin_estimated_from_gps": n} if ex.origin_estimated else {}
     alt, more = _msl_to_ellipsoid(alt_msl, None, ex)
     cols = {
         "lat_deg": lat,
@@ -185,7 +212,7 @@ def _ekf(rec: np.ndarray, fmt: DfFormat, ex: DfExtras) -> Converted:
     return Converted(cols, counters=counters | more)
 
 
-def _sim(rec: np.ndarray, fmt: DfFormat, ex: DfExtras) -> Converted:
+def _sim(rec: np.ndarray, fmt: DfFormat, ex: DfExtras, _t: I64) -> Converted:
     alt, counters = _msl_to_ellipsoid(fmt.scaled(rec, "Alt"), None, ex)
     cols = {
         "lat_deg": fmt.scaled(rec, "Lat"),
@@ -202,13 +229,24 @@ STREAMS: tuple[DfStream, ...] = (
     DfStream("IMU", _IMU, _imu, detail="rad/s, m/s^2"),
     DfStream("IMU2", _IMU, _imu, instance=1, detail="rad/s, m/s^2 (legacy second IMU)"),
     DfStream("IMU3", _IMU, _imu, instance=2, detail="rad/s, m/s^2 (legacy third IMU)"),
-    DfStream("GPS", TableName.GNSS, _gps, join=("GPA", _gpa), detail="GWk/GMS -> GPS time"),
+    DfStream("GPS", TableName.GNSS, _gps, join=("GPA", _gpa), detail="GPS week and ms -> GPS time"),
     DfStream(
         "GPS2", TableName.GNSS, _gps, instance=1, join=("GPA2", _gpa), detail="legacy 2nd GPS"
     ),
     DfStream("XKF1", _EST, _ekf, detail="EKF3 core output, position from ORGN"),
     DfStream("NKF1", _EST, _ekf, detail="EKF2 core output, position from ORGN"),
+    DfStream("EKF1", _EST, _ekf, detail="EKF (2014-2015 NavEKF) output, position from ORGN"),
     DfStream("SIM", TableName.TRUTH, _sim, detail="SITL truth (no velocity)"),
 )
 BY_NAME = {s.message: s for s in STREAMS}
+
+#: Legacy PX4 (sdlog2, ``.px4log``, until 2016): the same framing, PX4's own messages; the
+#: IMUs are ``IMU``, ``IMU1``, ``IMU2``; records are timed by the ``TIME`` record before them.
+PX4_STREAMS: tuple[DfStream, ...] = (
+    DfStream("IMU", _IMU, _imu, detail="rad/s, m/s^2 (PX4 sdlog2)"),
+    DfStream("IMU1", _IMU, _imu, instance=1, detail="rad/s, m/s^2 (PX4 sdlog2, second IMU)"),
+    DfStream("IMU2", _IMU, _imu, instance=2, detail="rad/s, m/s^2 (PX4 sdlog2, third IMU)"),
+    DfStream("GPS", TableName.GNSS, _px4_gps, detail="TIME paired with GPSTime (UTC); EPH/EPV"),
+)
+PX4_BY_NAME = {s.message: s for s in PX4_STREAMS}
 JOIN_COLUMNS = ("h_acc_m", "v_acc_m", "speed_acc_mps", "und")

@@ -14,8 +14,10 @@ so single late or jittery messages do not move it.
 - ``OffsetAccumulator`` keeps, per segment, the median of each block's offsets and the count,
   and returns their weighted median: bounded memory for logs of any length.
 - ``unroll_gps_week`` undoes a GPS week-number rollover (1024 weeks, catalogue case 35) by
-  snapping to the epoch nearest a reference time (the tlog reader does the same for UTC
-  values against its stamps, ``ROLLOVER_NS``).
+  moving the log forward by whole rollovers as long as it stays before a reference time it
+  cannot postdate (the file's modification time or the dataset's date; the tlog reader snaps
+  UTC values to its stamps, ``ROLLOVER_NS``). Nearest-epoch snapping would move a 2015 log
+  copied in 2026 (11 years: more than half a rollover) to 2034.
 """
 
 from __future__ import annotations
@@ -111,15 +113,20 @@ class OffsetAccumulator:
         return sum(c for _, c in self._parts.get(segment, ()))
 
 
+#: The reference date may precede the log by this much (a dataset's ``utc_date`` is the day).
+ROLLOVER_SLACK_NS = 2 * 86_400 * NS_PER_S
+
+
 def unroll_gps_week(week: I64, tow_ns: I64, reference_gps_ns: int) -> tuple[I64, int]:
-    """GPS weeks corrected by multiples of 1024 to the epoch nearest ``reference_gps_ns``.
+    """GPS weeks corrected by the most multiples of 1024 that keep the log before
+    ``reference_gps_ns`` (plus ``ROLLOVER_SLACK_NS``).
 
     Returns the corrected weeks and the number of weeks added (0 when none).
     """
     if not len(week):
         return week, 0
     t = week[0] * SECONDS_PER_WEEK * NS_PER_S + tow_ns[0]
-    k = round((reference_gps_ns - int(t)) / ROLLOVER_NS)
+    k = (reference_gps_ns + ROLLOVER_SLACK_NS - int(t)) // ROLLOVER_NS
     if k <= 0:
         return week, 0
     return week + k * ROLLOVER_WEEKS, k * ROLLOVER_WEEKS

@@ -5,6 +5,8 @@ Streams (``topic[multi_id]``), all on the boot clock ``timestamp`` (us) until pa
 =============================  ============================================================
 sensor_combined[i]             ``gyro_rad[0..2]`` rad/s, ``accelerometer_m_s2[0..2]`` m/s^2,
                                body FRD -> imu
+sensor_accel[i]                ``x/y/z`` m/s^2 with ``sensor_gyro[i]`` ``x/y/z`` rad/s nearest
+ + sensor_gyro[i]              in time -> imu, only in a log without sensor_combined
 vehicle_gps_position[i],       ``lat/lon`` 1e-7 deg (or ``latitude_deg``...), ``alt`` mm MSL,
 sensor_gps[i]                  ``alt_ellipsoid`` mm, ``eph/epv`` m (PX4's accuracies),
                                ``s_variance_m_s`` m/s, ``vel_n/e/d_m_s``, ``fix_type``,
@@ -15,6 +17,9 @@ vehicle_global_position[i]     ``lat/lon`` deg, ``alt`` m MSL (``alt_ellipsoid``
 vehicle_local_position[i]      ``x/y/z``, ``vx/vy/vz`` NED from ``ref_lat/ref_lon/ref_alt``
  + vehicle_attitude            (PX4's azimuthal-equidistant projection, valid where
                                ``xy_global``/``z_global``; NaN otherwise) -> estimator
+vehicle_global_position_       the simulator's state (PX4 SITL), as vehicle_global_position
+groundtruth[i] + vehicle_      (heights MSL unless ``alt_ellipsoid`` is logged: the GPS
+attitude_groundtruth           heights of SITL are MSL too) -> truth
 =============================  ============================================================
 
 Time: when a GPS topic carries ``time_utc_usec``, the boot clock is paired with it (median of
@@ -52,7 +57,13 @@ from navreplay.ingest.readers.base import (
     Selection,
     StreamInfo,
 )
-from navreplay.ingest.readers.ulog.ulogmsgs import GPS_TOPICS, TOPICS, UlogTopic, attitude_columns
+from navreplay.ingest.readers.ulog.ulogmsgs import (
+    GPS_TOPICS,
+    TOPICS,
+    UlogTopic,
+    attitude_columns,
+    gyro_columns,
+)
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
 
@@ -79,7 +90,7 @@ class UlogReader(LogReader):
         from pyulog import ULog
         from pyulog.core import ULogException
 
-        names = [*(t.name for t in TOPICS), "vehicle_attitude"]
+        names = [*(t.name for t in TOPICS), *{t.attitude or t.pair for t in TOPICS} - {""}]
         printed = io.StringIO()
         try:
             with contextlib.redirect_stdout(printed):  # pyulog prints its warnings
@@ -128,16 +139,23 @@ class UlogReader(LogReader):
     # ----------------------------------------------------------------------------- inventory
     def _datasets(self) -> Iterator[tuple[UlogTopic, Any]]:
         by_name = {t.name: t for t in TOPICS}
+        present = {d.name for d in self._load().data_list if len(d.data["timestamp"])}
         for d in sorted(self._load().data_list, key=lambda d: (d.name, d.multi_id)):
             topic = by_name.get(d.name)
-            if topic is not None and len(d.data["timestamp"]):
-                yield topic, d
+            if topic is None or not len(d.data["timestamp"]):
+                continue
+            if topic.fallback_for in present or (topic.pair and topic.pair not in present):
+                continue
+            yield topic, d
 
     def inventory(self) -> Inventory:
         streams = []
         for topic, d in self._datasets():
             ts = d.data["timestamp"]
             first, last = self.to_base(np.array([ts[0], ts[-1]]))
+            refused = (
+                _imu_coverage(d.name, d.multi_id, d.data) if topic.table == TableName.IMU else ""
+            )
             streams.append(
                 StreamInfo(
                     key=f"{d.name}[{d.multi_id}]",
@@ -145,11 +163,12 @@ class UlogReader(LogReader):
                     count=len(ts),
                     start_ns=int(first),
                     end_ns=int(last),
-                    table=topic.table,
+                    table=None if refused else topic.table,
                     time_base=self.base,
                     frame="frd" if topic.table == TableName.IMU else "ned",
                     instance=int(d.multi_id),
-                    detail=topic.detail,
+                    detail=f"not usable as imu: {refused}" if refused else topic.detail,
+                    refused=refused,
                 )
             )
         return Inventory(self.path, self.format, tuple(streams), (self._time_note(),))
@@ -174,8 +193,11 @@ class UlogReader(LogReader):
             conv = topic.convert(d.data, extras)
             t = self.to_base(d.data["timestamp"])
             offsets = np.zeros(len(t), np.int64)  # pyulog does not expose record offsets
-            if topic.join_attitude:
+            if topic.attitude:
                 yield self._with_attitude(key, topic, t, conv, offsets, ulog)
+                continue
+            if topic.pair:
+                yield self._with_pair(key, topic, d.multi_id, t, conv, offsets, ulog)
                 continue
             cols = {"t_ns": t, **conv.columns}
             yield Batch(key, topic.table, cols, offsets, conv.nulls, None, conv.counters, conv.info)
@@ -190,17 +212,36 @@ class UlogReader(LogReader):
                     return float(np.median(diff)) / 1000.0
         return None
 
+    def _with_pair(
+        self, key: str, topic: UlogTopic, multi_id: int, t: I64, conv: Any, offsets: I64, ulog: Any
+    ) -> Batch:
+        """``sensor_accel`` rows with the ``sensor_gyro`` of the same instance nearest in time
+        (null beyond ``JOIN_TOLERANCE_NS``, counted)."""
+        join = AsofJoin(("gyro_x_radps", "gyro_y_radps", "gyro_z_radps"), JOIN_TOLERANCE_NS)
+        for d in ulog.data_list:
+            if d.name == topic.pair and d.multi_id == multi_id:
+                join.push_right(self.to_base(d.data["timestamp"]), gyro_columns(d.data))
+        join.push_left(Left(t, conv.columns, conv.nulls, offsets))
+        out = join.pop(final=True)
+        assert out is not None
+        counters = dict(conv.counters)
+        missing = int(out.nulls["gyro_x_radps"].sum()) if "gyro_x_radps" in out.nulls else 0
+        if missing:
+            counters["gyro_not_within_50ms"] = missing
+        cols = {"t_ns": out.t, **out.columns}
+        return Batch(key, topic.table, cols, out.offsets, out.nulls, None, counters, conv.info)
+
     def _with_attitude(
         self, key: str, topic: UlogTopic, t: I64, conv: Any, offsets: I64, ulog: Any
     ) -> Batch:
         join = AsofJoin(("roll_rad", "pitch_rad", "yaw_rad"), JOIN_TOLERANCE_NS)
         for d in ulog.data_list:
-            if d.name == "vehicle_attitude" and d.multi_id == 0:
+            if d.name == topic.attitude and d.multi_id == 0:
                 join.push_right(self.to_base(d.data["timestamp"]), attitude_columns(d.data))
         join.push_left(Left(t, conv.columns, conv.nulls, offsets))
         out = join.pop(final=True)
         assert out is not None
-        info = {**conv.info, "attitude": "vehicle_attitude[0] q, nearest in time"}
+        info = {**conv.info, "attitude": f"{topic.attitude}[0] q, nearest in time"}
         cols = {"t_ns": out.t, **out.columns}
         return Batch(key, topic.table, cols, out.offsets, out.nulls, None, conv.counters, info)
 
@@ -233,6 +274,35 @@ class UlogReader(LogReader):
                     bytes_skipped=n,
                 )
             )
+
+
+#: Below this share of the log's time covered by its IMU samples' integration intervals, the
+#: samples are snapshots of a vibrating vehicle, not its motion: an INS cannot integrate them.
+MIN_IMU_COVERAGE = 0.5
+
+
+def _imu_coverage(name: str, multi_id: int, data: Any) -> str:
+    """Why ``sensor_combined`` cannot feed the IMU table, or "": each sample is the rate and
+    specific force integrated over ``*_integral_dt`` (us; seconds as float in PX4 < 1.7); a
+    logging profile that keeps one sample in 32 leaves most of the motion unmeasured."""
+    ts = np.asarray(data["timestamp"], np.int64)
+    dt_name = "accelerometer_integral_dt"
+    if dt_name not in data or len(ts) < 2 or ts[-1] <= ts[0]:
+        return ""
+    dt = np.asarray(data[dt_name], np.float64)
+    dt_us = dt * 1e6 if float(np.median(dt)) < 1.0 else dt
+    span_us = float(ts[-1] - ts[0])
+    share = float(dt_us.sum()) / span_us
+    if share >= MIN_IMU_COVERAGE:
+        return ""
+    rate = (len(ts) - 1) / (span_us * 1e-6)
+    return (
+        f"{name}[{multi_id}] has {len(ts)} samples over {span_us * 1e-6:.1f} s ({rate:.1f} Hz), "
+        f"each integrating {float(np.median(dt_us)) / 1000:.1f} ms ({dt_name}): only "
+        f"{100 * share:.1f} % of the time is measured, the rest of the motion is not in the log "
+        "(a reduced logging profile, SDLOG_PROFILE); an INS cannot integrate it. Log "
+        "sensor_combined at full rate (PX4 logs it at its rate with the default profile)"
+    )
 
 
 def _trailing_partial(path: Any) -> tuple[int, int] | None:

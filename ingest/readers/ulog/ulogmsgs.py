@@ -32,15 +32,21 @@ class UlogTopic:
         name: topic name.
         table: canonical table.
         convert: topic columns and the log's geoid undulation (m or None) -> columns.
-        join_attitude: vehicle_attitude is joined by time (roll, pitch, yaw).
+        attitude: the attitude topic joined by time (roll, pitch, yaw), or "" for none.
+        pair: a topic of the same instance whose converted columns are joined by time
+            (``sensor_gyro`` onto ``sensor_accel``), or "" for none.
+        fallback_for: offered only when the log has no such topic (``sensor_accel`` when
+            there is no ``sensor_combined``: selections of existing logs stay as they were).
         detail: what ``--list`` shows.
     """
 
     name: str
     table: TableName
     convert: Callable[[Data, float | None], Converted]
-    join_attitude: bool = False
+    attitude: str = ""
     detail: str = ""
+    pair: str = ""
+    fallback_for: str = ""
 
 
 def _f(data: Data, name: str, per: float = 1.0) -> F64:
@@ -53,6 +59,16 @@ def _imu(data: Data, _und: float | None) -> Converted:
     cols |= {f"gyro_{a}_radps": _f(data, f"gyro_rad[{i}]") for i, a in enumerate("xyz")}
     info = {"time": "timestamp (the gyro sample; accelerometer_timestamp_relative not applied)"}
     return Converted(cols, info=info)
+
+
+def _accel(data: Data, _und: float | None) -> Converted:
+    cols = {f"acc_{a}_mps2": _f(data, a) for a in "xyz"}
+    return Converted(cols, info={"time": "sensor_accel timestamp; sensor_gyro nearest in time"})
+
+
+def gyro_columns(data: Data) -> dict[str, np.ndarray]:
+    """``sensor_gyro`` ``x/y/z`` rad/s as the IMU's gyro columns."""
+    return {f"gyro_{a}_radps": _f(data, a) for a in "xyz"}
 
 
 def _gps(data: Data, und: float | None) -> Converted:
@@ -70,6 +86,12 @@ def _gps(data: Data, und: float | None) -> Converted:
         if "vel_ned_valid" in data
         else np.ones(len(lat), bool)
     )
+    vel = np.stack([_f(data, f"vel_{a}_m_s") for a in "ned"])
+    never_set = not valid_vel.any() and bool(np.any(vel != 0.0))
+    if never_set:
+        # PX4 SITL's simulated receiver (1.9) never sets the flag while its velocities match
+        # the simulator's to 0.1 m/s: a flag nobody maintains, not invalid velocities.
+        valid_vel = np.ones(len(lat), bool)
     fix = np.asarray(data["fix_type"], dtype=np.int8)
     cols = {
         "lat_deg": lat,
@@ -84,6 +106,8 @@ def _gps(data: Data, und: float | None) -> Converted:
     }
     nulls = {f"vel_{a}_mps": ~valid_vel for a in "ned"}
     counters = {"no_fix": int((fix < FixType.FIX_2D).sum())}
+    if never_set:
+        counters["vel_ned_valid_never_set_velocity_used"] = len(lat)
     if (~has_ell).any():
         counters["alt_msl_no_geoid" if und is None else "alt_msl_plus_undulation"] = int(
             (~has_ell).sum()
@@ -93,8 +117,10 @@ def _gps(data: Data, und: float | None) -> Converted:
 
 def _global_position(data: Data, und: float | None) -> Converted:
     n = len(data["timestamp"])
-    ell = "alt_ellipsoid" in data
-    alt = _f(data, "alt_ellipsoid") if ell else _f(data, "alt") + (und or 0.0)
+    # alt_ellipsoid of 0 is "not given" (PX4 SITL logs 0 there): MSL plus the log's undulation.
+    ell = _f(data, "alt_ellipsoid") if "alt_ellipsoid" in data else np.zeros(n)
+    has_ell = ell != 0.0
+    alt = np.where(has_ell, ell, _f(data, "alt") + (und or 0.0))
     cols = {"lat_deg": _f(data, "lat"), "lon_deg": _f(data, "lon"), "alt_m": alt}
     nulls = {}
     for a in "ned":
@@ -103,7 +129,8 @@ def _global_position(data: Data, und: float | None) -> Converted:
         else:
             cols[f"vel_{a}_mps"] = np.zeros(n)
             nulls[f"vel_{a}_mps"] = np.ones(n, bool)
-    counters = {} if ell or und is not None else {"alt_msl_no_geoid": n}
+    msl = int((~has_ell).sum())
+    counters = {} if not msl or und is not None else {"alt_msl_no_geoid": msl}
     return Converted(cols, nulls, counters)
 
 
@@ -159,20 +186,35 @@ def attitude_columns(data: Data) -> dict[str, np.ndarray]:
 
 TOPICS: tuple[UlogTopic, ...] = (
     UlogTopic("sensor_combined", TableName.IMU, _imu, detail="rad/s, m/s^2"),
+    UlogTopic(
+        "sensor_accel",
+        TableName.IMU,
+        _accel,
+        detail="m/s^2 + sensor_gyro rad/s (board frame since PX4 1.11)",
+        pair="sensor_gyro",
+        fallback_for="sensor_combined",
+    ),
     UlogTopic("vehicle_gps_position", TableName.GNSS, _gps, detail="1e-7 deg, mm"),
     UlogTopic("sensor_gps", TableName.GNSS, _gps, detail="receiver fixes"),
     UlogTopic(
         "vehicle_global_position",
         TableName.ESTIMATOR,
         _global_position,
-        join_attitude=True,
+        attitude="vehicle_attitude",
         detail="EKF global position + vehicle_attitude",
     ),
     UlogTopic(
         "vehicle_local_position",
         TableName.ESTIMATOR,
         _local_position,
-        join_attitude=True,
+        attitude="vehicle_attitude",
         detail="EKF local position + vehicle_attitude",
+    ),
+    UlogTopic(
+        "vehicle_global_position_groundtruth",
+        TableName.TRUTH,
+        _global_position,
+        attitude="vehicle_attitude_groundtruth",
+        detail="simulator truth (SITL) + vehicle_attitude_groundtruth",
     ),
 )

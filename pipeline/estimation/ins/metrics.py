@@ -28,7 +28,7 @@ from navreplay.pipeline.estimation.core.windows import Window, WindowMetricsPara
 from navreplay.pipeline.estimation.ins.models import measurement as me
 from navreplay.pipeline.estimation.ins.replay import RunResult
 from navreplay.pipeline.estimation.ins.tracks import outage_windows
-from navreplay.pipeline.estimation.ins.truth import error_states, full_truth
+from navreplay.pipeline.estimation.ins.truth import error_states, position_truth
 from navreplay.pipeline.nav.earth import F64
 
 
@@ -67,7 +67,7 @@ def compute_metrics(
     if windows:
         params = window_params or WindowMetricsParams()
         m["outage_windows"] = outage_windows(result, truth, fixes, lever_b, windows, t0_ns, params)
-    if truth is None or truth.num_rows == 0 or result.t_ns.size == 0 or not full_truth(truth):
+    if truth is None or truth.num_rows == 0 or result.t_ns.size == 0 or not position_truth(truth):
         m["truth"] = False
         return m
     inside, err, names = error_states(result, truth)
@@ -75,23 +75,31 @@ def compute_metrics(
     pos_h = np.hypot(err[:, 0], err[:, 1])
     pos_3d = np.sqrt(np.sum(err[:, 0:3] ** 2, axis=1))
     sig_h = np.sqrt(P[:, 0, 0] + P[:, 1, 1])
-    e_nav = nees(err[:, :9], P[:, :9, :9])
+    # The states the truth covers (a simulator's truth may lack velocity or attitude).
+    have = [j for j in range(9) if err.size and np.isfinite(err[:, j]).all()]
+    e_nav = nees(err[:, have], P[:, have][:, :, have])
+    vel = all(j in have for j in (3, 4, 5))
+    att = all(j in have for j in (6, 7, 8))
     m.update(
         {
             "truth": True,
             "pos_err_h_rms_m": _rms(pos_h),
-            "pos_err_v_rms_m": _rms(err[:, 2]),
-            "pos_err_3d_rms_m": _rms(pos_3d),
-            "pos_err_3d_max_m": float(pos_3d.max()) if pos_3d.size else None,
-            "vel_err_3d_rms_mps": _rms(np.sqrt(np.sum(err[:, 3:6] ** 2, axis=1))),
-            "att_err_rms_rad": {a: _rms(err[:, 6 + j]) for j, a in enumerate(("n", "e", "d"))},
+            "pos_err_v_rms_m": _rms(err[:, 2]) if 2 in have else None,
+            "pos_err_3d_rms_m": _rms(pos_3d) if 2 in have else None,
+            "pos_err_3d_max_m": float(pos_3d.max()) if pos_3d.size and 2 in have else None,
+            "vel_err_3d_rms_mps": _rms(np.sqrt(np.sum(err[:, 3:6] ** 2, axis=1))) if vel else None,
+            "att_err_rms_rad": {a: _rms(err[:, 6 + j]) for j, a in enumerate(("n", "e", "d"))}
+            if att
+            else None,
             "pos_h_within_3sigma": float(np.mean(pos_h <= 3.0 * sig_h)) if pos_h.size else None,
             "nees_mean": float(e_nav.mean()) if e_nav.size else None,
-            "nees_dof": 9,
-            "nees_states": names[:9],
+            "nees_dof": len(have),
+            "nees_states": [names[j] for j in have],
         }
     )
-    if len(names) > 9:
+    if len(have) < 9:
+        m["truth_missing"] = [n for j, n in enumerate(names[:9]) if j not in have]
+    if len(names) > 9 and len(have) == 9:
         e_full = nees(err, P)
         m["nees_full_mean"] = float(e_full.mean())
         m["nees_full_dof"] = len(names)

@@ -2,8 +2,9 @@
 
 Shared by the run metrics (``metrics``), the outage-window metrics (``ins.tracks``) and
 the experiments: ``truth_at`` interpolates the truth to given times, ``error_states`` gives
-truth minus estimate in the filter's error coordinates, ``full_truth`` whether a truth table
-has position, velocity and attitude.
+truth minus estimate in the filter's error coordinates, ``position_truth`` whether a truth
+table has positions (the metrics need no more; velocity and attitude errors are NaN where the
+truth lacks them).
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ _NAV_TRUTH = ("lat_deg", "lon_deg", "alt_m", "vel_n_mps", "vel_e_mps", "vel_d_mp
 
 
 def error_states(result: RunResult, truth: pa.Table) -> tuple[np.ndarray, F64, list[str]]:
-    """Truth-minus-estimate in the filter's error coordinates (``models.ins``).
+    """Truth-minus-estimate in the filter's error coordinates (``models.ins``); velocity or
+    attitude errors are NaN where the truth has no such columns (a simulator's ``SIM``).
 
     Returns:
         (mask of the estimate rows with truth, errors (K, k), names of the k states covered:
@@ -41,14 +43,19 @@ def error_states(result: RunResult, truth: pa.Table) -> tuple[np.ndarray, F64, l
         -(tr["alt_m"] - h),
     ]
     names = ["pos_n", "pos_e", "pos_d"]
+    missing = np.full(len(lat), np.nan)
     for j, axis in enumerate("ned"):
-        cols.append(tr[f"vel_{axis}_mps"] - x[:, ins.X_VEL + j])
+        v = tr.get(f"vel_{axis}_mps")
+        cols.append(v - x[:, ins.X_VEL + j] if v is not None else missing)
         names.append(f"vel_{axis}")
-    r_true = Rotation.from_euler("ZYX", np.column_stack([tr[a] for a in _ANGLES[::-1]]))
-    q = x[:, ins.X_Q : ins.X_Q + 4]
-    r_est = Rotation.from_quat(q[:, [1, 2, 3, 0]])
-    att = (r_true * r_est.inv()).as_rotvec()
-    cols += [att[:, 0], att[:, 1], att[:, 2]]
+    if all(a in tr for a in _ANGLES) and len(lat):
+        r_true = Rotation.from_euler("ZYX", np.column_stack([tr[a] for a in _ANGLES[::-1]]))
+        q = x[:, ins.X_Q : ins.X_Q + 4]
+        r_est = Rotation.from_quat(q[:, [1, 2, 3, 0]])
+        att = (r_true * r_est.inv()).as_rotvec()
+        cols += [att[:, 0], att[:, 1], att[:, 2]]
+    else:
+        cols += [missing, missing, missing]
     names += ["att_n", "att_e", "att_d"]
     extra = BIAS_COLUMNS + (CLOCK_COLUMNS if result.n > ins.N_LOOSE else ())
     if all(c[0] in tr for c in extra):
@@ -58,7 +65,7 @@ def error_states(result: RunResult, truth: pa.Table) -> tuple[np.ndarray, F64, l
     return inside, np.column_stack(cols) if cols else np.zeros((0, 0)), names
 
 
-def full_truth(truth: pa.Table) -> bool:
-    """Whether the truth has position, velocity and attitude (a simulator's may lack some)."""
-    cols = (*_NAV_TRUTH, *_ANGLES)
+def position_truth(truth: pa.Table) -> bool:
+    """Whether the truth has positions (velocity and attitude may be missing)."""
+    cols = _NAV_TRUTH[:3]
     return all(c in truth.column_names and truth.column(c).null_count < len(truth) for c in cols)
