@@ -53,7 +53,7 @@ from typing import Any
 from navreplay.ingest.alignment import check_tables
 from navreplay.ingest.atomic import atomic_directory, atomic_write_json
 from navreplay.ingest.config import DatasetConfig
-from navreplay.ingest.damage import DamageLog
+from navreplay.ingest.damage import Completeness, DamageLog, Defect
 from navreplay.ingest.detect import Detected, Format, detect
 from navreplay.ingest.errors import IngestError
 from navreplay.ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
@@ -250,6 +250,7 @@ def _ingest(
         _check_definitions(sinks, opened)
         rows = {t.value: sink.finish() for t, sink in sinks.items()}
         stack.close()
+        _report_copies(sinks, opened, warnings)
         for t, n in rows.items():
             if n == 0:
                 warnings.append(f"table {t} ({plans[TableName(t)].key}) is empty")
@@ -283,6 +284,40 @@ def _ingest(
         write_meta(tmp, meta)
         atomic_write_json(tmp / REPORT_NAME, report)
     return IngestResult(out_dir, rows, report)
+
+
+def _report_copies(
+    sinks: dict[TableName, TableSink], opened: list[_Log], warnings: list[str]
+) -> None:
+    """A duplicated copy of a log found by the streams' hygiene becomes one defect of its file
+    (the earliest offset any stream saw it at) and a warning, instead of a second segment."""
+    by_path = {str(o.detected.path): o for o in opened}
+    by_path |= {str(f): o for o in opened for f in o.detected.files}
+    found: dict[str, list[tuple[str, int, int]]] = {}
+    for t, sink in sinks.items():
+        for c in sink.cleaner.counts.copies:
+            found.setdefault(c.path, []).append((t.value, c.offset, c.rows_dropped))
+    for path, hits in found.items():
+        o = by_path.get(path)
+        if o is None:
+            continue
+        at = min(offset for _, offset, _ in hits)
+        where = f"line {at}" if o.damage.offsets_are_lines else f"byte offset {at}"
+        dropped = ", ".join(f"{t} {n}" for t, _, n in hits)
+        text = (
+            f"{o.detected.path.name}: a duplicated copy of the log, from {where} on: time goes "
+            f"back to the start and the rows repeat it exactly; the copy was dropped (rows: "
+            f"{dropped}), not read as a second segment"
+        )
+        warnings.append(text)
+        o.damage.record(
+            Defect(
+                Completeness.DUPLICATED_COPY_DROPPED,
+                text,
+                offset=at,
+                messages_lost=sum(n for _, _, n in hits),
+            )
+        )
 
 
 def _check_definitions(sinks: dict[TableName, TableSink], opened: list[_Log]) -> None:
