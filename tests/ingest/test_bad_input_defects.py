@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from navreplay.ingest.api import IngestOptions, ingest
-from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
 
 from .fuzzseeds import SEEDS
 
@@ -55,3 +55,63 @@ def test_a_real_clock_step_with_other_values_is_still_a_step(tmp_path: Path) -> 
     assert step["step_s"] < 0
     assert result.report["tables"]["imu"]["hygiene"]["duplicated_copies"] == []
     assert result.tables["imu"] == 2 * len(rows)
+
+
+# ------------------------------------------- 7: a damaged text line is named, not "offset 0"
+def test_a_corrupt_rinex_nav_body_names_the_bad_line(tmp_path: Path) -> None:
+    seed = SEEDS["rinex_nav"](tmp_path)
+    lines = seed.target.read_bytes().split(b"\n")
+    lines[30] = lines[30][:20] + b"\xff\x00" + lines[30][22:]  # invalid UTF-8 and a NUL
+    seed.target.write_bytes(b"\n".join(lines))
+    result = ingest(list(seed.logs), tmp_path / "out")
+    nav = next(f for f in result.report["files"] if f["name"] == "drive.nav")
+    assert nav["completeness"] == ["bad_data_skipped"]
+    (defect,) = nav["defects"]
+    assert defect["offset"] == 31
+    assert "line 31" in defect["reason"]
+    assert result.tables["gnss_obs"] > 0  # the other records still give every orbit
+
+
+def test_a_zeroed_block_in_a_rinex_nav_body_is_salvaged(tmp_path: Path) -> None:
+    seed = SEEDS["rinex_nav"](tmp_path)
+    data = bytearray(seed.target.read_bytes())
+    at = data.index(b"END OF HEADER") + 2000
+    data[at : at + 300] = bytes(300)
+    seed.target.write_bytes(bytes(data))
+    result = ingest(list(seed.logs), tmp_path / "out")
+    nav = next(f for f in result.report["files"] if f["name"] == "drive.nav")
+    assert nav["completeness"] == ["bad_data_skipped"]
+    assert all("line" in d["reason"] for d in nav["defects"])
+
+
+def test_a_corrupt_csv_header_names_the_line_and_the_missing_columns(tmp_path: Path) -> None:
+    seed = SEEDS["csv"](tmp_path)
+    data = bytearray(seed.target.read_bytes())
+    data[data.index(b"acc_y_mps2") + 2] ^= 0x80  # a bit flip: not UTF-8 any more
+    seed.target.write_bytes(bytes(data))
+    with pytest.raises(UnsupportedFormatError) as err:
+        ingest(list(seed.logs), tmp_path / "out")
+    assert err.value.record == "line 1"
+    assert "lacks acc_y_mps2" in str(err.value)
+    assert "table imu" in str(err.value)
+    assert "unrecognised content" not in str(err.value)
+
+
+def test_a_csv_header_unlike_any_table_lists_it(tmp_path: Path) -> None:
+    path = tmp_path / "wheel.csv"
+    path.write_text("time,left,right\n0.1,1,2\n0.2,1,2\n")
+    with pytest.raises(UnsupportedFormatError, match="no column mapping") as err:
+        ingest([path], tmp_path / "out")
+    assert "header: time, left, right" in str(err.value)
+    assert err.value.record == "line 1"
+
+
+def test_a_damaged_first_rinex_line_is_named(tmp_path: Path) -> None:
+    seed = SEEDS["rinex_obs"](tmp_path)
+    data = bytearray(seed.target.read_bytes())
+    data[65] ^= 0x01  # inside "RINEX VERSION / TYPE"
+    seed.target.write_bytes(bytes(data))
+    with pytest.raises(CorruptLogError, match="not a valid 'RINEX VERSION / TYPE' line") as err:
+        ingest(list(seed.logs), tmp_path / "out")
+    assert err.value.record == "line 1"
+    assert str(seed.target) in str(err.value)

@@ -54,6 +54,15 @@ _KEYS = {
 }
 
 
+#: columns each variant cannot do without (the others read as NaN when absent)
+_NEEDED = {
+    "derived2021": ("millisSinceGpsEpoch", "signalType", "svid", "constellationType"),
+    "device_gnss2022": ("TimeNanos", "FullBiasNanos", "SignalType", "Svid", "ConstellationType"),
+    "truth2021": ("millisSinceGpsEpoch", "latDeg", "lngDeg"),
+    "truth2022": ("UnixTimeMillis", "LatitudeDegrees", "LongitudeDegrees"),
+}
+
+
 class GsdcReader(LogReader):
     """One GSDC CSV file (see the module docstring)."""
 
@@ -116,6 +125,15 @@ class GsdcReader(LogReader):
             lines = good[: table.num_rows].astype(np.int64)
         if repeats:  # the blanked header lines are not rows: later rows sit lower in the file
             lines = lines + np.searchsorted(np.asarray(repeats), lines, side="right")
+        missing = [c for c in _NEEDED[self.variant] if c not in table.column_names]
+        if missing:
+            raise CorruptLogError(
+                f"the header lacks column(s) {', '.join(missing)} of a GSDC {self.variant} file",
+                path=self.path,
+                offset=1,
+                record="line 1",
+                hint="the header line is damaged or the file is not a GSDC CSV; repair it",
+            )
         _check_numbers(table, lines, set(types), self.path)
         self._table, self._lines = table, lines
         return table
