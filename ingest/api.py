@@ -55,14 +55,14 @@ from navreplay.ingest.atomic import atomic_directory, atomic_write_json
 from navreplay.ingest.config import DatasetConfig
 from navreplay.ingest.damage import Completeness, DamageLog, Defect
 from navreplay.ingest.detect import Detected, Format, detect
-from navreplay.ingest.errors import IngestError
+from navreplay.ingest.errors import IngestError, PlausibilityError
 from navreplay.ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
 from navreplay.ingest.readers import open_reader
 from navreplay.ingest.readers.base import Inventory, LogReader, ReadContext, Selection
 from navreplay.ingest.readers.ros.rosmsg import DefinitionError
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.select import TablePlan, select_streams
-from navreplay.ingest.sink import TableSink
+from navreplay.ingest.sink import UNUSABLE_WARN_FRACTION, USABLE, TableSink
 from navreplay.ingest.tables import SourceFile, package_version, sha256_file
 from navreplay.ingest.timebase import TimeBase, reconcile
 from navreplay.ingest.typed import to_plain
@@ -251,6 +251,7 @@ def _ingest(
         rows = {t.value: sink.finish() for t, sink in sinks.items()}
         stack.close()
         _report_copies(sinks, opened, warnings)
+        _check_usable(sinks, opened, warnings)
         for t, n in rows.items():
             if n == 0:
                 warnings.append(f"table {t} ({plans[TableName(t)].key}) is empty")
@@ -284,6 +285,34 @@ def _ingest(
         write_meta(tmp, meta)
         atomic_write_json(tmp / REPORT_NAME, report)
     return IngestResult(out_dir, rows, report)
+
+
+def _check_usable(
+    sinks: dict[TableName, TableSink], opened: list[_Log], warnings: list[str]
+) -> None:
+    """An IMU or GNSS table none of whose rows a filter could use (NaN or inf in a column every
+    row needs) is refused; one mostly so gets a warning with the count."""
+    for t, sink in sinks.items():
+        rows, bad = sink.audit.rows, sink.unusable_rows
+        if not rows or not bad:
+            continue
+        needed = ", ".join(USABLE[t])
+        if bad == rows:
+            raise PlausibilityError(
+                f"every one of the {rows} {t.value} rows has NaN or inf in {needed}: the "
+                "stream holds no usable sample",
+                path=opened[sink.plan.sources[0].file_index].detected.path,
+                record=f"stream {sink.plan.key}",
+                hint="check the stream's columns (the csv mapping or topic in dataset.yaml) "
+                "or select another stream; no filter can run on it",
+            )
+        if bad > UNUSABLE_WARN_FRACTION * rows:
+            text = (
+                f"table {t.value} ({sink.plan.key}): {bad} of {rows} rows "
+                f"({100 * bad / rows:.0f} %) have NaN or inf in {needed}; the filters skip them"
+            )
+            warnings.append(text)
+            log.warning("%s", text)
 
 
 def _report_copies(

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from navreplay.ingest.api import IngestOptions, ingest
-from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
+from navreplay.ingest.errors import CorruptLogError, PlausibilityError, UnsupportedFormatError
 
 from .fuzzseeds import SEEDS
 
@@ -115,3 +115,33 @@ def test_a_damaged_first_rinex_line_is_named(tmp_path: Path) -> None:
         ingest(list(seed.logs), tmp_path / "out")
     assert err.value.record == "line 1"
     assert str(seed.target) in str(err.value)
+
+
+# ------------------------------------------------------------------ 4: an IMU table of NaN
+def _imu_csv(path: Path, rows: list[str]) -> Path:
+    header = "t_ns,acc_x_mps2,acc_y_mps2,acc_z_mps2,gyro_x_radps,gyro_y_radps,gyro_z_radps"
+    path.write_text("\n".join([header, *rows]) + "\n")
+    return path
+
+
+def test_an_imu_table_of_nan_is_refused_at_ingest(tmp_path: Path) -> None:
+    t0 = 1_700_000_000 * 10**9
+    rows = [f"{t0 + i * 10_000_000},nan,nan,nan,nan,nan,nan" for i in range(300)]
+    log = _imu_csv(tmp_path / "imu.csv", rows)
+    with pytest.raises(PlausibilityError, match="every one of the 300 imu rows has NaN") as err:
+        ingest([log], tmp_path / "out")
+    assert str(log) in str(err.value)
+    assert "no filter can run" in str(err.value)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_mostly_nan_imu_table_is_kept_with_a_counted_warning(tmp_path: Path) -> None:
+    t0 = 1_700_000_000 * 10**9
+    rows = []
+    for i in range(300):
+        values = "0.01,-0.02,-9.81,0.001,0.0,-0.001" if i % 4 == 0 else "nan,0,-9.81,0,0,0"
+        rows.append(f"{t0 + i * 10_000_000},{values}")
+    result = ingest([_imu_csv(tmp_path / "imu.csv", rows)], tmp_path / "out")
+    assert result.tables["imu"] == 300  # NaN stays NaN (catalogue case 21), counted
+    (warning,) = [w for w in result.report["warnings"] if "NaN or inf" in w]
+    assert "225 of 300 rows (75 %)" in warning
