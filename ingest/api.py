@@ -24,7 +24,9 @@ so a stream split over several files (a split bag) continues across them.
                            median_m_at_zero, epochs, motion_m}}
                                   gnss_obs positions vs the fixes (ingest.gnss.fixcheck)
     files[]   {name, format, variant, streams[] (the inventory), inventory_notes[],
-               completeness[] ("complete", "truncated", "corrupt_chunks_skipped", ...),
+               verification (the checksums the format has, or "unverified: ..."),
+               completeness[] ("complete", "truncated", "corrupt_chunks_skipped",
+                               "duplicated_copy_dropped", "implausible_values", ...),
                defects[] {kind, reason, offset, messages_lost, messages_recovered,
                           time_range_ns, bytes_skipped}, notes[], counters{}}
     tables{}  {stream, msgtype, selection, alternatives[], files[], time_base,
@@ -32,10 +34,11 @@ so a stream split over several files (a split bag) continues across them.
                info{} (frame_id ...),
                hygiene {rows_in, rows_out, reordered, dropped_late(+offsets),
                         duplicates_exact_dropped, duplicates_conflicting_dropped(+offsets),
-                        clock_steps_backward[]},
+                        clock_steps_backward[], duplicated_copies[]},
                stats {rows, first/last_t_ns, duration_s, rate_hz, median_dt_ms, jitter_ms,
                       max_dt_ms, gaps {threshold_ms, count, total_s, longest_s, first[]},
-                      segments[], nonfinite{column: {nan, inf}}},
+                      segments[], nonfinite{column: {nan, inf}},
+                      implausible{column: {count, limit_abs}}},
                plausibility {...} (imu: rest, gravity, gyro bias, mounting; gnss: ranges),
                companion {...} (gnss velocity join)}
     warnings[]
@@ -252,6 +255,7 @@ def _ingest(
         stack.close()
         _report_copies(sinks, opened, warnings)
         _check_usable(sinks, opened, warnings)
+        _report_implausible(sinks, opened, warnings)
         for t, n in rows.items():
             if n == 0:
                 warnings.append(f"table {t} ({plans[TableName(t)].key}) is empty")
@@ -285,6 +289,58 @@ def _ingest(
         write_meta(tmp, meta)
         atomic_write_json(tmp / REPORT_NAME, report)
     return IngestResult(out_dir, rows, report)
+
+
+#: what each format lets ingest verify; a format not listed has no checksums at all
+CHECKSUMS: dict[Format, str] = {
+    Format.TLOG: "X.25 CRC of every MAVLink packet, checked",
+    Format.MCAP: "CRC-32 of every chunk that carries one, checked",
+    Format.NMEA: "checksum of every sentence that carries one, checked",
+}
+UNVERIFIED = (
+    "unverified: the format has no checksums, so bit errors change values undetected; only "
+    "plausibility checks apply (time order, physical magnitudes: see each table's hygiene and "
+    "stats.implausible)"
+)
+
+
+def _verification(fmt: Format) -> str:
+    return CHECKSUMS.get(fmt, UNVERIFIED)
+
+
+def _report_implausible(
+    sinks: dict[TableName, TableSink], opened: list[_Log], warnings: list[str]
+) -> None:
+    """Values beyond physical limits (``ingest.audit.LIMITS``) are a defect of the file they
+    came from: bit damage, most likely, where the format has no checksums; samples out of time
+    order in such a file get a warning too."""
+    for t, sink in sinks.items():
+        o = opened[sink.plan.sources[0].file_index]
+        h = sink.cleaner.counts
+        disorder = h.reordered + h.dropped_late + len(h.steps)
+        if disorder and o.detected.format not in CHECKSUMS:
+            text = (
+                f"{o.detected.path.name}: table {t.value} ({sink.plan.key}): {disorder} samples "
+                "out of time order (re-sorted, dropped late, clock steps) in a file without "
+                "checksums: damaged timestamps are possible; see the table's hygiene"
+            )
+            warnings.append(text)
+            log.warning("%s", text)
+        over = sink.audit.implausible
+        if not over:
+            continue
+        listed = ", ".join(f"{n} {k}" for k, n in sorted(over.items()))
+        why = (
+            "corrupt values (the format has no checksums: bit damage?)"
+            if o.detected.format not in CHECKSUMS
+            else "corrupt or mis-scaled values"
+        )
+        text = (
+            f"{o.detected.path.name}: table {t.value} ({sink.plan.key}) holds values beyond "
+            f"physical limits ({listed}): {why}; kept as they are, check them before use"
+        )
+        warnings.append(text)
+        o.damage.record(Defect(Completeness.IMPLAUSIBLE_VALUES, text))
 
 
 def _check_usable(
@@ -502,6 +558,7 @@ def _report(
                 for s in o.inventory.streams
             ],
             "inventory_notes": list(o.inventory.notes),
+            "verification": _verification(o.detected.format),
         }
         entry.update(o.damage.to_json())
         files.append(entry)

@@ -7,12 +7,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from navreplay.ingest.api import IngestOptions, ingest
+from navreplay.ingest.api import UNVERIFIED, IngestOptions, ingest
 from navreplay.ingest.errors import CorruptLogError, PlausibilityError, UnsupportedFormatError
 
 from .fuzzseeds import SEEDS
+from .mavlogs import UTC0_US, G, UlogLog
+from .test_tlog_faults import highres_log
 
 pytestmark = pytest.mark.filterwarnings("ignore")
 
@@ -145,3 +148,110 @@ def test_a_mostly_nan_imu_table_is_kept_with_a_counted_warning(tmp_path: Path) -
     assert result.tables["imu"] == 300  # NaN stays NaN (catalogue case 21), counted
     (warning,) = [w for w in result.report["warnings"] if "NaN or inf" in w]
     assert "225 of 300 rows (75 %)" in warning
+
+
+# ------------------------------------------ 5: bit flips in a format that has no checksums
+def _ulog_with(tmp_path: Path, gyro_at: dict[int, float]) -> Path:
+    """The ULog seed with some samples' gyro x replaced (what a flipped exponent bit does)."""
+    ulog = UlogLog()
+    ulog.format(
+        "sensor_combined",
+        "uint64_t timestamp;float[3] gyro_rad;float[3] accelerometer_m_s2;",
+        "Q3f3f",
+    )
+    ulog.subscribe("sensor_combined")
+    rng = np.random.default_rng(3)
+    for i in range(400):
+        gyro = rng.normal(0, 1e-3, 3)
+        gyro[0] = gyro_at.get(i, gyro[0])
+        acc = np.array([0.0, 0.0, -9.80665]) + rng.normal(0, 0.02, 3)
+        ulog.data("sensor_combined", 10_000_000 + i * 5000, *gyro, *acc)
+    path = tmp_path / "flight.ulg"
+    path.write_bytes(ulog.bytes())
+    return path
+
+
+def test_every_file_says_whether_its_format_could_be_verified(tmp_path: Path) -> None:
+    for fmt, verified in (("ulog", False), ("dataflash", False), ("csv", False), ("tlog", True)):
+        (tmp_path / fmt).mkdir()
+        seed = SEEDS[fmt](tmp_path / fmt)
+        (entry,) = ingest(list(seed.logs), tmp_path / fmt / "out").report["files"]
+        assert entry["verification"].startswith("unverified") is not verified, fmt
+    assert "bit errors change values undetected" in UNVERIFIED
+
+
+def test_a_ulog_value_flipped_beyond_physical_limits_is_counted_and_flagged(
+    tmp_path: Path,
+) -> None:
+    # A flipped exponent bit made one rate 1e34 rad/s: before, the file was "complete" (or the
+    # units check blamed deg/s); now the value is counted, flagged and kept out of decisions.
+    log = _ulog_with(tmp_path, {57: 9.9e34, 300: -3.0e12})
+    result = ingest([log], tmp_path / "out")
+    (entry,) = result.report["files"]
+    assert entry["completeness"] == ["implausible_values"]
+    assert entry["verification"].startswith("unverified")
+    imu = result.report["tables"]["imu"]
+    assert imu["stats"]["implausible"] == {"gyro_x_radps": {"count": 2, "limit_abs": 100.0}}
+    assert imu["plausibility"]["implausible_samples_ignored"] == 2
+    (warning,) = [w for w in result.report["warnings"] if "physical limits" in w]
+    assert "no checksums" in warning
+    assert result.tables["imu"] == 400  # kept as they are: the report says where to look
+
+
+def test_a_plausible_ulog_flip_leaves_the_file_unverified_not_complete_and_sure(
+    tmp_path: Path,
+) -> None:
+    log = _ulog_with(tmp_path, {57: 0.5})  # wrong but within limits: nothing can tell
+    (entry,) = ingest([log], tmp_path / "out").report["files"]
+    assert entry["completeness"] == ["complete"]
+    assert entry["verification"] == UNVERIFIED
+
+
+# --------------------------- 6: a units heuristic misled by a truncated or turning log
+def _standing_then_turning(tmp_path: Path, *, yaw_at_rest: float, turn_s: float) -> Path:
+    """HIGHRES_IMU at 100 Hz: 10 s level at rest (yawing at ``yaw_at_rest`` rad/s, as a SITL
+    vehicle spinning on the ground does), then a steady 19 deg banked turn at 0.2 rad/s."""
+    rng = np.random.default_rng(8)
+    n_rest, n_turn = 1000, round(turn_s * 100)
+    bank = np.radians(19.0)
+    acc = np.vstack(
+        [np.tile([0.0, 0.0, -G], (n_rest, 1)), np.tile([0.0, 0.0, -G / np.cos(bank)], (n_turn, 1))]
+    ) + rng.normal(0, 0.02, (n_rest + n_turn, 3))
+    gyro = np.vstack(
+        [
+            np.tile([0.0, 0.0, yaw_at_rest], (n_rest, 1)),
+            np.tile([0.0, 0.2 * np.sin(bank), 0.2 * np.cos(bank)], (n_turn, 1)),
+        ]
+    ) + rng.normal(0, 0.003, (n_rest + n_turn, 3))
+    t = UTC0_US + np.arange(n_rest + n_turn, dtype=np.int64) * 10_000
+    return highres_log(acc, gyro, t).write(tmp_path / "flight.tlog")
+
+
+@pytest.mark.parametrize("keep", [0.05, 0.2, 0.5, 1.0])
+def test_a_truncated_tlog_of_a_vehicle_yawing_at_rest_is_not_called_deg_per_s(
+    tmp_path: Path, keep: float
+) -> None:
+    log = _standing_then_turning(tmp_path, yaw_at_rest=-0.229, turn_s=0.0)
+    data = log.read_bytes()
+    log.write_bytes(data[: round(len(data) * keep)])
+    result = ingest([log], tmp_path / "out")  # before: "probable deg/s", set degps
+    plaus = result.report["tables"]["imu"]["plausibility"]
+    assert plaus["gyro_bias_at_rest_horizontal_radps"] in (None, pytest.approx(0.0, abs=0.01))
+
+
+def test_steady_banked_turns_that_pass_for_rest_are_not_units_evidence(tmp_path: Path) -> None:
+    log = _standing_then_turning(tmp_path, yaw_at_rest=0.0, turn_s=30.0)
+    result = ingest([log], tmp_path / "out")  # before: rate at rest 0.15 rad/s, deg/s
+    plaus = result.report["tables"]["imu"]["plausibility"]
+    assert plaus["rest_windows_level"] == 10
+    assert plaus["gyro_bias_at_rest_horizontal_radps"] == pytest.approx(0.0, abs=0.005)
+
+
+def test_gyro_in_deg_per_s_at_rest_is_still_refused(tmp_path: Path) -> None:
+    rng = np.random.default_rng(9)
+    acc = np.array([0.0, 0.0, -G]) + rng.normal(0, 0.01, (600, 3))
+    gyro = np.degrees(np.array([0.004, -0.003, 0.002]) + rng.normal(0, 0.002, (600, 3)))
+    t = UTC0_US + np.arange(600, dtype=np.int64) * 10_000
+    log = highres_log(acc, gyro, t).write(tmp_path / "a.tlog")
+    with pytest.raises(PlausibilityError, match="about horizontal axes\\) - probable deg/s"):
+        ingest([log], tmp_path / "out")
