@@ -97,7 +97,7 @@ RX_LLA = (37.5, 127.0, 80.0)
 
 
 def _sky() -> tuple[Any, pa.Table, np.ndarray]:
-    """A nominal GPS constellation, 20 epochs of observations of every satellite above 10 deg
+    """A nominal GPS constellation, 10 epochs of observations of every satellite above 10 deg
     from ``RX_LLA`` (1 Hz), and the receiver's ECEF position."""
     from navreplay.pipeline.synth.constellation import nominal_gps
     from navreplay.pipeline.synth.seoul_params import ConstellationParams
@@ -108,7 +108,7 @@ def _sky() -> tuple[Any, pa.Table, np.ndarray]:
     names = ("t_ns", "sv", "pseudorange_m", "pseudorange_rate_mps", "cn0_dbhz")
     rows: dict[str, list[Any]] = {n: [] for n in (*names, "sat_x_m", "sat_y_m", "sat_z_m")}
     first = {int(p): i for i, p in reversed(list(enumerate(eph.prn.tolist())))}
-    for k in range(20):
+    for k in range(10):
         t = T0_GPS_NS + k * NS_PER_S
         for prn, i in sorted(first.items()):
             pos = np.asarray(orbit(eph, i, t).pos_m).reshape(3)
@@ -142,7 +142,7 @@ def _gnsslogger(d: Path) -> Seed:
     from .gnsslogs import write_gnsslogger
 
     eph, obs, _ = _sky()
-    t = np.arange(5, dtype=np.int64) * 4 * NS_PER_S + T0_GPS_NS
+    t = np.arange(5, dtype=np.int64) * 2 * NS_PER_S + T0_GPS_NS
     ones = np.ones(len(t))
     cols = {"t_ns": t, "lat_deg": RX_LLA[0] * ones, "lon_deg": RX_LLA[1] * ones}
     cols |= {"alt_m": RX_LLA[2] * ones, "vel_n_mps": 0 * ones, "vel_e_mps": 0 * ones}

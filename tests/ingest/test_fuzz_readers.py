@@ -5,9 +5,9 @@ this process under a per-case time limit. Every case must end in a typed error n
 with nothing left at or beside the output folder (the CLI's exit 2), or in tables with each
 file's completeness in the report: no traceback, no hang, nothing half-written.
 
-Seeded: the same ~300 cases every run (about 30 s on two shared cores); a handful go through
-the CLI in a subprocess. The cases the fuzzer found, and their fixes, are pinned by tests at
-the end of this module and in ``test_bad_input_defects``.
+Seeded: the same 267 cases every run (about 23 s of CPU: 30-70 s wall on two cores shared
+with other work); three go through the CLI in a subprocess. The cases the fuzzer found, and
+their fixes, are pinned by tests at the end of this module and in ``test_bad_input_defects``.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ def _cases() -> list[Case]:
     cases = []
     for fmt in SEEDS:
         for mutation in MUTATIONS:
-            n = REPEATS.get(fmt, 6) if mutation in RANDOM_KINDS else 1
+            n = REPEATS.get(fmt, 5) if mutation in RANDOM_KINDS else 1
             cases += [Case(fmt, mutation, seed) for seed in range(n)]
     return cases
 
@@ -98,7 +98,6 @@ CLI_SAMPLE = [
     Case("tlog", "empty"),
     Case("mcap", "truncate", 1),
     Case("ulog", "bitflip", 2),
-    Case("rinex_nav", "directory"),
 ]
 
 
