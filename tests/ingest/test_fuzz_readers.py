@@ -192,3 +192,20 @@ def test_bytes_after_an_arrays_data_are_reported(seeds: dict[str, Seed], tmp_pat
     assert defect["kind"] == "corrupt_tail"
     assert defect["offset"] == size
     assert defect["bytes_skipped"] == 24
+
+
+def test_an_mcap_file_twice_in_one_file_says_what_it_ignored(
+    seeds: dict[str, Seed], tmp_path: Path
+) -> None:
+    # Found as mcap-duplicate-0: the reader stops at the first DataEnd, so the copy was
+    # ignored without a word and the file reported complete.
+    log = tmp_path / "drive.mcap"
+    data = seeds["mcap"].target.read_bytes()
+    log.write_bytes(data * 2)
+    result = ingest([log], tmp_path / "out")
+    assert result.tables == {"imu": 200, "gnss": 10}
+    (entry,) = result.report["files"]
+    (defect,) = entry["defects"]
+    assert defect["kind"] == "corrupt_tail"
+    assert defect["offset"] == len(data)
+    assert defect["bytes_skipped"] == len(data)
