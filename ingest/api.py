@@ -386,8 +386,13 @@ def _report_copies(
         o = by_path.get(path)
         if o is None:
             continue
-        at = min(offset for _, offset, _ in hits)
-        where = f"line {at}" if o.damage.offsets_are_lines else f"byte offset {at}"
+        at: int | None = min(offset for _, offset, _ in hits)
+        if not at:  # a copy follows its original: 0 means the reader gives no record offsets
+            at, where = None, "a record offset the reader does not give"
+        elif o.damage.offsets_are_lines:
+            where = f"line {at}"
+        else:
+            where = f"byte offset {at}"
         dropped = ", ".join(f"{t} {n}" for t, _, n in hits)
         text = (
             f"{o.detected.path.name}: a duplicated copy of the log, from {where} on: time goes "

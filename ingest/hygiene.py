@@ -15,7 +15,7 @@ sorted and unique, applying the catalogue's rules (bad-inputs.md, cases 29-32):
   and counted; non-identical ones keep the first arrival and are counted as conflicting;
   a table keyed by time and a second column (``gnss_obs``: ``t_ns``, ``sv``) sorts by both
   and only rows equal in both are duplicates (one epoch holds many satellites);
-- a clock step backwards whose first rows repeat the stream's first rows exactly (time and
+- a clock step backwards whose first rows repeat rows of the stream's start exactly (time and
   every value) is not a clock step but a duplicated copy of the log (a file concatenated with
   itself, the same file given twice): the copy is dropped, up to where the original ended,
   and reported with its offset and row count instead of becoming a second segment;
@@ -41,6 +41,9 @@ from navreplay.ingest.errors import CorruptLogError
 STEP_MIN_SAMPLES = 3
 #: rows compared with the stream's first rows to call a step backwards a duplicated copy
 COPY_MATCH_ROWS = 8
+#: the stream's first rows kept for that comparison (the copy may start a little later: a
+#: reader resynchronising after the copy's header loses its first records)
+COPY_HEAD_ROWS = 256
 _MAX_LISTED = 10
 
 
@@ -179,8 +182,8 @@ class StreamCleaner:
         self.counts.rows_in += len(rows)
         if not len(rows):
             return self._empty_like(rows)
-        if len(self._head) < COPY_MATCH_ROWS and not self._shift and not self.counts.steps:
-            need = min(COPY_MATCH_ROWS - len(self._head), len(rows))
+        if len(self._head) < COPY_HEAD_ROWS and not self._shift and not self.counts.steps:
+            need = min(COPY_HEAD_ROWS - len(self._head), len(rows))
             self._head = Rows.concat([self._head, rows.take(np.arange(need))])
         rows.columns["t_ns"] = rows.t + self._shift
         if len(self._held):
@@ -249,17 +252,21 @@ class StreamCleaner:
         return rows.take(np.flatnonzero(keep)) if not keep.all() else rows
 
     def _is_copy(self, rows: Rows, i: int) -> bool:
-        """Whether the rows from ``i`` repeat the stream's first rows exactly."""
-        n = min(COPY_MATCH_ROWS, len(self._head), len(rows) - i)
+        """Whether the rows from ``i`` repeat rows of the stream's start exactly."""
+        at = np.flatnonzero(self._head.t == int(rows.t[i]) - self._shift)
+        if not at.size:
+            return False
+        j = int(at[0])
+        n = min(COPY_MATCH_ROWS, len(self._head) - j, len(rows) - i)
         if n < min(STEP_MIN_SAMPLES, len(self._head)) or not n:
             return False
-        if not np.array_equal(rows.t[i : i + n] - self._shift, self._head.t[:n]):
+        if not np.array_equal(rows.t[i : i + n] - self._shift, self._head.t[j : j + n]):
             return False
         for name, col in self._head.columns.items():
             other = rows.columns.get(name)
             if name == "t_ns" or other is None:
                 continue
-            a, b = other[i : i + n], col[:n]
+            a, b = other[i : i + n], col[j : j + n]
             same = a == b
             if a.dtype.kind == "f":
                 same |= np.isnan(a) & np.isnan(b)

@@ -48,6 +48,25 @@ def test_a_log_concatenated_with_itself_is_a_dropped_copy_not_a_reboot(
         ingest(list(seed.logs), tmp_path / "strict", options=IngestOptions(strict=True))
 
 
+def test_a_real_ulog_twice_in_one_file_reads_once(tmp_path: Path) -> None:
+    # pyulog resynchronises after the copy's header and loses the copy's first messages: the
+    # copy is still recognised (its rows repeat rows of the log's start, not its first row).
+    real = Path(__file__).resolve().parents[3] / "shared" / "data" / "pyulog_samples"
+    src = real / "sample_log_small.ulg"
+    if not src.is_file():
+        pytest.skip(f"real data not present: {src} (../shared/data is read in place)")
+    once = ingest([src], tmp_path / "once")
+    log = tmp_path / "twice.ulg"
+    log.write_bytes(src.read_bytes() * 2)
+    twice = ingest([log], tmp_path / "twice")
+    assert twice.tables == once.tables
+    (entry,) = twice.report["files"]
+    assert "duplicated_copy_dropped" in entry["completeness"]
+    (defect,) = (d for d in entry["defects"] if d["kind"] == "duplicated_copy_dropped")
+    assert "offset" not in defect  # pyulog gives no record offsets: none is made up
+    assert "record offset the reader does not give" in defect["reason"]
+
+
 def test_a_real_clock_step_with_other_values_is_still_a_step(tmp_path: Path) -> None:
     seed = SEEDS["csv"](tmp_path)
     header, *rows = seed.target.read_text().splitlines()
