@@ -388,14 +388,14 @@ def _report_copies(
             continue
         at: int | None = min(offset for _, offset, _ in hits)
         if not at:  # a copy follows its original: 0 means the reader gives no record offsets
-            at, where = None, "a record offset the reader does not give"
+            at, where = None, " (at an offset the reader does not give)"
         elif o.damage.offsets_are_lines:
-            where = f"line {at}"
+            where = f", from line {at} on"
         else:
-            where = f"byte offset {at}"
+            where = f", from byte offset {at} on"
         dropped = ", ".join(f"{t} {n}" for t, _, n in hits)
         text = (
-            f"{o.detected.path.name}: a duplicated copy of the log, from {where} on: time goes "
+            f"{o.detected.path.name}: a duplicated copy of the log{where}: time goes "
             f"back to the start and the rows repeat it exactly; the copy was dropped (rows: "
             f"{dropped}), not read as a second segment"
         )

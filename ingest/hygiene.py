@@ -176,6 +176,7 @@ class StreamCleaner:
         self._last_out: Rows | None = None
         self._head = Rows({}, np.empty(0, np.int64))  # the stream's first rows, as received
         self._copy_until: int | None = None  # inside a duplicated copy: drop rows up to here
+        self._first_index = 0  # arrival index (0 = the stream's first row) of the rows admitted
 
     def push(self, rows: Rows, path: Path) -> Rows:
         """Add a batch (arrival order); return the rows that are now final (sorted, unique)."""
@@ -191,11 +192,13 @@ class StreamCleaner:
             self._held = Rows({}, np.empty(0, np.int64))
         if self._nominal_ns is None:
             self._nominal_ns = _median_dt(rows.t)
+        self._first_index = self.counts.rows_in - len(rows)  # arrival index of rows[0]
         accepted = self._admit(rows, path, final=False)
         return self._emit(accepted, path, final=False)
 
     def finish(self, path: Path) -> Rows:
         """Flush everything held; returns the last final rows."""
+        self._first_index = self.counts.rows_in - len(self._held)
         accepted = self._admit(self._held, path, final=True) if len(self._held) else None
         self._held = Rows({}, np.empty(0, np.int64))
         return self._emit(accepted, path, final=True)
@@ -259,6 +262,8 @@ class StreamCleaner:
         j = int(at[0])
         n = min(COPY_MATCH_ROWS, len(self._head) - j, len(rows) - i)
         if n < min(STEP_MIN_SAMPLES, len(self._head)) or not n:
+            return False
+        if j + n > self._first_index + i:  # the rows matched must all precede the copy
             return False
         if not np.array_equal(rows.t[i : i + n] - self._shift, self._head.t[j : j + n]):
             return False
