@@ -24,7 +24,9 @@ so a stream split over several files (a split bag) continues across them.
                            median_m_at_zero, epochs, motion_m}}
                                   gnss_obs positions vs the fixes (ingest.gnss.fixcheck)
     files[]   {name, format, variant, streams[] (the inventory), inventory_notes[],
-               completeness[] ("complete", "truncated", "corrupt_chunks_skipped", ...),
+               verification (the checksums the format has, or "unverified: ..."),
+               completeness[] ("complete", "truncated", "corrupt_chunks_skipped",
+                               "duplicated_copy_dropped", "implausible_values", ...),
                defects[] {kind, reason, offset, messages_lost, messages_recovered,
                           time_range_ns, bytes_skipped}, notes[], counters{}}
     tables{}  {stream, msgtype, selection, alternatives[], files[], time_base,
@@ -32,10 +34,11 @@ so a stream split over several files (a split bag) continues across them.
                info{} (frame_id ...),
                hygiene {rows_in, rows_out, reordered, dropped_late(+offsets),
                         duplicates_exact_dropped, duplicates_conflicting_dropped(+offsets),
-                        clock_steps_backward[]},
+                        clock_steps_backward[], duplicated_copies[]},
                stats {rows, first/last_t_ns, duration_s, rate_hz, median_dt_ms, jitter_ms,
                       max_dt_ms, gaps {threshold_ms, count, total_s, longest_s, first[]},
-                      segments[], nonfinite{column: {nan, inf}}},
+                      segments[], nonfinite{column: {nan, inf}},
+                      implausible{column: {count, limit_abs}}},
                plausibility {...} (imu: rest, gravity, gyro bias, mounting; gnss: ranges),
                companion {...} (gnss velocity join)}
     limits[]  {table, code, reason}   what the tables cannot give an INS/GNSS replay
@@ -55,9 +58,9 @@ from typing import Any
 from navreplay.ingest.alignment import check_tables
 from navreplay.ingest.atomic import atomic_directory, atomic_write_json
 from navreplay.ingest.config import DatasetConfig
-from navreplay.ingest.damage import DamageLog
+from navreplay.ingest.damage import Completeness, DamageLog, Defect
 from navreplay.ingest.detect import Detected, Format, detect
-from navreplay.ingest.errors import IngestError
+from navreplay.ingest.errors import IngestError, PlausibilityError
 from navreplay.ingest.limits import find_limits
 from navreplay.ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
 from navreplay.ingest.readers import open_reader
@@ -65,7 +68,7 @@ from navreplay.ingest.readers.base import Inventory, LogReader, ReadContext, Sel
 from navreplay.ingest.readers.ros.rosmsg import DefinitionError
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.select import TablePlan, select_streams
-from navreplay.ingest.sink import TableSink
+from navreplay.ingest.sink import UNUSABLE_WARN_FRACTION, USABLE, TableSink
 from navreplay.ingest.tables import SourceFile, package_version, sha256_file
 from navreplay.ingest.timebase import TimeBase, reconcile
 from navreplay.ingest.typed import to_plain
@@ -253,6 +256,9 @@ def _ingest(
         _check_definitions(sinks, opened)
         rows = {t.value: sink.finish() for t, sink in sinks.items()}
         stack.close()
+        _report_copies(sinks, opened, warnings)
+        _check_usable(sinks, opened, warnings)
+        _report_implausible(sinks, opened, warnings)
         for t, n in rows.items():
             if n == 0:
                 warnings.append(f"table {t} ({plans[TableName(t)].key}) is empty")
@@ -290,6 +296,125 @@ def _ingest(
         write_meta(tmp, meta)
         atomic_write_json(tmp / REPORT_NAME, report)
     return IngestResult(out_dir, rows, report)
+
+
+#: what each format lets ingest verify; a format not listed has no checksums at all
+CHECKSUMS: dict[Format, str] = {
+    Format.TLOG: "X.25 CRC of every MAVLink packet, checked",
+    Format.MCAP: "CRC-32 of every chunk that carries one, checked",
+    Format.NMEA: "checksum of every sentence that carries one, checked",
+}
+UNVERIFIED = (
+    "unverified: the format has no checksums, so bit errors change values undetected; only "
+    "plausibility checks apply (time order, physical magnitudes: see each table's hygiene and "
+    "stats.implausible)"
+)
+
+
+def _verification(fmt: Format) -> str:
+    return CHECKSUMS.get(fmt, UNVERIFIED)
+
+
+def _report_implausible(
+    sinks: dict[TableName, TableSink], opened: list[_Log], warnings: list[str]
+) -> None:
+    """Values beyond physical limits (``ingest.audit.LIMITS``) are a defect of the file they
+    came from: bit damage, most likely, where the format has no checksums; samples out of time
+    order in such a file get a warning too."""
+    for t, sink in sinks.items():
+        o = opened[sink.plan.sources[0].file_index]
+        h = sink.cleaner.counts
+        disorder = h.reordered + h.dropped_late + len(h.steps)
+        if disorder and o.detected.format not in CHECKSUMS:
+            text = (
+                f"{o.detected.path.name}: table {t.value} ({sink.plan.key}): {disorder} samples "
+                "out of time order (re-sorted, dropped late, clock steps) in a file without "
+                "checksums: damaged timestamps are possible; see the table's hygiene"
+            )
+            warnings.append(text)
+            log.warning("%s", text)
+        over = sink.audit.implausible
+        if not over:
+            continue
+        listed = ", ".join(f"{n} {k}" for k, n in sorted(over.items()))
+        why = (
+            "corrupt values (the format has no checksums: bit damage?)"
+            if o.detected.format not in CHECKSUMS
+            else "corrupt or mis-scaled values"
+        )
+        text = (
+            f"{o.detected.path.name}: table {t.value} ({sink.plan.key}) holds values beyond "
+            f"physical limits ({listed}): {why}; kept as they are, check them before use"
+        )
+        warnings.append(text)
+        o.damage.record(Defect(Completeness.IMPLAUSIBLE_VALUES, text))
+
+
+def _check_usable(
+    sinks: dict[TableName, TableSink], opened: list[_Log], warnings: list[str]
+) -> None:
+    """An IMU or GNSS table none of whose rows a filter could use (NaN or inf in a column every
+    row needs) is refused; one mostly so gets a warning with the count."""
+    for t, sink in sinks.items():
+        rows, bad = sink.audit.rows, sink.unusable_rows
+        if not rows or not bad:
+            continue
+        needed = ", ".join(USABLE[t])
+        if bad == rows:
+            raise PlausibilityError(
+                f"every one of the {rows} {t.value} rows has NaN or inf in {needed}: the "
+                "stream holds no usable sample",
+                path=opened[sink.plan.sources[0].file_index].detected.path,
+                record=f"stream {sink.plan.key}",
+                hint="check the stream's columns (the csv mapping or topic in dataset.yaml) "
+                "or select another stream; no filter can run on it",
+            )
+        if bad > UNUSABLE_WARN_FRACTION * rows:
+            text = (
+                f"table {t.value} ({sink.plan.key}): {bad} of {rows} rows "
+                f"({100 * bad / rows:.0f} %) have NaN or inf in {needed}; the filters skip them"
+            )
+            warnings.append(text)
+            log.warning("%s", text)
+
+
+def _report_copies(
+    sinks: dict[TableName, TableSink], opened: list[_Log], warnings: list[str]
+) -> None:
+    """A duplicated copy of a log found by the streams' hygiene becomes one defect of its file
+    (the earliest offset any stream saw it at) and a warning, instead of a second segment."""
+    by_path = {str(o.detected.path): o for o in opened}
+    by_path |= {str(f): o for o in opened for f in o.detected.files}
+    found: dict[str, list[tuple[str, int, int]]] = {}
+    for t, sink in sinks.items():
+        for c in sink.cleaner.counts.copies:
+            found.setdefault(c.path, []).append((t.value, c.offset, c.rows_dropped))
+    for path, hits in found.items():
+        o = by_path.get(path)
+        if o is None:
+            continue
+        at: int | None = min(offset for _, offset, _ in hits)
+        if not at:  # a copy follows its original: 0 means the reader gives no record offsets
+            at, where = None, " (at an offset the reader does not give)"
+        elif o.damage.offsets_are_lines:
+            where = f", from line {at} on"
+        else:
+            where = f", from byte offset {at} on"
+        dropped = ", ".join(f"{t} {n}" for t, _, n in hits)
+        text = (
+            f"{o.detected.path.name}: a duplicated copy of the log{where}: time goes "
+            f"back to the start and the rows repeat it exactly; the copy was dropped (rows: "
+            f"{dropped}), not read as a second segment"
+        )
+        warnings.append(text)
+        o.damage.record(
+            Defect(
+                Completeness.DUPLICATED_COPY_DROPPED,
+                text,
+                offset=at,
+                messages_lost=sum(n for _, _, n in hits),
+            )
+        )
 
 
 def _check_definitions(sinks: dict[TableName, TableSink], opened: list[_Log]) -> None:
@@ -445,6 +570,7 @@ def _report(
                 for s in o.inventory.streams
             ],
             "inventory_notes": list(o.inventory.notes),
+            "verification": _verification(o.detected.format),
         }
         entry.update(o.damage.to_json())
         files.append(entry)

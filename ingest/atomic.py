@@ -154,14 +154,81 @@ def atomic_write_json(target: str | Path, obj: Any) -> None:
     atomic_write_text(target, dumps_json(obj))
 
 
+#: kinds of file navreplay writes into an output folder (tables, runs, reports); a folder
+#: holding anything else is not replaced (``atomic_directory``)
+OUTPUT_SUFFIXES = frozenset({".parquet", ".json", ".html", ".csv", ".svg", ".png"})
+
+
+def _foreign_files(target: Path, owned: frozenset[str]) -> list[Path]:
+    """Files under the existing folder ``target`` that navreplay would not have written
+    (links count as foreign: replacing the folder would lose them)."""
+    found = []
+    for path in sorted(target.rglob("*")):
+        if path.is_symlink() or (not path.is_dir() and path.suffix.lower() not in owned):
+            found.append(path)
+    return found
+
+
+def check_output_dir(target: str | Path, extra_suffixes: tuple[str, ...] = ()) -> None:
+    """Refuse an output folder whose replacement would delete something navreplay did not write.
+
+    ``target`` may be absent, an empty folder, or a previous navreplay output: a folder whose
+    files are all of the kinds navreplay writes (``OUTPUT_SUFFIXES`` plus ``extra_suffixes``).
+
+    Raises:
+        OutputPathError: ``target`` is a file (or a link, or something else that is not a
+            folder), or a folder holding files navreplay did not write; nothing is touched.
+    """
+    from navreplay.ingest.errors import OutputPathError
+
+    target = Path(target)
+    for above in target.parents:
+        if above.exists() and not above.is_dir():
+            raise OutputPathError(
+                f"the output folder would be inside {above}, which is a file, not a folder",
+                path=target,
+                hint="give --out a path whose parent folders are folders; nothing was written",
+            )
+    if target.is_symlink() or (target.exists() and not target.is_dir()):
+        kind = "a symbolic link" if target.is_symlink() else "a file, not a folder"
+        raise OutputPathError(
+            f"the output path is {kind}; navreplay writes a folder there and would replace it",
+            path=target,
+            hint="give --out a new folder (or a previous navreplay output folder); nothing "
+            "was written",
+        )
+    if not target.is_dir():
+        return
+    owned = OUTPUT_SUFFIXES | {s.lower() for s in extra_suffixes}
+    foreign = _foreign_files(target, frozenset(owned))
+    if foreign:
+        shown = ", ".join(str(p.relative_to(target)) for p in foreign[:3])
+        more = f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
+        raise OutputPathError(
+            f"the output folder is not empty and holds files navreplay did not write "
+            f"({shown}{more}); it would be replaced as a whole",
+            path=target,
+            hint="give --out a new or empty folder (e.g. a subfolder), or move those files "
+            "away; nothing was written",
+        )
+
+
 @contextlib.contextmanager
-def atomic_directory(target: str | Path) -> Iterator[Path]:
+def atomic_directory(target: str | Path, *, extra_suffixes: tuple[str, ...] = ()) -> Iterator[Path]:
     """Yield a temporary directory to fill; on success it replaces ``target`` as a whole.
 
-    An existing ``target`` directory is moved aside and deleted only after the new one is in
-    place, so a failure at any point leaves either the old or the new directory, never a mix.
+    ``target`` must be absent, empty or a previous navreplay output (``check_output_dir``,
+    checked before anything is created; ``extra_suffixes``: further kinds of file the caller
+    itself writes there). An existing ``target`` directory is moved aside and deleted only
+    after the new one is in place, so a failure at any point leaves either the old or the new
+    directory, never a mix. Folders created for ``target`` are removed again on failure.
+
+    Raises:
+        OutputPathError: see ``check_output_dir``.
     """
     target = Path(target)
+    check_output_dir(target, extra_suffixes)
+    created = [p for p in (target.parent, *target.parent.parents) if not p.exists()]
     target.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(target)
     tmp = _temp_sibling(target)
@@ -172,6 +239,7 @@ def atomic_directory(target: str | Path) -> Iterator[Path]:
             if path.is_file():
                 with path.open("rb") as fh:
                     os.fsync(fh.fileno())
+        check_output_dir(target, extra_suffixes)  # the folder may have changed meanwhile
         old: Path | None = None
         if target.exists():
             old = _temp_sibling(target)
@@ -182,4 +250,7 @@ def atomic_directory(target: str | Path) -> Iterator[Path]:
             shutil.rmtree(old, ignore_errors=True)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        for folder in created:  # innermost first
+            with contextlib.suppress(OSError):
+                folder.rmdir()
         raise

@@ -14,7 +14,11 @@ null (catalogue case 21).
   longest and the first ones listed;
 - ``segments``: gaps longer than ``max(60 s, 1000 x median dt)`` are listed again as segment
   boundaries (a forward clock jump or a recording paused: case 32); filters restart there;
-- ``nonfinite``: per column, NaN and inf counts (inf already converted to NaN).
+- ``nonfinite``: per column, NaN and inf counts (inf already converted to NaN);
+- ``implausible``: per column, values beyond what any vehicle or sensor produces
+  (``LIMITS``: |specific force| > 2000 m/s^2, |rate| > 100 rad/s, |lat| > 90 deg ...): in a
+  format without checksums (ULog, DataFlash, CSV) the trace bit damage leaves. They are
+  counted, not changed.
 """
 
 from __future__ import annotations
@@ -25,6 +29,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+#: |value| above which a column's value is physically implausible (counted, not changed)
+LIMITS: dict[str, float] = {
+    **{f"acc_{a}_mps2": 2000.0 for a in "xyz"},
+    **{f"gyro_{a}_radps": 100.0 for a in "xyz"},
+    **{f"vel_{a}_mps": 1000.0 for a in "ned"},
+    "lat_deg": 90.0,
+    "lon_deg": 180.0,
+    "alt_m": 100_000.0,
+}
 _RESERVOIR = 1 << 18
 _MAX_CANDIDATES = 100_000
 _MAX_LISTED = 10
@@ -47,6 +60,7 @@ class StreamAudit:
     first_t_ns: int | None = None
     last_t_ns: int | None = None
     nonfinite: dict[str, dict[str, int]] = field(default_factory=dict)
+    implausible: dict[str, int] = field(default_factory=dict)
     _dts: npt.NDArray[np.int64] = field(default_factory=lambda: np.empty(0, np.int64))
     _stride: int = 1
     _phase: int = 0
@@ -70,6 +84,11 @@ class StreamAudit:
                 entry = self.nonfinite.setdefault(name, {"nan": 0, "inf": 0})
                 entry["nan"] += nan
                 entry["inf"] += n_inf
+            limit = LIMITS.get(name)
+            if limit is not None:
+                over = int(np.count_nonzero(np.abs(col) > limit))
+                if over:
+                    self.implausible[name] = self.implausible.get(name, 0) + over
         full = t if self.last_t_ns is None else np.concatenate([[self.last_t_ns], t])
         offs = offsets if self.last_t_ns is None else np.concatenate([[offsets[0]], offsets])
         dt = np.diff(full)
@@ -115,6 +134,9 @@ class StreamAudit:
                 else None
             ),
             "nonfinite": self.nonfinite,
+            "implausible": {
+                k: {"count": n, "limit_abs": LIMITS[k]} for k, n in sorted(self.implausible.items())
+            },
         }
         dts = self._dts[self._dts > 0]
         if not dts.size:

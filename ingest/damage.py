@@ -31,6 +31,8 @@ class Completeness(StrEnum):
     PARTIAL_RECORD_DROPPED = "partial_record_dropped"
     MISSING_METADATA = "missing_metadata"
     CHECKSUM_MISMATCH = "checksum_mismatch"
+    DUPLICATED_COPY_DROPPED = "duplicated_copy_dropped"
+    IMPLAUSIBLE_VALUES = "implausible_values"
 
 
 @dataclass(frozen=True)

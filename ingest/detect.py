@@ -227,17 +227,35 @@ def _tlog_chain(head: bytes, pos: int, *, whole: bool = False) -> int:
     return -1 if whole and good == 1 and pos == len(head) else good
 
 
+#: a text head may hold damaged lines (invalid UTF-8, NUL or control bytes from a bit flip or
+#: a zeroed block): up to this fraction of its lines (at least one) and of its bytes, so that
+#: the reader names the damaged lines; random or binary bytes damage nearly every line
+TEXT_DAMAGED_LINES_MAX = 0.1
+TEXT_DAMAGED_BYTES_MAX = 0.25
+_CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f\ufffd]")
+
+
 def _as_text(head: bytes) -> str | None:
-    """``head`` decoded as UTF-8 text, or None if it is binary."""
-    if b"\x00" in head:
+    """``head`` decoded as UTF-8 text (damaged characters as U+FFFD), or None if it is binary.
+
+    A multi-byte character cut by the head boundary is still text, and so is text with a few
+    damaged lines (``TEXT_DAMAGED_LINES_MAX``, ``TEXT_DAMAGED_BYTES_MAX``).
+    """
+    text = head.decode("utf-8", "replace")
+    if text.endswith("\ufffd") and b"\x00" not in head[-3:]:
+        text = text.rstrip("\ufffd")  # a character cut by the head boundary
+    if not text:
         return None
-    try:
-        return head.decode("utf-8")
-    except UnicodeDecodeError as err:
-        # A multi-byte character cut by the head boundary is still text.
-        if err.start >= len(head) - 3:
-            return head[: err.start].decode("utf-8", "replace")
+    bad = len(_CONTROL.findall(text))
+    if not bad:
+        return text
+    lines = text.split("\n")
+    damaged = sum(bool(_CONTROL.search(ln)) for ln in lines)
+    if len(lines) < 2 or damaged > max(1, TEXT_DAMAGED_LINES_MAX * len(lines)):
         return None
+    if bad > TEXT_DAMAGED_BYTES_MAX * len(text):
+        return None
+    return _CONTROL.sub("\ufffd", text)
 
 
 def _detect_text(path: Path, text: str) -> Detected | None:
@@ -254,11 +272,29 @@ def _detect_text(path: Path, text: str) -> Detected | None:
     if label.startswith("CRINEX VERS"):
         return Detected(path, Format.RINEX, one, variant="crinex", version=first[:9].strip())
     lines = [ln for ln in text.splitlines()[:60] if ln.strip()]
+    _refuse_damaged_rinex(path, first, lines)
     if any(re.match(r"^#\s*Raw,.*TimeNanos", ln) for ln in lines):
         return Detected(path, Format.GNSSLOGGER, one)
     if lines and sum(bool(_NMEA_RE.match(ln.encode())) for ln in lines) >= max(1, len(lines) // 2):
         return Detected(path, Format.NMEA, one)
     return _detect_delimited(path, lines)
+
+
+_RINEX_LABELS = ("PGM / RUN BY / DATE", "MARKER NAME", "END OF HEADER", "LEAP SECONDS")
+
+
+def _refuse_damaged_rinex(path: Path, first: str, lines: list[str]) -> None:
+    """A RINEX header whose first line is damaged: say so rather than guess another format."""
+    labels = sum(ln[60:80].strip() in _RINEX_LABELS for ln in lines[:40])
+    if labels >= 2:
+        raise CorruptLogError(
+            f"a RINEX header whose first line is not a valid 'RINEX VERSION / TYPE' line "
+            f"({first[:80]!r})",
+            path=path,
+            record="line 1",
+            hint="the header's first line is damaged; restore it (version in columns 1-9, "
+            "file type in column 21, the label in columns 61-80)",
+        )
 
 
 def _detect_delimited(path: Path, lines: list[str]) -> Detected | None:
@@ -269,7 +305,8 @@ def _detect_delimited(path: Path, lines: list[str]) -> Detected | None:
     data_lines = [ln for ln in lines if not ln.lstrip().startswith("#")]
     if data_lines and all(ln.isprintable() or "\t" in ln for ln in data_lines):
         # The last line of the head may be cut short.
-        librsf = all(_LIBRSF_RE.match(ln) for ln in lines[:-1] or lines)
+        body = lines[:-1] or lines
+        librsf = sum(bool(_LIBRSF_RE.match(ln)) for ln in body) >= 0.9 * len(body)
         return Detected(path, Format.LIBRSF if librsf else Format.CSV, (path,))
     return None
 

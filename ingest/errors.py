@@ -99,3 +99,7 @@ class PlausibilityError(IngestError):
 
 class ConfigError(IngestError):
     """A dataset descriptor (``dataset.yaml``) is malformed."""
+
+
+class OutputPathError(IngestError):
+    """The output path cannot be written without destroying something navreplay did not write."""

@@ -15,8 +15,12 @@ sorted and unique, applying the catalogue's rules (bad-inputs.md, cases 29-32):
   and counted; non-identical ones keep the first arrival and are counted as conflicting;
   a table keyed by time and a second column (``gnss_obs``: ``t_ns``, ``sv``) sorts by both
   and only rows equal in both are duplicates (one epoch holds many satellites);
-- ``--strict`` turns re-sorting, late drops, conflicting duplicates and clock steps into a
-  ``CorruptLogError`` naming the file and the record offset.
+- a clock step backwards whose first rows repeat rows of the stream's start exactly (time and
+  every value) is not a clock step but a duplicated copy of the log (a file concatenated with
+  itself, the same file given twice): the copy is dropped, up to where the original ended,
+  and reported with its offset and row count instead of becoming a second segment;
+- ``--strict`` turns re-sorting, late drops, conflicting duplicates, clock steps and copies
+  into a ``CorruptLogError`` naming the file and the record offset.
 
 Rows are held only while they may still be preceded by a late arrival (W of data), plus the
 output block being assembled, so memory does not grow with the log.
@@ -35,6 +39,11 @@ from navreplay.ingest.arrays import I64, Bools
 from navreplay.ingest.errors import CorruptLogError
 
 STEP_MIN_SAMPLES = 3
+#: rows compared with the stream's first rows to call a step backwards a duplicated copy
+COPY_MATCH_ROWS = 8
+#: the stream's first rows kept for that comparison (the copy may start a little later: a
+#: reader resynchronising after the copy's header loses its first records)
+COPY_HEAD_ROWS = 256
 _MAX_LISTED = 10
 
 
@@ -91,6 +100,16 @@ class TimeStep:
 
 
 @dataclass
+class DuplicateCopy:
+    """A duplicated copy of the stream's start, dropped (see the module docstring)."""
+
+    offset: int
+    t_ns: int
+    path: str
+    rows_dropped: int = 0
+
+
+@dataclass
 class HygieneCounts:
     rows_in: int = 0
     rows_out: int = 0
@@ -101,9 +120,14 @@ class HygieneCounts:
     duplicates_conflicting: int = 0
     duplicates_conflicting_offsets: list[int] = field(default_factory=list)
     steps: list[TimeStep] = field(default_factory=list)
+    copies: list[DuplicateCopy] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
         return {
+            "duplicated_copies": [
+                {"file": c.path, "offset": c.offset, "t_ns": c.t_ns, "rows_dropped": c.rows_dropped}
+                for c in self.copies
+            ],
             "rows_in": self.rows_in,
             "rows_out": self.rows_out,
             "reordered": self.reordered,
@@ -150,23 +174,31 @@ class StreamCleaner:
         self._shift = 0
         self._nominal_ns: int | None = None
         self._last_out: Rows | None = None
+        self._head = Rows({}, np.empty(0, np.int64))  # the stream's first rows, as received
+        self._copy_until: int | None = None  # inside a duplicated copy: drop rows up to here
+        self._first_index = 0  # arrival index (0 = the stream's first row) of the rows admitted
 
     def push(self, rows: Rows, path: Path) -> Rows:
         """Add a batch (arrival order); return the rows that are now final (sorted, unique)."""
         self.counts.rows_in += len(rows)
         if not len(rows):
             return self._empty_like(rows)
+        if len(self._head) < COPY_HEAD_ROWS and not self._shift and not self.counts.steps:
+            need = min(COPY_HEAD_ROWS - len(self._head), len(rows))
+            self._head = Rows.concat([self._head, rows.take(np.arange(need))])
         rows.columns["t_ns"] = rows.t + self._shift
         if len(self._held):
             rows = Rows.concat([self._held, rows])
             self._held = Rows({}, np.empty(0, np.int64))
         if self._nominal_ns is None:
             self._nominal_ns = _median_dt(rows.t)
+        self._first_index = self.counts.rows_in - len(rows)  # arrival index of rows[0]
         accepted = self._admit(rows, path, final=False)
         return self._emit(accepted, path, final=False)
 
     def finish(self, path: Path) -> Rows:
         """Flush everything held; returns the last final rows."""
+        self._first_index = self.counts.rows_in - len(self._held)
         accepted = self._admit(self._held, path, final=True) if len(self._held) else None
         self._held = Rows({}, np.empty(0, np.int64))
         return self._emit(accepted, path, final=True)
@@ -180,7 +212,7 @@ class StreamCleaner:
         plus O(1) per late sample.
         """
         keep = np.ones(len(rows), bool)
-        start = 0
+        start = self._drop_copy(rows, 0, keep)
         while start < len(rows):
             seg = rows.t[start:]
             prev = self._max_t if self._max_t is not None else int(seg[0])
@@ -212,11 +244,67 @@ class StreamCleaner:
                 self._max_t = max(int(before[n - 1]), int(seg[n - 1]))
             if step_at is None:
                 break
+            if self._is_copy(rows, step_at):
+                self._start_copy(rows, step_at, path)
+                start = self._drop_copy(rows, step_at, keep)
+                continue
             self._step(rows, step_at, path)
             start = step_at
         if not keep.any():
             return None
         return rows.take(np.flatnonzero(keep)) if not keep.all() else rows
+
+    def _is_copy(self, rows: Rows, i: int) -> bool:
+        """Whether the rows from ``i`` repeat rows of the stream's start exactly."""
+        at = np.flatnonzero(self._head.t == int(rows.t[i]) - self._shift)
+        if not at.size:
+            return False
+        j = int(at[0])
+        n = min(COPY_MATCH_ROWS, len(self._head) - j, len(rows) - i)
+        if n < min(STEP_MIN_SAMPLES, len(self._head)) or not n:
+            return False
+        if j + n > self._first_index + i:  # the rows matched must all precede the copy
+            return False
+        if not np.array_equal(rows.t[i : i + n] - self._shift, self._head.t[j : j + n]):
+            return False
+        for name, col in self._head.columns.items():
+            other = rows.columns.get(name)
+            if name == "t_ns" or other is None:
+                continue
+            a, b = other[i : i + n], col[j : j + n]
+            same = a == b
+            if a.dtype.kind == "f":
+                same |= np.isnan(a) & np.isnan(b)
+            if not bool(np.all(same)):
+                return False
+        return True
+
+    def _start_copy(self, rows: Rows, i: int, path: Path) -> None:
+        assert self._max_t is not None
+        offset = int(rows.offsets[i])
+        if self.strict:
+            raise CorruptLogError(
+                f"stream {self.name}: a duplicated copy of the log starts here (time goes back "
+                f"to the start and the rows repeat it exactly)",
+                path=path,
+                offset=offset,
+                hint="--strict refuses it; without it the copy is dropped and reported",
+            )
+        self._copy_until = self._max_t
+        self.counts.copies.append(DuplicateCopy(offset, int(rows.t[i]) - self._shift, str(path)))
+
+    def _drop_copy(self, rows: Rows, start: int, keep: Bools) -> int:
+        """Inside a duplicated copy: drop the rows from ``start`` that do not go past the end
+        of the original; returns the first row after the copy (``len(rows)`` if none)."""
+        if self._copy_until is None or start >= len(rows):
+            return start
+        beyond = np.flatnonzero(rows.t[start:] > self._copy_until)
+        end = start + int(beyond[0]) if beyond.size else len(rows)
+        keep[start:end] = False
+        self.counts.copies[-1].rows_dropped += end - start
+        if beyond.size:
+            self._copy_until = None
+        return end
 
     def _step(self, rows: Rows, i: int, path: Path) -> None:
         assert self._max_t is not None

@@ -10,12 +10,17 @@ IMU (catalogue cases 23, 24, 26):
 - Accelerometer units: |gravity| must lie in 9.81 +- 0.5 m/s^2. About 1.0 means g units:
   E-FATAL (``PlausibilityError``) unless the descriptor says ``accel_units: g``, which scales
   by 9.80665 and is recorded in provenance. Any other magnitude is E-FATAL too.
-- Gyro units: at rest the mean rate (bias) must stay below ``REST_GYRO_MAX_RADPS``; without
-  rest the median |rate| must stay below ``MOVING_GYRO_MEDIAN_MAX_RADPS``; and no rate
-  exceeds ``GYRO_MAX_RADPS`` (2000 deg/s, the widest full scale of MEMS gyros, plus the 25 %
-  a saturated axis can read beyond it: a tumbling copter's MPU6000 reads 35.6 rad/s).
-  Failing: probable deg/s, E-FATAL unless ``gyro_units: degps`` (scaled to rad/s, recorded)
-  or ``radps`` (accepted as is).
+- Gyro units: at rest the rate (bias, the median over at least ``REST_MIN_WINDOWS`` rest
+  windows of each window's median) must stay below ``REST_GYRO_MAX_RADPS`` about the
+  horizontal axes: a rotation about gravity leaves the accelerometer unchanged, so a vehicle
+  turning while it stands (a hovering copter yawing, a SITL vehicle spinning on the ground)
+  looks at rest, and its yaw rate is no evidence of units; without rest the median |rate|
+  must stay below ``MOVING_GYRO_MEDIAN_MAX_RADPS``; and no vehicle exceeds ``GYRO_MAX_RADPS``
+  (2000 deg/s, the widest full scale of MEMS gyros, plus the 25 % a saturated axis can read
+  beyond it: a tumbling copter's MPU6000 reads 35.6 rad/s) for ``PEAK_MIN_SAMPLES`` samples. Failing: probable deg/s, E-FATAL unless
+  ``gyro_units: degps`` (scaled to rad/s, recorded) or ``radps`` (accepted as is).
+- Samples beyond physical limits (``ingest.audit.LIMITS``: a bit flip in a format without
+  checksums, a glitch) are left out of every decision, like NaN ones; the audit counts them.
 - Mounting: ``mounting_rpy_deg`` from the descriptor, else levelled from gravity when the tilt
   exceeds ``MOUNTING_MIN_TILT_DEG`` (smaller tilts are the vehicle standing on a slope, not a
   mounting; they are reported and left alone).
@@ -34,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.ingest.audit import LIMITS
 from navreplay.ingest.config import GnssConfig, ImuConfig
 from navreplay.ingest.errors import PlausibilityError
 from navreplay.ingest.frames import (
@@ -50,9 +56,23 @@ G0 = 9.80665
 GRAVITY_TOL_MPS2 = 0.5
 REST_ACC_STD_MPS2 = 0.2
 REST_GYRO_MAX_RADPS = 0.05
+REST_MIN_WINDOWS = 2
+#: the accelerometer passes when this share of the rest windows (and at least
+#: ``REST_MIN_WINDOWS``) each show |f| = 9.81 +- 0.5 m/s^2, even if steady turns in flight
+#: that pass for rest pull the mean away (a short or truncated log); g units never do
+REST_FIT_SHARE = 0.25
+#: rest windows whose |f| is this close to gravity's are level rest: the gyro bias is taken
+#: from them only (a steady banked turn shows |f| > g and a rate)
+LEVEL_TOL_MPS2 = 0.2
+#: the horizontal rate of the rest windows must agree to within this fraction of it to count
+#: as a bias (a bias is one vector; steady turns in flight that pass for rest each differ)
+REST_SPREAD_MAX = 0.5
+PEAK_MIN_SAMPLES = 3
 MOVING_GYRO_MEDIAN_MAX_RADPS = 1.0
 GYRO_MAX_RADPS = 1.25 * math.radians(2000.0)
 MOUNTING_MIN_TILT_DEG = 10.0
+ACC_LIMIT = LIMITS["acc_x_mps2"]
+GYRO_LIMIT = LIMITS["gyro_x_radps"]
 
 
 @dataclass
@@ -97,7 +117,10 @@ def decide_imu(
     d = ImuDecision()
     acc = np.stack([columns[n] for n in ACC], axis=1)
     gyro = np.stack([columns[n] for n in GYRO], axis=1)
-    good = np.isfinite(acc).all(axis=1) & np.isfinite(gyro).all(axis=1)
+    finite = np.isfinite(acc).all(axis=1) & np.isfinite(gyro).all(axis=1)
+    nonfinite = int(len(finite) - np.count_nonzero(finite))
+    within = (np.abs(acc) <= ACC_LIMIT).all(axis=1) & (np.abs(gyro) <= GYRO_LIMIT).all(axis=1)
+    good = finite & within
     acc, gyro, t = acc[good], gyro[good], columns["t_ns"][good]
     if len(t) < 2:
         d.report["checked"] = False
@@ -115,12 +138,12 @@ def decide_imu(
     acc, gyro = acc * d.accel_scale, gyro * d.gyro_scale
     wins = _windows(t)
     rest = [w for w in wins if float(np.linalg.norm(acc[w].std(axis=0))) < REST_ACC_STD_MPS2]
-    if rest:
-        f = np.mean([acc[w].mean(axis=0) for w in rest], axis=0)
-        bias = np.mean([gyro[w].mean(axis=0) for w in rest], axis=0)
-    else:
-        f = acc.mean(axis=0)
-        bias = None
+    f = np.mean([acc[w].mean(axis=0) for w in rest], axis=0) if rest else acc.mean(axis=0)
+    mags = np.array([float(np.linalg.norm(acc[w].mean(axis=0))) for w in rest])
+    fits = mags[np.abs(mags - G0) <= GRAVITY_TOL_MPS2]
+    ref = float(np.median(fits)) if fits.size else float(np.linalg.norm(f))
+    level = [w for w, m in zip(rest, mags, strict=True) if abs(m - ref) <= LEVEL_TOL_MPS2]
+    bias, horizontal = _gyro_at_rest(d, gyro, level, f)
     rate = np.linalg.norm(gyro, axis=1)
     d.report.update(
         checked=True,
@@ -130,13 +153,50 @@ def decide_imu(
         specific_force_sensor_mps2=f.tolist(),
         gravity_magnitude_mps2=float(np.linalg.norm(f)),
         gyro_bias_at_rest_radps=None if bias is None else bias.tolist(),
+        gyro_bias_at_rest_horizontal_radps=horizontal,
         gyro_median_radps=float(np.median(rate)),
         gyro_max_radps=float(rate.max()),
+        implausible_samples_ignored=int(len(good) - np.count_nonzero(good) - nonfinite),
     )
-    _check_accel(float(np.linalg.norm(f)), config, path, stream)
-    _check_gyro(bias, float(np.median(rate)), float(rate.max()), config, path, stream)
+    if rest and bias is None:
+        d.report["gyro_bias_at_rest_radps"] = (
+            f"not checked: {len(level)} level rest window(s), fewer than {REST_MIN_WINDOWS}"
+        )
+    peak = float(np.sort(rate)[-PEAK_MIN_SAMPLES]) if len(rate) >= PEAK_MIN_SAMPLES else 0.0
+    d.report["rest_windows_level"] = len(level)
+    if fits.size < max(REST_MIN_WINDOWS, REST_FIT_SHARE * len(rest)):
+        _check_accel(float(np.linalg.norm(f)), config, path, stream)
+    _check_gyro(
+        None if bias is None else (bias, horizontal),
+        float(np.median(rate)),
+        peak,
+        config,
+        path,
+        stream,
+        agree=bool(d.report.get("gyro_rest_windows_agree", True)),
+    )
     _decide_mounting(d, f, config)
     return d
+
+
+def _gyro_at_rest(
+    d: ImuDecision, gyro: np.ndarray, level: list[slice], f: np.ndarray
+) -> tuple[np.ndarray | None, float | None]:
+    """The gyro bias over the level rest windows (median of each window's median) and its
+    component about horizontal axes; ``gyro_rest_windows_agree`` in the report says whether
+    the windows show one bias (rest) or differ (steady motion that passed for rest)."""
+    if len(level) < REST_MIN_WINDOWS:
+        return None, None
+    per_window = np.array([np.median(gyro[w], axis=0) for w in level])
+    bias = np.median(per_window, axis=0)
+    up = f / max(float(np.linalg.norm(f)), 1e-9)
+    flat = per_window - np.outer(per_window @ up, up)
+    middle = np.median(flat, axis=0)
+    horizontal = float(np.linalg.norm(middle))
+    spread = float(np.median(np.linalg.norm(flat - middle, axis=1)))
+    d.report["gyro_rest_windows_spread_radps"] = spread
+    d.report["gyro_rest_windows_agree"] = spread <= REST_SPREAD_MAX * horizontal
+    return bias, horizontal
 
 
 def _check_accel(g: float, config: ImuConfig, path: Path, stream: str) -> None:
@@ -152,19 +212,26 @@ def _check_accel(g: float, config: ImuConfig, path: Path, stream: str) -> None:
 
 
 def _check_gyro(
-    bias: np.ndarray | None,
+    rest: tuple[np.ndarray, float | None] | None,
     median: float,
     peak: float,
     config: ImuConfig,
     path: Path,
     stream: str,
+    *,
+    agree: bool = True,
 ) -> None:
+    """``rest``: the bias at rest and its component about horizontal axes, evidence only when
+    the rest windows ``agree``; ``peak``: the ``PEAK_MIN_SAMPLES``-th largest rate."""
     if config.gyro_units != "auto":
         return
     problems = []
-    if bias is not None and float(np.linalg.norm(bias)) > REST_GYRO_MAX_RADPS:
-        problems.append(f"rate at rest {float(np.linalg.norm(bias)):.3f} rad/s")
-    if bias is None and median > MOVING_GYRO_MEDIAN_MAX_RADPS:
+    if rest is not None and rest[1] is not None and rest[1] > REST_GYRO_MAX_RADPS and agree:
+        problems.append(
+            f"rate at rest {float(np.linalg.norm(rest[0])):.3f} rad/s, "
+            f"{rest[1]:.3f} rad/s about horizontal axes"
+        )
+    if rest is None and median > MOVING_GYRO_MEDIAN_MAX_RADPS:
         problems.append(f"median rate {median:.2f} rad/s")
     if peak > GYRO_MAX_RADPS:
         problems.append(f"peak rate {peak:.1f} rad/s")

@@ -35,6 +35,20 @@ from navreplay.ingest.timebase import TimeBase, convert
 log = logging.getLogger(__name__)
 
 _VELOCITY = ("vel_n_mps", "vel_e_mps", "vel_d_mps", "speed_acc_mps")
+#: the columns a row needs, all finite, for a filter to use it
+USABLE: dict[TableName, tuple[str, ...]] = {
+    TableName.IMU: (
+        "acc_x_mps2",
+        "acc_y_mps2",
+        "acc_z_mps2",
+        "gyro_x_radps",
+        "gyro_y_radps",
+        "gyro_z_radps",
+    ),
+    TableName.GNSS: ("lat_deg", "lon_deg", "alt_m"),
+}
+#: above this fraction of unusable rows a table gets a warning
+UNUSABLE_WARN_FRACTION = 0.5
 
 
 class TableSink:
@@ -89,6 +103,7 @@ class TableSink:
             if plan.companion is not None
             else None
         )
+        self.unusable_rows = 0  # rows a filter cannot use (``USABLE``): NaN/inf in a key column
         self._block: list[Rows] = []
         self._block_len = 0
         self._writer: TableWriter | None = None
@@ -172,6 +187,10 @@ class TableSink:
         if self.gnss is not None:
             self.gnss.apply(rows.columns)
         self.audit.observe(rows.columns, rows.offsets)
+        needed = [rows.columns[c] for c in USABLE.get(self.table, ()) if c in rows.columns]
+        if needed:
+            ok = np.logical_and.reduce([np.isfinite(c) for c in needed])
+            self.unusable_rows += int(len(ok) - np.count_nonzero(ok))
         assert self._writer is not None
         self._writer.write(self._arrow(rows))
 

@@ -141,7 +141,9 @@ def format_summary(report: dict, out_dir: Path) -> str:  # type: ignore[type-arg
         rate = f"{st['rate_hz']:.2f} Hz" if st.get("rate_hz") else "-"
         lines.append(f"  {name:<9} {st['rows']:>9} rows  {rate:>11}  from {t['stream']}")
     for f in report["files"]:
-        lines.append(f"  {f['name']}: {', '.join(f['completeness'])}")
+        checked = f.get("verification", "")
+        unverified = " (unverified: no checksums)" if checked.startswith("unverified") else ""
+        lines.append(f"  {f['name']}: {', '.join(f['completeness'])}{unverified}")
         lines.extend(f"    {d['reason']}" for d in f["defects"])
     lines.extend(f"  warning: {w}" for w in report["warnings"])
     lines.extend(

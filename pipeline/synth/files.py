@@ -27,6 +27,7 @@ from navreplay.ingest.typed import to_plain
 from navreplay.ingest.writers import rinex, ros
 from navreplay.pipeline.nav import earth
 from navreplay.pipeline.synth import SynthResult
+from navreplay.pipeline.synth.output import SYNTH_LOG_SUFFIXES
 
 log = logging.getLogger(__name__)
 REFERENCE_DIR = "reference"
@@ -42,7 +43,7 @@ def write_result(name: str, result: SynthResult, out_dir: Path, *, params: Any) 
     out_dir = Path(out_dir)
     tables = result.tables
     written: list[tuple[str, str]] = []  # (file name, format)
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, extra_suffixes=SYNTH_LOG_SUFFIXES) as tmp:
         if "imu" in tables:
             noise = result.sensors.imu_noise
             rate = _imu_rate_hz(result)

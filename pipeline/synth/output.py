@@ -28,6 +28,9 @@ from navreplay.ingest.writers.csv import CsvColumn, quantize, write_csv
 from navreplay.pipeline.synth import SynthResult
 
 REFERENCE_DIR = "reference"  # as in pipeline.synth.files
+#: the kinds of log a synthesized dataset folder holds besides tables and JSON (a folder of
+#: them is a previous synth output that may be replaced: ``ingest.atomic.check_output_dir``)
+SYNTH_LOG_SUFFIXES = (".mcap", ".bag", ".obs", ".nav", ".tlog")
 
 
 def dataset_seed(seed: int, dataset: str) -> np.random.SeedSequence:
@@ -122,7 +125,7 @@ def write_dataset_dir(
         the final paths of the log files, then of the reference files.
     """
     out = Path(out_dir)
-    with atomic_directory(out) as tmp:
+    with atomic_directory(out, extra_suffixes=SYNTH_LOG_SUFFIXES) as tmp:
         logs = list(write_logs(tmp))
         ref = write_reference(tmp, dataset, result, sources=logs, params=params)
     return [out / p.relative_to(tmp) for p, _ in logs] + [out / p.relative_to(tmp) for p in ref]

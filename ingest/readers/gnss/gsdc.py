@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import io
 from collections.abc import Iterator, Sequence
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -53,6 +54,15 @@ _KEYS = {
 }
 
 
+#: columns each variant cannot do without (the others read as NaN when absent)
+_NEEDED = {
+    "derived2021": ("millisSinceGpsEpoch", "signalType", "svid", "constellationType"),
+    "device_gnss2022": ("TimeNanos", "FullBiasNanos", "SignalType", "Svid", "ConstellationType"),
+    "truth2021": ("millisSinceGpsEpoch", "latDeg", "lngDeg"),
+    "truth2022": ("UnixTimeMillis", "LatitudeDegrees", "LongitudeDegrees"),
+}
+
+
 class GsdcReader(LogReader):
     """One GSDC CSV file (see the module docstring)."""
 
@@ -81,6 +91,10 @@ class GsdcReader(LogReader):
                 )
             )
             data = data[:cut]
+        data, repeats = _blank_repeated_headers(data)
+        if repeats:
+            self.damage.count("repeated_header_lines", len(repeats))
+            self.damage.note(f"repeated header lines skipped at lines {repeats[:10]}")
         skipped: list[int] = []
 
         def bad_row(row: pacsv.InvalidRow) -> str:
@@ -109,6 +123,18 @@ class GsdcReader(LogReader):
         if skipped:  # line numbers of the rows kept (the header is line 1)
             good = np.setdiff1d(np.arange(2, table.num_rows + len(skipped) + 2), skipped)
             lines = good[: table.num_rows].astype(np.int64)
+        if repeats:  # the blanked header lines are not rows: later rows sit lower in the file
+            lines = lines + np.searchsorted(np.asarray(repeats), lines, side="right")
+        missing = [c for c in _NEEDED[self.variant] if c not in table.column_names]
+        if missing:
+            raise CorruptLogError(
+                f"the header lacks column(s) {', '.join(missing)} of a GSDC {self.variant} file",
+                path=self.path,
+                offset=1,
+                record="line 1",
+                hint="the header line is damaged or the file is not a GSDC CSV; repair it",
+            )
+        _check_numbers(table, lines, set(types), self.path)
         self._table, self._lines = table, lines
         return table
 
@@ -290,3 +316,44 @@ def _signals(table: pa.Table, t: np.ndarray, variant: str) -> gsdc.Signals:
         tropo_m=_f(table, c["tropo"]),
         **extra,
     )
+
+
+def _blank_repeated_headers(data: bytes) -> tuple[bytes, list[int]]:
+    """``data`` with later copies of its header line emptied (a file concatenated with itself
+    or a logger that restarted into it), and their line numbers."""
+    header, sep, rest = data.partition(b"\n")
+    if not sep or header.rstrip(b"\r") + b"\n" not in rest:
+        return data, []
+    lines = rest.split(b"\n")
+    repeats = [i + 2 for i, ln in enumerate(lines) if ln.rstrip(b"\r") == header.rstrip(b"\r")]
+    for i in repeats:
+        lines[i - 2] = b""
+    return header + sep + b"\n".join(lines), repeats
+
+
+def _check_numbers(table: pa.Table, lines: np.ndarray, declared: set[str], path: Any) -> None:
+    """A column read as text although most of its values are numbers (a numeric column with
+    damaged lines in it, not a text column such as ``MessageType``) names its first bad line."""
+    for name in table.column_names:
+        col = table.column(name)
+        if name in declared or not pa.types.is_string(col.type):
+            continue
+        values = col.to_pylist()
+        bad = [i for i, v in enumerate(values) if v is not None and not _is_number(v)]
+        if bad and len(bad) * 2 < sum(v is not None for v in values):
+            i = bad[0]
+            raise CorruptLogError(
+                f"column {name!r} holds {str(values[i])[:40]!r}, not a number",
+                path=path,
+                offset=int(lines[i]),
+                record=f"line {int(lines[i])}",
+                hint="the line is damaged; remove or repair it",
+            )
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

@@ -271,6 +271,8 @@ class McapReader(LogReader):
                 base += stop
                 state.need = (9 + declared - len(carry)) if declared >= 0 else 0
         self._flush_pending(state, damage)
+        if state.done:
+            self._trailing_bytes(state.end_at, damage)
         if state.done and not self._has_footer():
             damage.record(
                 Defect(
@@ -278,6 +280,33 @@ class McapReader(LogReader):
                     "the summary section or footer after DataEnd is missing or damaged: every "
                     "message recovered from the data section",
                     offset=None,
+                )
+            )
+
+    def _trailing_bytes(self, start: int, damage: DamageLog) -> None:
+        """Bytes after the closing magic that follows DataEnd (a copy of the file appended, a
+        second recording) are not read: say so."""
+        with self.file.open("rb") as fh:
+            fh.seek(start)
+            at, tail = start, b""
+            while chunk := fh.read(1 << 20):
+                hit = (tail + chunk).find(MCAP_MAGIC)
+                if hit >= 0:
+                    end = at - len(tail) + hit + len(MCAP_MAGIC)
+                    break
+                tail = chunk[-(len(MCAP_MAGIC) - 1) :]
+                at += len(chunk)
+            else:
+                return
+        if end < self.size:
+            damage.record(
+                Defect(
+                    Completeness.CORRUPT_TAIL,
+                    f"{self.size - end} bytes after the end of the MCAP file (its closing magic "
+                    f"at offset {end - len(MCAP_MAGIC)}) ignored: a copy or another recording "
+                    "appended?",
+                    offset=end,
+                    bytes_skipped=self.size - end,
                 )
             )
 
@@ -328,10 +357,10 @@ class McapReader(LogReader):
             elif op == Opcode.DATA_END:
                 state.crc = zlib.crc32(arr.data[: p - 9], state.crc)
                 self._check_data_crc(arr, p, n, offset, state, damage)
-                state.done = True
+                state.done, state.end_at = True, offset
                 return
             elif op == Opcode.FOOTER:
-                state.done = True
+                state.done, state.end_at = True, offset
                 return
         if run:
             idx = np.asarray(run)
@@ -522,6 +551,7 @@ class _WalkState:
     need: int = 0
     done: bool = False
     pending: _Pending | None = None
+    end_at: int = 0  # offset of the DataEnd (or Footer) record that ended the walk
 
 
 def _parse_chunk_header(

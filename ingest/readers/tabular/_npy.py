@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from tokenize import TokenError
 
 import numpy as np
 
@@ -97,8 +98,14 @@ def read_header(path: Path) -> NpyHeader:
             offset = fh.tell()
     except OSError as err:
         raise CorruptLogError(f"cannot read: {err.strerror}", path=path) from err
-    except ValueError as err:
-        raise CorruptLogError(f"unreadable .npy header: {err}", path=path, offset=0) from err
+    except (ValueError, SyntaxError, TokenError, TypeError) as err:
+        # numpy parses the header's Python literal: damage there fails in its tokenizer too
+        raise CorruptLogError(
+            f"unreadable .npy header: {err}",
+            path=path,
+            offset=0,
+            hint="the array's header is damaged; restore the file from its source",
+        ) from err
     if dtype.hasobject:
         raise CorruptLogError("an object array, not a stored log stream", path=path, offset=0)
     header = NpyHeader(tuple(int(s) for s in shape), dtype, offset, 0, bool(fortran))
@@ -138,6 +145,18 @@ def load(path: Path, damage: DamageLog, name: str | None = None) -> tuple[np.nda
                 offset=header.missing_offset(),
                 messages_lost=header.rows - count,
                 messages_recovered=count,
+            )
+        )
+    end = header.data_offset + header.rows * header.row_bytes if header.shape else None
+    size = path.stat().st_size
+    if end is not None and size > end:
+        damage.record(
+            Defect(
+                Completeness.CORRUPT_TAIL,
+                f"{name or path.name}: {size - end} bytes after the end of the array's data "
+                "(the header declares fewer rows: a copy or another array appended?) ignored",
+                offset=end,
+                bytes_skipped=size - end,
             )
         )
     return np.ascontiguousarray(data, dtype=np.float64), header

@@ -62,7 +62,8 @@ class CsvReader(LogReader):
         mapped = [src for src in (cfg.csv if cfg else ()) if (base / src.path).resolve() == here]
         if mapped:
             return mapped
-        header = set(self._peek_header(","))
+        line, names = self._peek_header(",")
+        header = set(names)
         best: tuple[int, TableName] | None = None
         for table in TableName:
             columns = spec(table).columns
@@ -75,20 +76,38 @@ class CsvReader(LogReader):
             cols = {c.name: c.name for c in spec(table).columns if c.name in header}
             cols.pop("t_ns")
             return [CsvSource(str(self.file), table.value, "t_ns", "ns", cols)]
+        hint = (
+            "add a `csv:` entry for this file to dataset.yaml (table, time_column, time_unit, "
+            "columns) and pass --dataset-config"
+        )
+        near = _nearest_table(header)
+        if near is not None:
+            table, missing = near
+            raise UnsupportedFormatError(
+                f"the header has most of table {table.value}'s columns but lacks "
+                f"{', '.join(missing)} (a damaged or renamed column?)",
+                path=self.file,
+                offset=line,
+                record=f"line {line}",
+                hint=f"repair the header line, or {hint}",
+            )
+        shown = ", ".join(names[:8]) + (", ..." if len(names) > 8 else "")
         raise UnsupportedFormatError(
-            "delimited text with no column mapping",
+            f"delimited text with no column mapping (header: {shown})",
             path=self.file,
-            hint="add a `csv:` entry for this file to dataset.yaml (table, time_column, "
-            "time_unit, columns) and pass --dataset-config",
+            offset=line,
+            record=f"line {line}",
+            hint=hint,
         )
 
-    def _peek_header(self, delimiter: str) -> list[str]:
+    def _peek_header(self, delimiter: str) -> tuple[int, list[str]]:
+        """The header's line number and its fields (the first line that is not a comment)."""
         with self.file.open("rb") as fh:
-            for raw in fh:
+            for number, raw in enumerate(fh, start=1):
                 text = raw.decode("utf-8", "replace").strip()
                 if text and not text.startswith("#"):
-                    return [f.strip() for f in text.split(delimiter)]
-        return []
+                    return number, [f.strip() for f in text.split(delimiter)]
+        return 1, []
 
     def _time_base(self, src: CsvSource) -> TimeBase:
         if src.time_base is not None:
@@ -238,6 +257,19 @@ class CsvReader(LogReader):
             d.record(stats.bad.defect())
         if stats.partial is not None:
             d.record(partial_line_defect(stats.partial))
+
+
+def _nearest_table(header: set[str]) -> tuple[TableName, list[str]] | None:
+    """The canonical table whose required columns the header has all but one or two of (a
+    navreplay export with a damaged header), and those it lacks."""
+    best: tuple[int, TableName, list[str]] | None = None
+    for table in TableName:
+        needed = [c.name for c in spec(table).columns if c.required and not c.nullable]
+        missing = [n for n in needed if n not in header]
+        have = len(needed) - len(missing)
+        if 0 < len(missing) <= 2 and have >= 3 and (best is None or have > best[0]):
+            best = (have, table, missing)
+    return None if best is None else (best[1], best[2])
 
 
 class _LineStats:

@@ -190,7 +190,17 @@ class UlogReader(LogReader):
             key = f"{d.name}[{d.multi_id}]"
             if key not in keys:
                 continue
-            conv = topic.convert(d.data, extras)
+            try:
+                conv = topic.convert(d.data, extras)
+            except KeyError as err:
+                raise CorruptLogError(
+                    f"topic {d.name} lacks field {err} in the log's definition of it",
+                    path=self.file,
+                    record=f"topic {key}",
+                    hint="a damaged format definition (ULog has no checksums) or a PX4 "
+                    "version whose topic layout navreplay does not know; select another "
+                    "topic in dataset.yaml",
+                ) from err
             t = self.to_base(d.data["timestamp"])
             offsets = np.zeros(len(t), np.int64)  # pyulog does not expose record offsets
             if topic.attitude:

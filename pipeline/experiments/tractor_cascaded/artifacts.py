@@ -222,7 +222,7 @@ def write_experiment(
         if r.series is not None:
             series[r.spec.scenario][r.spec.label] = r.series
     bands = inputs.sections[BASELINE].convergence_band.values()
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, extra_suffixes=(".md",)) as tmp:
         write_tables(tmp, runs, summary, comparison, bands, exp.seeds, outage_lengths)
         write_timeseries(tmp, series)
         doc = {
