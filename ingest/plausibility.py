@@ -17,8 +17,9 @@ IMU (catalogue cases 23, 24, 26):
   looks at rest, and its yaw rate is no evidence of units; without rest the median |rate|
   must stay below ``MOVING_GYRO_MEDIAN_MAX_RADPS``; and no vehicle exceeds ``GYRO_MAX_RADPS``
   (2000 deg/s, the widest full scale of MEMS gyros, plus the 25 % a saturated axis can read
-  beyond it: a tumbling copter's MPU6000 reads 35.6 rad/s) for ``PEAK_MIN_SAMPLES`` samples. Failing: probable deg/s, E-FATAL unless
-  ``gyro_units: degps`` (scaled to rad/s, recorded) or ``radps`` (accepted as is).
+  beyond it: a tumbling copter's MPU6000 reads 35.6 rad/s) for ``PEAK_MIN_SAMPLES`` samples.
+  Failing: probable deg/s, E-FATAL unless ``gyro_units: degps`` (scaled to rad/s, recorded)
+  or ``radps`` (accepted as is).
 - Samples beyond physical limits (``ingest.audit.LIMITS``: a bit flip in a format without
   checksums, a glitch) are left out of every decision, like NaN ones; the audit counts them.
 - Mounting: ``mounting_rpy_deg`` from the descriptor, else levelled from gravity when the tilt
