@@ -20,6 +20,7 @@ for a scenario's windows gets fewer or shorter ones, each change stated in ``not
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -72,16 +73,33 @@ def _has_sat_positions(tables_dir: Path) -> bool:
     return len(col) > 0 and col.null_count < len(col)
 
 
+def _limits(tables_dir: Path) -> dict[str, str]:
+    """What the ingest found a log cannot give a replay (``ingest_report.json`` ``limits``):
+    code -> reason."""
+    path = tables_dir / "ingest_report.json"
+    if not path.is_file():
+        return {}
+    report = json.loads(path.read_text(encoding="utf-8"))
+    return {str(x["code"]): str(x["reason"]) for x in report.get("limits", [])}
+
+
 def plan(tables_dir: Path, filters: Sequence[str]) -> tuple[list[str], list[Skipped]]:
-    """The filters of ``filters`` that fit the tables, and the others with the reason."""
+    """The filters of ``filters`` that fit the tables, and the others with the reason (the
+    ingest's own where it said why a table is missing or unusable)."""
     have = {p.stem for p in tables_dir.glob("*.parquet")}
+    limits = _limits(tables_dir)
     run, skip = [], []
     for f in filters:
         kind = FILTER_KINDS.get(f)
         if kind is None:
             skip.append(Skipped(f, "*", "not an INS/GNSS filter analyze can run yet"))
         elif "imu" not in have:
-            skip.append(Skipped(f, "*", "the log has no IMU stream"))
+            why = limits.get("imu_refused", "the log has no IMU stream")
+            skip.append(Skipped(f, "*", why))
+        elif kind.coupling == "loose" and "gnss_no_fix" in limits:
+            skip.append(
+                Skipped(f, "*", f"loose coupling needs GNSS fixes: {limits['gnss_no_fix']}")
+            )
         elif kind.coupling == "loose" and "gnss" not in have:
             skip.append(Skipped(f, "*", "loose coupling needs GNSS fixes; the log has none"))
         elif kind.coupling == "tight" and not _has_sat_positions(tables_dir):

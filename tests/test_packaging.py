@@ -113,3 +113,66 @@ def test_nothing_imports_the_folders_by_their_own_names() -> None:
 
 def test_the_built_in_params_are_in_the_wheel(wheel: zipfile.ZipFile) -> None:
     assert wheel.read("navreplay/pipeline/params.yaml") == (REPO / "params.yaml").read_bytes()
+
+
+@pytest.mark.slow
+def test_analyze_runs_from_any_directory_with_the_wheel_installed(
+    wheel: zipfile.ZipFile, tmp_path: Path
+) -> None:
+    """A new user's first steps: the wheel installed into a fresh environment (its
+    dependencies taken from this one, without the checkout), a log made in an empty
+    directory, `navreplay analyze` on it with no parameter file anywhere."""
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
+    python = venv / "bin" / "python"
+    purelib = subprocess.run(
+        [str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+        capture_output=True, text=True, check=True,
+    ).stdout.strip()  # fmt: skip
+    # the dependencies: this environment's site-packages as a plain path (its .pth files,
+    # among them the editable install of the checkout, are not processed)
+    deps = sysconfig_purelib()
+    Path(purelib, "navreplay_test_deps.pth").write_text(deps + "\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NUMBA_CACHE_DIR")}
+    env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
+    done = subprocess.run(
+        [sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps",
+         "--no-index", "--quiet", str(wheel.filename)],
+        capture_output=True, text=True, check=False, env=env,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    navreplay = venv / "bin" / "navreplay"
+    work = tmp_path / "work"
+    work.mkdir()
+
+    def cli(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [str(navreplay), *args], cwd=work, env=env, capture_output=True, text=True,
+            timeout=600, check=False,
+        )  # fmt: skip
+
+    where = cli("params", "--section", "run.filters")
+    assert where.returncode == 0, where.stderr
+    assert f"built-in defaults ({Path(purelib) / 'navreplay' / 'pipeline'}" in where.stdout
+    made = cli("-q", "synth", "fwekf_reference", "--out", "raw")
+    assert made.returncode == 0, made.stderr
+    done = cli("analyze", "raw/fwekf_reference.tlog", "--filters", "lc_ekf",
+               "--scenarios", "nominal,outage_60s", "--out", "analysis")  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "Traceback" not in done.stderr
+    runs = {(r["filter"], r["scenario"]): r for r in
+            json.loads((work / "analysis/report/tables/runs.json").read_text())}  # fmt: skip
+    assert runs[("lc_ekf", "nominal")]["status"] == "ok"
+    # the 80 s drive is too short for five 60 s windows after 120 s: one shorter one is placed
+    assert runs[("lc_ekf", "outage_60s")]["status"] == "ok"
+    assert "note: outage_60s: 5 window(s) of 60 s need 120 s of settling" in done.stdout
+    windows = json.loads((work / "analysis/runs/lc_ekf/outage_60s/metrics.json").read_text())[
+        "windows"
+    ]
+    assert len(windows) == 1
+
+
+def sysconfig_purelib() -> str:
+    import sysconfig
+
+    return sysconfig.get_paths()["purelib"]

@@ -1,11 +1,18 @@
 """Initialization and coarse alignment of the INS/GNSS filters (explicit and reported).
 
 The filter starts at the first GNSS epoch of a segment whose horizontal speed reaches
-``init.align_speed_mps`` (a low-cost gyro cannot find north by gyrocompassing; a land vehicle
-moves along its body x axis):
+``init.align_speed_mps`` and ``init.align_sigmas`` times its own 1-sigma there and at the
+next ``init.align_epochs - 1`` epochs (a low-cost gyro cannot find north by gyrocompassing; a
+land vehicle moves along its body x axis). The speed's sigma is the receiver's speed accuracy
+where it reports a velocity, else the fixes' horizontal accuracy propagated through the
+difference of the neighbouring fixes: at standstill, 1.5 m fixes a second apart difference to
+~2 m/s of noise, which must not become a heading. The confirming epochs lie after the start
+(this is a replay, the whole log is known), so a vehicle that keeps moving starts where it
+would without them:
 
 - heading: ``atan2(v_e, v_n)`` of the GNSS velocity (a reversing vehicle would be 180 deg
-  off; the yaw 1-sigma of ``init`` must cover sideslip);
+  off; the yaw 1-sigma of ``init`` must cover sideslip), its 1-sigma at least the angle the
+  speed's noise subtends;
 - roll and pitch: from the specific force averaged over +-0.25 s, corrected by the
   acceleration seen in the GNSS velocity: ``f^b = C_n^b (a^n - g^n)`` solved for pitch and
   roll at the known heading (static levelling when the vehicle is at rest);
@@ -38,6 +45,9 @@ from navreplay.pipeline.estimation.ins.models.gnss import AN_DIM, AN_RE, AN_VE, 
 from navreplay.pipeline.nav.earth import F64, OMEGA_IE, ecef_to_geodetic, gravity, radii
 
 log = logging.getLogger(__name__)
+
+#: 1-sigma of a single-point velocity from Doppler, m/s (a few cm/s per rate, DOP ~2).
+SPP_SPEED_SIGMA_MPS = 0.2
 
 
 @dataclass(frozen=True)
@@ -82,6 +92,8 @@ class _Track:
     t_ns: np.ndarray
     llh: np.ndarray  # antenna lat, lon (rad), h (m)
     vel: np.ndarray  # NED m/s (NaN where unknown)
+    sig_speed: np.ndarray  # 1-sigma of the horizontal speed, m/s
+    differenced: np.ndarray  # the velocity is differenced from neighbouring fixes
     sig_h: np.ndarray
     sig_v: np.ndarray
     clock: np.ndarray  # (K, 2) clock bias, drift from SPP (NaN from fixes)
@@ -133,12 +145,18 @@ def _track_from_fixes(fixes: FixData) -> _Track | None:
         ]
     )
     ts = t * 1e-9
+    sig_speed = f[:, me.FX_SIG_VEL].copy()
+    differenced = ~np.isfinite(vel[:, 0])
+    # the fixes' own accuracy (FX_SIG_H carries the inflation for correlated errors)
+    raw_sig_h = f[:, me.FX_SIG_H] / np.sqrt(f[:, me.FX_POS_INFL])
     for k in (int(j) for j in np.flatnonzero(~np.isfinite(vel[:, 0]))):
         lo, hi = max(k - 1, 0), min(k + 1, int(t.size) - 1)
         if hi > lo and ts[hi] - ts[lo] <= 2.5:
             vel[k] = (ned[hi] - ned[lo]) / (ts[hi] - ts[lo])
+            # per axis; white fix errors (correlated ones difference to less)
+            sig_speed[k] = math.hypot(raw_sig_h[lo], raw_sig_h[hi]) / (ts[hi] - ts[lo])
     clock = np.full((t.size, 2), math.nan)
-    return _Track(t, llh, vel, f[:, me.FX_SIG_H], f[:, me.FX_SIG_V], clock)
+    return _Track(t, llh, vel, sig_speed, differenced, f[:, me.FX_SIG_H], f[:, me.FX_SIG_V], clock)
 
 
 def _track_from_obs(obs: ObsData) -> _Track | None:
@@ -160,6 +178,8 @@ def _track_from_obs(obs: ObsData) -> _Track | None:
         np.array(ts),
         np.array(llh),
         np.array(vel),
+        np.full(k, SPP_SPEED_SIGMA_MPS),
+        np.zeros(k, dtype=bool),
         np.full(k, 5.0),
         np.full(k, 8.0),
         np.array(clock),
@@ -248,6 +268,49 @@ def _initial_navigation(
     return x0, c_bn
 
 
+def _confirmed(moving: np.ndarray, t_ns: np.ndarray, epochs: int) -> np.ndarray:
+    """Epochs that are moving, as are the next ``epochs - 1`` ones, none of them more than
+    2.5 s apart (a gap in the fixes breaks the run)."""
+    ok = moving.copy()
+    if moving.size < epochs:
+        return np.zeros_like(ok)
+    close = np.diff(t_ns) <= 2_500_000_000
+    for j in range(1, epochs):
+        nxt = np.zeros_like(ok)
+        nxt[:-j] = (
+            moving[j:]
+            & np.all(np.lib.stride_tricks.sliding_window_view(close, j), axis=1)[: ok.size - j]
+        )
+        ok &= nxt
+    return ok
+
+
+def why_not_aligned(fixes: FixData | None, obs: ObsData | None, init: InitParams) -> str:
+    """Why ``align`` found no start in a log: what its GNSS speed showed against the tests."""
+    track = _track_from_fixes(fixes) if fixes is not None else None
+    if track is None and obs is not None:
+        track = _track_from_obs(obs)
+    need = (
+        f"a horizontal GNSS speed of at least {init.align_speed_mps:g} m/s and "
+        f"{init.align_sigmas:g} times its own 1-sigma at {init.align_epochs} consecutive epochs"
+    )
+    if track is None:
+        return f"no GNSS epoch to start from (alignment needs {need})"
+    speed = np.hypot(track.vel[:, 0], track.vel[:, 1])
+    good = np.isfinite(speed)
+    if not good.any():
+        return f"no GNSS speed in the log (alignment needs {need})"
+    k = int(np.nanargmax(speed / np.where(good, track.sig_speed, np.inf)))
+    source = "differenced from the fixes" if track.differenced[k] else "from the receiver"
+    return (
+        f"alignment needs {need}; the log's best epoch had {speed[k]:.2f} m/s at "
+        f"{speed[k] / track.sig_speed[k]:.1f} sigma (speed {source}, 1-sigma "
+        f"{track.sig_speed[k]:.2f} m/s), fastest {np.nanmax(speed):.2f} m/s: a static or bench "
+        "log, no fix, or a vehicle too slow for a heading from its course (for a slow ground "
+        "vehicle, lower filters.<name>.init.align_speed_mps)"
+    )
+
+
 def align(
     imu: ImuData,
     segment: tuple[int, int],
@@ -269,12 +332,13 @@ def align(
         return None
     half = 250_000_000
     speed = np.hypot(track.vel[:, 0], track.vel[:, 1])
-    ok = (
+    moving = (
         np.isfinite(speed)
         & (speed >= init.align_speed_mps)
-        & (track.t_ns - half >= t_imu[0])
-        & (track.t_ns + half <= t_imu[-1])
+        & (speed >= init.align_sigmas * track.sig_speed)
     )
+    ok = _confirmed(moving, track.t_ns, init.align_epochs)
+    ok &= (track.t_ns - half >= t_imu[0]) & (track.t_ns + half <= t_imu[-1])
     if not ok.any():
         return None
     k = int(np.flatnonzero(ok)[0])
@@ -289,7 +353,8 @@ def align(
     sig_h = max(init.pos_sigma_m, float(track.sig_h[k]))
     sig_v = max(init.pos_sigma_m, float(track.sig_v[k]))
     d = [sig_h, sig_h, sig_v] + [init.vel_sigma_mps] * 3
-    d += [init.roll_pitch_sigma_rad] * 2 + [init.yaw_sigma_rad]
+    yaw_sigma = max(init.yaw_sigma_rad, math.atan2(float(track.sig_speed[k]), float(speed[k])))
+    d += [init.roll_pitch_sigma_rad] * 2 + [yaw_sigma]
     d += [max(noise.accel_bias_sigma_mps2, 1e-6)] * 3
     d += [max(noise.gyro_bias_sigma_radps, OMEGA_IE if static_s else 1e-7)] * 3
     d += [init.clock_bias_sigma_m, init.clock_drift_sigma_mps]

@@ -31,13 +31,18 @@ class InitParams:
     """Initialization and coarse alignment.
 
     The filter starts at the first GNSS epoch where the horizontal speed reaches
-    ``align_speed_mps``: heading from the GNSS velocity, roll and pitch from the specific force
-    (corrected by the GNSS-derived acceleration), position and velocity from GNSS. A static
-    period before it (``static_window_s`` of IMU with ``|f| - g`` and ``|w|`` below the
-    thresholds) initializes the gyro bias.
+    ``align_speed_mps`` and ``align_sigmas`` times its own 1-sigma, there and at the next
+    ``align_epochs - 1`` epochs (motion, not noise: speed differenced from 1.5 m fixes a second
+    apart is ~2 m/s of pure noise at standstill): heading from the GNSS velocity, roll and
+    pitch from the specific force (corrected by the GNSS-derived acceleration), position and
+    velocity from GNSS. A static period before it (``static_window_s`` of IMU with ``|f| - g``
+    and ``|w|`` below the thresholds) initializes the gyro bias.
 
     Attributes:
         align_speed_mps: minimum horizontal GNSS speed for the heading alignment, m/s.
+        align_sigmas: ... and minimum multiple of the speed's own 1-sigma (the receiver's
+            speed accuracy, or the fixes' accuracy propagated through the difference).
+        align_epochs: consecutive GNSS epochs that must pass both tests.
         static_window_s: shortest static window used for the gyro-bias estimate, s.
         static_accel_tol_mps2: static if the specific-force norm stays within this of g.
         static_gyro_tol_radps: static if the angular-rate norm stays below this.
@@ -50,6 +55,8 @@ class InitParams:
     """
 
     align_speed_mps: float = 2.0
+    align_sigmas: float = 5.0
+    align_epochs: int = 3
     static_window_s: float = 2.0
     static_accel_tol_mps2: float = 0.3
     static_gyro_tol_radps: float = 0.02

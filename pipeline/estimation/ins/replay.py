@@ -41,7 +41,7 @@ from navreplay.pipeline.estimation.core.runlog import RunLog
 from navreplay.pipeline.estimation.core.tables import ReplayInputError
 from navreplay.pipeline.estimation.core.unscented import ukf_weights
 from navreplay.pipeline.estimation.ins import inputs as inp
-from navreplay.pipeline.estimation.ins.alignment import Alignment, align
+from navreplay.pipeline.estimation.ins.alignment import Alignment, align, why_not_aligned
 from navreplay.pipeline.estimation.ins.config import FILTER_KINDS, FilterKind, InsFilterParams
 from navreplay.pipeline.estimation.ins.kernels.records import Fading, Schedule, Settings
 from navreplay.pipeline.estimation.ins.models import ins, ins_errors
@@ -277,11 +277,7 @@ def run_filter(
             break
     if not alignments and status == "ok":
         status = "not_aligned"
-        failure = (
-            f"the filter never aligned: none of the log's {len(imu_data.segments)} IMU "
-            f"segment(s) has a GNSS epoch at >= {params.init.align_speed_mps:g} m/s horizontal "
-            "speed to start from (a static or bench log, no GNSS fix, or no motion)"
-        )
+        failure = "the filter never aligned: " + why_not_aligned(fixes, obs, params.init)
         log.warning("filter %s: %s", name, failure)
     events.sort(key=lambda e: e.t_ns)
     return RunResult(

@@ -41,16 +41,22 @@ Tables = dict[str, pa.Table]
 
 
 def seoul(
-    duration_s: float, seed: int, *, variant: str = "cw", white_fixes: bool = False
+    duration_s: float,
+    seed: int,
+    *,
+    variant: str = "cw",
+    white_fixes: bool = False,
+    stationary_s: float = 10.0,
 ) -> tuple[Tables, SensorMeta]:
-    """A seoul_campus drive (params.yaml's synthesizer settings) with 10 s at rest first.
+    """A seoul_campus drive (params.yaml's synthesizer settings) with 10 s (``stationary_s``)
+    at rest first.
 
     The vehicle starts moving at 10 s and turns 90 degrees at about 45 s. ``white_fixes``
     makes the receiver's position-fix errors white (the synthesizer's default correlates them
     over 30 s, which the loosely coupled filters do not model).
     """
     sp = load_params(REPO / "params.yaml").synth.seoul_campus
-    sp = replace(sp, duration_s=duration_s, stationary_s=10.0)
+    sp = replace(sp, duration_s=duration_s, stationary_s=stationary_s)
     if white_fixes:
         sp = replace(sp, gnss=replace(sp.gnss, fix_tau_s=1e-3))
     result = simulate(sp, seed=seed, variant=variant)  # type: ignore[arg-type]
