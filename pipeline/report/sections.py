@@ -17,8 +17,9 @@ MAX_TABLE_ROWS = 40  # rows of an experiment's CSV shown on the page
 
 
 def overview(data: DatasetInputs, rows: Sequence[Row]) -> str:
-    """What the dataset holds, which runs exist (filter x scenario), what was skipped, why."""
-    parts = []
+    """What the dataset holds, which runs exist (filter x scenario), what was skipped, why;
+    first, a verdict when some runs did not end ``ok``."""
+    parts = [verdict(rows)] if rows else []
     meta = data.meta
     if meta is not None:
         tables = ", ".join(f"{k} ({v:,} rows)" for k, v in sorted(meta.tables.items()))
@@ -50,6 +51,25 @@ def overview(data: DatasetInputs, rows: Sequence[Row]) -> str:
     else:
         parts.append(h.para("No filter runs for this dataset yet.", "note"))
     return "".join(parts)
+
+
+def verdict(rows: Sequence[Row]) -> str:
+    """The report's first words on its runs: how many are ``ok``, and what the others are."""
+    counts: dict[str, int] = {}
+    for r in rows:
+        counts[str(r["status"])] = counts.get(str(r["status"]), 0) + 1
+    ok = counts.pop("ok", 0)
+    if not counts:
+        return h.para(f"All {ok} runs ended ok.", "verdict ok")
+    others = ", ".join(f"{n} {status.replace('_', ' ')}" for status, n in sorted(counts.items()))
+    head = "No run ended ok" if ok == 0 else f"{ok} of {len(rows)} runs ended ok"
+    why = " (the reasons are listed below"
+    if "inconsistent" in counts:
+        why += (
+            "; an inconsistent run finished, but its innovations are larger than its "
+            "covariance says"
+        )
+    return h.para(f"{head}: {others}{why}).", "verdict bad" if ok == 0 else "verdict warn")
 
 
 def _status_cls(key: str) -> Any:

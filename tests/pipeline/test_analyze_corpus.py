@@ -146,10 +146,11 @@ def test_analyze_gives_each_real_log_its_outcome(name: str, tmp_path: Path) -> N
     outage = runs.get("outage_60s")
     if outage is not None and outage["status"] == "skipped" and want.status["nominal"] != "skipped":
         assert "no outage window fits" in outage["reason"]  # a log of a few seconds
+    page = (tmp_path / "out/report/index.html").read_text()
+    assert '<section id="audit">' in page
     if want.rc == 0:
         assert nominal["reference"] == want.reference
         assert 0.05 < nominal["pos_err_h_rms_m"] < want.max_rms_m
-        page = (tmp_path / "out/report/index.html").read_text()
-        assert '<section id="audit">' in page
-    else:
+    else:  # the summary's and the report's first words say so
         assert "no filter could run on this log:" in done.stdout.splitlines()[2]
+        assert '<p class="verdict bad">No run ended ok' in page

@@ -257,3 +257,18 @@ def test_a_cell_of_planar_filters_is_ranked_by_horizontal_error() -> None:
     }
     ranks = {r["filter"]: r["mean_rank"] for r in ranking(cells)}
     assert ranks == {"vehicle_dynamic": 1.0, "tc_ukf": 1.0, "vehicle_kinematic": 2.0, "lc_ekf": 2.0}
+
+
+def test_the_report_says_first_how_its_runs_ended() -> None:
+    from navreplay.pipeline.report.sections import verdict
+
+    ok = [{"status": "ok"}] * 3
+    assert verdict(ok) == '<p class="verdict ok">All 3 runs ended ok.</p>'
+    mixed = verdict([*ok, {"status": "inconsistent"}, {"status": "not_aligned"}])
+    assert mixed.startswith(
+        '<p class="verdict warn">3 of 5 runs ended ok: 1 inconsistent, 1 not aligned'
+    )
+    assert "an inconsistent run finished" in mixed
+    none = verdict([{"status": "diverged"}, {"status": "skipped"}])
+    assert none.startswith('<p class="verdict bad">No run ended ok: 1 diverged, 1 skipped')
+    assert "inconsistent run" not in none
