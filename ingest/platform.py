@@ -10,6 +10,7 @@ The readers decide from what their format carries:
 - MAVLink tlog: the autopilot's ``HEARTBEAT.type`` (``MAV_TYPE``; ground stations, gimbals
   and cameras are ignored);
 - ArduPilot DataFlash: the firmware string of the first ``MSG``/``VER`` records;
+- both: an ArduPlane whose ``Q_ENABLE`` parameter is set is a QuadPlane, a VTOL;
 - PX4 ULog: ``vehicle_status`` (``system_type``, ``is_vtol``, ``is_rotary_wing``,
   ``vehicle_type``) or the ``MAV_TYPE`` parameter;
 - comma2k19 (a car) and smartLoc (a car): ground; every other format: unknown.
@@ -113,6 +114,13 @@ def from_heartbeats(types: Iterable[tuple[int, int, int]]) -> Platform:
     if best is None:
         return UNKNOWN
     return from_mav_type(best[0], "HEARTBEAT") or UNKNOWN
+
+
+def with_q_enable(found: Platform, q_enable: float | None) -> Platform:
+    """An ArduPlane QuadPlane: a fixed wing whose ``Q_ENABLE`` parameter is set is a VTOL."""
+    if found.kind != "fixed_wing" or q_enable is None or q_enable < 1:
+        return found
+    return Platform("vtol", f"{found.source} with parameter Q_ENABLE {q_enable:g} (a QuadPlane)")
 
 
 #: firmware name (lowercase prefix of the text) -> kind, most specific first

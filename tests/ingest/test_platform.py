@@ -36,10 +36,18 @@ def platform_of(out: Path) -> Platform:
 
 
 # ------------------------------------------------------------------------------ MAVLink tlog
-def tlog(path: Path, vehicle_type: int | None, *, gcs: bool = True, gimbal: bool = False) -> Path:
+def tlog(
+    path: Path,
+    vehicle_type: int | None,
+    *,
+    gcs: bool = True,
+    gimbal: bool = False,
+    q_enable: float | None = None,
+) -> Path:
     """A vehicle at rest for 3 s (RAW_IMU 50 Hz, GPS_RAW_INT 5 Hz, SYSTEM_TIME 1 Hz) sending
     HEARTBEAT of ``vehicle_type`` at 1 Hz (none if None), beside a ground station's heartbeats
-    at 2 Hz (MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID) and, with ``gimbal``, a gimbal's at 2 Hz."""
+    at 2 Hz (MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID) and, with ``gimbal``, a gimbal's at 2 Hz;
+    with ``q_enable``, the vehicle sends that PARAM_VALUE once."""
     vehicle, ground, mount = mav(1, 1), mav(255, 190), mav(1, 154)
     log = Tlog()
     for i in range(150):
@@ -62,6 +70,11 @@ def tlog(path: Path, vehicle_type: int | None, *, gcs: bool = True, gimbal: bool
                 mount,
                 mount.heartbeat_encode(apm.MAV_TYPE_GIMBAL, apm.MAV_AUTOPILOT_INVALID, 0, 0, 0),
             )
+        if q_enable is not None and i == 7:
+            param = vehicle.param_value_encode(
+                b"Q_ENABLE", q_enable, apm.MAV_PARAM_TYPE_INT8, 900, 512
+            )
+            log.add(stamp, vehicle, param)
         log.add(stamp, vehicle, vehicle.raw_imu_encode(boot_us, 0, 0, -1000, 1, -1, 0, 1, 2, 3))
         if i % 10 == 0:
             gps = vehicle.gps_raw_int_encode(
@@ -98,6 +111,17 @@ def test_tlog_platform_is_the_vehicles_heartbeat_type_not_the_ground_stations(
     found = platform_of(tmp_path / "out")
     assert found.kind == kind
     assert words in found.source
+
+
+@pytest.mark.parametrize(("q_enable", "kind"), [(1.0, "vtol"), (0.0, "fixed_wing")])
+def test_tlog_of_a_quadplane_is_a_vtol(tmp_path: Path, q_enable: float, kind: str) -> None:
+    path = tlog(tmp_path / "v.tlog", apm.MAV_TYPE_FIXED_WING, q_enable=q_enable)
+    (inv,), _ = inspect([path])
+    assert inv.platform.kind == kind
+    if kind == "vtol":
+        assert inv.platform.source == (
+            "HEARTBEAT type 1 (MAV_TYPE_FIXED_WING) with parameter Q_ENABLE 1 (a QuadPlane)"
+        )
 
 
 def test_tlog_with_only_ground_station_heartbeats_is_unknown(tmp_path: Path) -> None:
@@ -153,6 +177,18 @@ def test_dataflash_platform_from_the_firmware_message(
         assert found.source == f'firmware "{firmware.decode().rsplit(" ", 1)[0]}"'
     elif firmware.startswith(b"ArduSub"):
         assert found.source == 'firmware "ArduSub V4.1.0" (a submarine)'
+
+
+@pytest.mark.parametrize(("q_enable", "kind"), [(1.0, "vtol"), (0.0, "fixed_wing")])
+def test_dataflash_of_a_quadplane_is_a_vtol(tmp_path: Path, q_enable: float, kind: str) -> None:
+    log = copter33(firmware=b"ArduPlane V4.2.3 (b7e7b6e1)")
+    log.write("PARM", b"Q_ENABLE".ljust(16, b"\0"), q_enable)
+    (inv,), _ = inspect([log.save(tmp_path / "log.bin")])
+    assert inv.platform.kind == kind
+    if kind == "vtol":
+        assert inv.platform.source == (
+            'firmware "ArduPlane V4.2.3" with parameter Q_ENABLE 1 (a QuadPlane)'
+        )
 
 
 def test_firmware_found_after_other_messages_and_words() -> None:
@@ -283,8 +319,11 @@ REAL = {
         "multirotor",
         "HEARTBEAT type 2 (MAV_TYPE_QUADROTOR)",
     ),
-    # ArduPlane's QuadPlane SITL announces itself as a fixed wing
-    "uavlogviewer_sitl_tlog/vtol.tlog": ("fixed_wing", "HEARTBEAT type 1 (MAV_TYPE_FIXED_WING)"),
+    # ArduPlane's QuadPlane SITL announces itself as a fixed wing, with Q_ENABLE 1
+    "uavlogviewer_sitl_tlog/vtol.tlog": (
+        "vtol",
+        "HEARTBEAT type 1 (MAV_TYPE_FIXED_WING) with parameter Q_ENABLE 1 (a QuadPlane)",
+    ),
     "corpus_2026/px4_v190_fmuv3_flight.ulg": (
         "multirotor",
         "vehicle_status.system_type type 2 (MAV_TYPE_QUADROTOR)",
