@@ -63,6 +63,7 @@ from navreplay.ingest.detect import Detected, Format, detect
 from navreplay.ingest.errors import IngestError, PlausibilityError
 from navreplay.ingest.limits import find_limits
 from navreplay.ingest.meta import DatasetMeta, SensorMeta, SourceRecord, write_meta
+from navreplay.ingest.platform import resolve as resolve_platform
 from navreplay.ingest.readers import open_reader
 from navreplay.ingest.readers.base import Inventory, LogReader, ReadContext, Selection
 from navreplay.ingest.readers.ros.rosmsg import DefinitionError
@@ -288,7 +289,7 @@ def _ingest(
                 for src, o in zip(sources, opened, strict=True)
             ),
             tables=rows,
-            sensors=_sensors(config, sinks),
+            sensors=_sensors(config, sinks, inventories),
             frame_conversions=tuple(c for s in sinks.values() for c in s.conversions)
             + _mounting_note(sinks),
             audit=report,
@@ -522,7 +523,9 @@ def _dataset_id(out_dir: Path) -> str:
     return cleaned if cleaned[:1].isalpha() else f"d_{cleaned}" if cleaned else "adhoc"
 
 
-def _sensors(config: DatasetConfig, sinks: dict[TableName, TableSink]) -> SensorMeta:
+def _sensors(
+    config: DatasetConfig, sinks: dict[TableName, TableSink], inventories: list[Inventory]
+) -> SensorMeta:
     imu = sinks.get(TableName.IMU)
     mounting = imu.mounting_rpy_deg if imu is not None else None
     return SensorMeta(
@@ -530,6 +533,7 @@ def _sensors(config: DatasetConfig, sinks: dict[TableName, TableSink]) -> Sensor
         lever_arm_m=config.gnss.lever_arm_m,
         imu_mounting_rpy_deg=mounting or (0.0, 0.0, 0.0),
         wheelbase_m=config.vehicle.wheelbase_m,
+        platform=resolve_platform(config.platform, (inv.platform for inv in inventories)),
     )
 
 

@@ -32,6 +32,7 @@ from typing import Literal
 import yaml
 
 from navreplay.ingest.errors import ConfigError
+from navreplay.ingest.platform import PlatformKind
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.typed import FieldError, KeyPathError, load_dataclass
 
@@ -204,6 +205,8 @@ class DatasetConfig:
     Attributes:
         utc_date: UTC date (``YYYY-MM-DD``) of the first record, for logs whose records carry
             only a time of day (NMEA without a valid RMC or ZDA sentence).
+        platform: the vehicle kind (``ground``, ``multirotor``, ``fixed_wing``, ``vtol``,
+            ``unknown``); overrides what the log says (``ingest.platform``).
     """
 
     id: str
@@ -212,6 +215,7 @@ class DatasetConfig:
     required: tuple[str, ...] = ()
     time_base: Literal["auto", "gps", "utc", "recorder"] = "auto"
     utc_date: str | None = None
+    platform: PlatformKind | None = None
     imu: ImuConfig = field(default_factory=ImuConfig)
     gnss: GnssConfig = field(default_factory=GnssConfig)
     gnss_obs: StreamConfig = field(default_factory=StreamConfig)

@@ -15,6 +15,7 @@ from typing import Any
 from navreplay.ingest.atomic import atomic_write_json
 from navreplay.ingest.config import ImuNoise, Vec3
 from navreplay.ingest.errors import ConfigError
+from navreplay.ingest.platform import UNKNOWN, Platform
 from navreplay.ingest.tables import SourceFile, package_version
 from navreplay.ingest.typed import KeyPathError, load_dataclass, to_plain
 
@@ -34,12 +35,14 @@ class SensorMeta:
         lever_arm_m: GNSS antenna relative to the IMU, body FRD, m.
         imu_mounting_rpy_deg: the mounting rotation applied at ingest (for the record).
         wheelbase_m: vehicle wheelbase, m, if known.
+        platform: the vehicle kind and its source (``ingest.platform``).
     """
 
     imu_noise: ImuNoise | None = None
     lever_arm_m: Vec3 = (0.0, 0.0, 0.0)
     imu_mounting_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
     wheelbase_m: float | None = None
+    platform: Platform = UNKNOWN
 
 
 @dataclass(frozen=True)

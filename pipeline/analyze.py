@@ -7,7 +7,8 @@ filter run) and returning what the summary needs.
 
 Which filters fit (``plan``): the INS/GNSS filters need an ``imu`` table; loosely coupled
 ones (``lc_*``) need ``gnss`` fixes, tightly coupled ones (``tc_*``) need ``gnss_obs`` with
-satellite positions. A filter that does not fit is skipped with the reason, never run on
+satellite positions; the ``*_nhc`` variants need a ground vehicle (or an unknown platform). A
+filter that does not fit is skipped with the reason, never run on
 data it cannot use. Each filter replays under each scenario (``pipeline.outages.runs``: the
 scenario engine applies outage windows, k-satellite windows or faults to the tables first);
 a scenario the log cannot support (e.g. k satellites without raw observables) or a run that
@@ -31,6 +32,8 @@ import pyarrow.parquet as pq
 
 from navreplay.ingest.api import IngestOptions, ingest
 from navreplay.ingest.config import DatasetConfig
+from navreplay.ingest.meta import META_NAME, read_meta
+from navreplay.ingest.platform import UNKNOWN, Platform
 from navreplay.ingest.tables import params_hash
 from navreplay.ingest.typed import to_plain
 from navreplay.pipeline.errors import DivergenceError, ParamsError, PipelineError
@@ -43,6 +46,10 @@ if TYPE_CHECKING:
     from navreplay.pipeline.scenarios.config import ScenariosParams
 
 Progress = Callable[[str], None]
+
+#: the platforms the non-holonomic constraint may be fused on (unknown: the user's choice)
+NHC_PLATFORMS = ("ground", "unknown")
+NHC_REASON = "the non-holonomic constraint holds for ground vehicles"
 
 
 @dataclass
@@ -85,9 +92,11 @@ def _limits(tables_dir: Path) -> dict[str, str]:
 
 def plan(tables_dir: Path, filters: Sequence[str]) -> tuple[list[str], list[Skipped]]:
     """The filters of ``filters`` that fit the tables, and the others with the reason (the
-    ingest's own where it said why a table is missing or unusable)."""
+    ingest's own where it said why a table is missing or unusable). The ``*_nhc`` filters fit
+    only a ``ground`` or ``unknown`` platform (``meta.json`` ``sensors.platform``)."""
     have = {p.stem for p in tables_dir.glob("*.parquet")}
     limits = _limits(tables_dir)
+    platform = _platform(tables_dir)
     run, skip = [], []
     for f in filters:
         kind = FILTER_KINDS.get(f)
@@ -109,9 +118,18 @@ def plan(tables_dir: Path, filters: Sequence[str]) -> tuple[list[str], list[Skip
                 else "no raw GNSS observables"
             )
             skip.append(Skipped(f, "*", f"tight coupling needs pseudoranges and orbits: {why}"))
+        elif kind.nhc and platform.kind not in NHC_PLATFORMS:
+            skip.append(Skipped(f, "*", f"{NHC_REASON}; this log is a {platform.text()}"))
         else:
             run.append(f)
     return run, skip
+
+
+def _platform(tables_dir: Path) -> Platform:
+    """The vehicle kind ingest recorded in ``meta.json`` (unknown without one)."""
+    if not (tables_dir / META_NAME).is_file():
+        return UNKNOWN
+    return read_meta(tables_dir).sensors.platform
 
 
 def write_skip(run_dir: Path, s: Skipped) -> None:

@@ -54,6 +54,7 @@ from navreplay.ingest.arrays import I64
 from navreplay.ingest.config import DatasetConfig
 from navreplay.ingest.damage import DamageLog
 from navreplay.ingest.detect import Detected, Format
+from navreplay.ingest.platform import UNKNOWN, Platform
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.timebase import TimeBase
 
@@ -127,12 +128,18 @@ class StreamInfo:
 
 @dataclass(frozen=True)
 class Inventory:
-    """Everything a log holds, before conversion."""
+    """Everything a log holds, before conversion.
+
+    Attributes:
+        platform: the vehicle kind the log says it was recorded on (``ingest.platform``),
+            with its source; unknown for a format that does not say.
+    """
 
     path: Path
     format: Format
     streams: tuple[StreamInfo, ...]
     notes: tuple[str, ...] = ()
+    platform: Platform = UNKNOWN
 
     def stream(self, key: str) -> StreamInfo | None:
         for s in self.streams:

@@ -9,6 +9,7 @@ import pytest
 from navreplay.ingest.config import ImuNoise
 from navreplay.ingest.errors import ConfigError
 from navreplay.ingest.meta import DatasetMeta, SensorMeta, SourceRecord, read_meta, write_meta
+from navreplay.ingest.platform import Platform
 
 
 def test_meta_round_trips(tmp_path: Path) -> None:
@@ -31,4 +32,20 @@ def test_missing_or_malformed_meta(tmp_path: Path) -> None:
         read_meta(tmp_path)
     (tmp_path / "meta.json").write_text('{"dataset": "x", "time_base": "gps", "tables": {}}')
     with pytest.raises(ConfigError, match="sources: missing"):
+        read_meta(tmp_path)
+
+
+def test_platform_round_trips_and_a_wrong_kind_names_its_key(tmp_path: Path) -> None:
+    meta = DatasetMeta(
+        dataset="hover",
+        time_base="gps",
+        sources=(SourceRecord("a.tlog", "0" * 64, "tlog"),),
+        tables={"imu": 100},
+        sensors=SensorMeta(platform=Platform("multirotor", "HEARTBEAT type 2")),
+    )
+    write_meta(tmp_path, meta)
+    assert read_meta(tmp_path) == meta
+    path = tmp_path / "meta.json"
+    path.write_text(path.read_text().replace('"multirotor"', '"blimp"'))
+    with pytest.raises(ConfigError, match=r"sensors\.platform\.kind"):
         read_meta(tmp_path)

@@ -75,14 +75,17 @@ def read_all(path: Path, name: str) -> list[Any]:
     return out
 
 
-def copter33(seconds: float = 4.0, *, gps_t: bool = True) -> DfLog:
-    """Copter 3.3 at rest then moving north at 3 m/s: IMU/IMU2 at 50 Hz, GPS 5 Hz, EKF1 10 Hz."""
+def copter33(
+    seconds: float = 4.0, *, gps_t: bool = True, firmware: bytes = b"APM:Copter V3.3 (d6053245)"
+) -> DfLog:
+    """Copter 3.3 at rest then moving north at 3 m/s: IMU/IMU2 at 50 Hz, GPS 5 Hz, EKF1 10 Hz;
+    ``firmware`` is the first MSG record's text."""
     rng = np.random.default_rng(5)
     log = DfLog()
     log.fmt("FMT")
     for name, spec in COPTER33.items():
         log.fmt(name, GPS_NO_T if name == "GPS" and not gps_t else spec)
-    log.write("MSG", b"APM:Copter V3.3 (d6053245)".ljust(64, b"\0"))
+    log.write("MSG", firmware.ljust(64, b"\0"))
     log.write("PARM", b"SYSID_THISMAV".ljust(16, b"\0"), 1.0)
     for i in range(round(seconds * 50)):
         ms = BOOT0_MS + i * 20

@@ -47,6 +47,7 @@ from navreplay.ingest.detect import Format
 from navreplay.ingest.ecef import geodetic_from_ecef
 from navreplay.ingest.errors import CorruptLogError
 from navreplay.ingest.gnss.ephemeris import C_MPS, rotate_earth
+from navreplay.ingest.platform import UNKNOWN, Platform
 from navreplay.ingest.readers._lines import BadLines, partial_line_defect
 from navreplay.ingest.readers.base import (
     Batch,
@@ -65,6 +66,8 @@ _TYPES: dict[str, tuple[TableName, int, str | None, str]] = {
     "point3": (TableName.TRUTH, 13, "ned", "ego ECEF position"),
 }
 _SYSTEMS = {1: "G", 2: "S", 4: "R", 8: "E", 16: "J", 32: "C"}
+#: odom3 is a wheel speed and yaw rate: the smartLoc datasets are recorded in cars
+ODOMETRY_PLATFORM = Platform("ground", "libRSF odom3 (wheel speed and yaw rate of a car)")
 TIME_NOTE = (
     "libRSF stamps count seconds from the start of the run; the files carry no absolute epoch "
     "(time base recorder)"
@@ -119,7 +122,8 @@ class LibrsfReader(LogReader):
                     detail=what + epochs,
                 )
             )
-        return Inventory(self.path, self.format, tuple(streams), (TIME_NOTE,))
+        platform = ODOMETRY_PLATFORM if "odom3" in counts else UNKNOWN
+        return Inventory(self.path, self.format, tuple(streams), (TIME_NOTE,), platform)
 
     def read(self, selections: Sequence[Selection]) -> Iterator[Batch]:
         wanted = {s.key for s in selections if s.key in _TYPES}

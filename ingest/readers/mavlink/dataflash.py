@@ -29,6 +29,7 @@ import numpy.typing as npt
 from navreplay.ingest.arrays import I64
 from navreplay.ingest.detect import DATAFLASH_MAGIC, Detected, Format
 from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
+from navreplay.ingest.platform import from_firmware, with_q_enable
 from navreplay.ingest.readers.asof import AsofJoin, Left
 from navreplay.ingest.readers.base import (
     Batch,
@@ -119,7 +120,8 @@ class DataFlashReader(LogReader):
         if s.platform:
             notes.append(f"platform: {'; '.join(s.platform)}")
         notes += [f"FMT of {u.name} at offset {u.offset}: {u.reason}" for u in s.unusable]
-        return Inventory(self.path, self.format, tuple(streams), tuple(notes))
+        platform = with_q_enable(from_firmware(s.platform), s.q_enable)
+        return Inventory(self.path, self.format, tuple(streams), tuple(notes), platform)
 
     # ---------------------------------------------------------------------------------- read
     def read(self, selections: Sequence[Selection]) -> Iterator[Batch]:

@@ -117,6 +117,7 @@ class DfSurvey:
     undulation_mm: OffsetAccumulator = field(default_factory=OffsetAccumulator)
     origins: list[tuple[int, float, float, float]] = field(default_factory=list)
     platform: list[str] = field(default_factory=list)  # firmware and board, from MSG/VER
+    q_enable: float | None = None  # ArduPlane's Q_ENABLE parameter (a QuadPlane when set)
     fixes: list[np.ndarray] = field(default_factory=list)  # (boot us, lat, lon, MSL alt) rows
     ekf1: list[np.ndarray] = field(default_factory=list)  # (boot us, PN, PE, PD) rows
     gps_first: tuple[int, int] | None = None
@@ -315,8 +316,7 @@ def _records(
             s.counts[key] += int(sel.sum())
             s.first_us.setdefault(key, int(t_us[sel][0]))
             s.last_us[key] = int(t_us[sel][-1])
-    if name in ("MSG", "VER") and len(s.platform) < PLATFORM_LINES:
-        _platform(s, rec.decode(idx[:PLATFORM_LINES], fmt))
+    _platform_records(s, rec, idx, fmt)
     if name not in ("GPS", "GPS2", "GPA", "GPA2", "ORGN", "EKF1"):
         return
     data = rec.decode(idx, fmt)
@@ -356,6 +356,19 @@ def _platform(s: DfSurvey, data: np.ndarray) -> None:
         text = " ".join(p for p in parts if p)
         if text and len(s.platform) < PLATFORM_LINES:
             s.platform.append(text)
+
+
+def _platform_records(s: DfSurvey, rec: Records, idx: npt.NDArray[np.intp], fmt: DfFormat) -> None:
+    """What tells the vehicle kind: the first ``MSG``/``VER`` texts and ArduPlane's
+    ``Q_ENABLE`` from ``PARM`` records (the last value logged)."""
+    if fmt.name in ("MSG", "VER") and len(s.platform) < PLATFORM_LINES:
+        _platform(s, rec.decode(idx[:PLATFORM_LINES], fmt))
+    if fmt.name != "PARM" or "Name" not in fmt.columns or "Value" not in fmt.columns:
+        return
+    data = rec.decode(idx, fmt)
+    hit = np.flatnonzero(np.asarray(data["Name"]) == b"Q_ENABLE")
+    if len(hit):
+        s.q_enable = float(fmt.scaled(data[hit[-1:]], "Value")[0])
 
 
 def gps_epochs(data: np.ndarray, fmt: DfFormat) -> tuple[I64, npt.NDArray[np.bool_]]:

@@ -130,7 +130,9 @@ class TlogReader(LogReader):
                 )
         notes = [f"MAVLink dialect {self.dialect.name}; CRC checked on every packet"]
         notes += s.decisions()
-        return Inventory(self.path, self.format, tuple(streams), tuple(notes))
+        platform = s.platform()
+        notes.append(f"platform: {platform.text()}")
+        return Inventory(self.path, self.format, tuple(streams), tuple(notes), platform)
 
     def _to_base(self, utc_ns: int) -> int:
         if self._surveyed().base == TimeBase.GPS:

@@ -18,7 +18,8 @@ the vehicle has a GPS fix, the vehicle's UTC (``SYSTEM_TIME.time_unix_usec``, ep
 - GPS week rollover (case 35): vehicle UTC values 1024 weeks away from the tlog stamps are
   corrected (the stamps are the reference) and counted;
 - message counts per stream and instance, first/last stamps, and the geoid undulation
-  (median ``alt_ellipsoid - alt`` of GPS packets).
+  (median ``alt_ellipsoid - alt`` of GPS packets);
+- the HEARTBEAT ``(type, autopilot)`` counts per sender, the vehicle kind (``ingest.platform``).
 
 The dataset base is GPS (UTC converted with the leap-second table) when every segment is
 paired with the vehicle's GPS-derived UTC, else UTC (the GCS clock).
@@ -34,6 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from navreplay.ingest.arrays import I64
+from navreplay.ingest.platform import UNKNOWN, Platform, from_heartbeats, with_q_enable
 from navreplay.ingest.readers.mavlink._mavscan import VALID, gather
 from navreplay.ingest.readers.mavlink.mavclock import ROLLOVER_NS, BootTracker, OffsetAccumulator
 from navreplay.ingest.readers.mavlink.mavdialect import Dialect, MessageDef
@@ -86,10 +88,24 @@ class TlogSurvey:
     rollover_rows: int = 0
     undulation_m: float | None = None
     base: TimeBase = TimeBase.UTC
+    heartbeats: dict[int, Counter[tuple[int, int]]] = field(default_factory=dict)
+    q_enable: dict[int, float] = field(default_factory=dict)
     _stamp_minus_boot: dict[int, OffsetAccumulator] = field(default_factory=dict)
     _systime: dict[int, OffsetAccumulator] = field(default_factory=dict)
     _epoch_minus_stamp: dict[int, OffsetAccumulator] = field(default_factory=dict)
     _undulation: OffsetAccumulator = field(default_factory=OffsetAccumulator)
+
+    def platform(self) -> Platform:
+        """The vehicle kind from the HEARTBEAT ``type`` of the vehicle, else of any other
+        sender that is a flight controller (GCS heartbeats never count); a fixed wing whose
+        ``Q_ENABLE`` parameter (PARAM_VALUE) is set is a QuadPlane, a VTOL."""
+        order = sorted(self.heartbeats, key=lambda k: (k != self.vehicle, k))
+        for sender in order:
+            beats = self.heartbeats[sender]
+            found = from_heartbeats((t, a, n) for (t, a), n in beats.items())
+            if found.known:
+                return with_q_enable(found, self.q_enable.get(sender))
+        return UNKNOWN
 
     @property
     def tracker(self) -> BootTracker:
@@ -112,6 +128,8 @@ def survey(path: Path, dialect: Dialect) -> TlogSurvey:
     s = TlogSurvey()
     boot_ids = boot_messages(dialect)
     systime = dialect.by_name("SYSTEM_TIME")
+    heartbeat = dialect.by_name("HEARTBEAT")
+    param = dialect.by_name("PARAM_VALUE")
     for p in scan_blocks(path, dialect, s.stats):
         ok = p.flag == VALID
         _boot_clock(s, p, ok, boot_ids)
@@ -121,6 +139,10 @@ def survey(path: Path, dialect: Dialect) -> TlogSurvey:
             s.trackers.setdefault(sender, BootTracker())
             if systime is not None:
                 _systime_pairs(s, p, mine, systime, sender)
+            if heartbeat is not None:
+                _heartbeats(s, p, mine, heartbeat, sender)
+            if param is not None:
+                _q_enable(s, p, mine, param, sender)
             _streams(s, p, mine, dialect, sender)
     _finish(s)
     return s
@@ -188,6 +210,32 @@ def _systime_pairs(
     boot_ns = rec["time_boot_ms"].astype(np.int64) * 1_000_000
     segs = s.trackers[sender].segment_of(p.offset[idx])
     s._systime.setdefault(sender, OffsetAccumulator()).add(segs, unix_ns - boot_ns)
+
+
+def _heartbeats(
+    s: TlogSurvey, p: Packets, mine: npt.NDArray[np.bool_], mdef: MessageDef, sender: int
+) -> None:
+    idx = np.flatnonzero(mine & (p.msgid == mdef.msgid))
+    if not len(idx):
+        return
+    rec = decode(p, idx, mdef)
+    pairs = np.column_stack([rec["type"].astype(np.int64), rec["autopilot"].astype(np.int64)])
+    values, counts = np.unique(pairs, axis=0, return_counts=True)
+    beats = s.heartbeats.setdefault(sender, Counter())
+    for (t, a), n in zip(values.tolist(), counts.tolist(), strict=True):
+        beats[(t, a)] += n
+
+
+def _q_enable(
+    s: TlogSurvey, p: Packets, mine: npt.NDArray[np.bool_], mdef: MessageDef, sender: int
+) -> None:
+    idx = np.flatnonzero(mine & (p.msgid == mdef.msgid))
+    if not len(idx):
+        return
+    rec = decode(p, idx, mdef)
+    hit = np.flatnonzero(rec["param_id"] == b"Q_ENABLE")
+    if len(hit):
+        s.q_enable[sender] = float(rec["param_value"][hit[-1]])
 
 
 def _streams(

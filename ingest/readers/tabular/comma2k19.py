@@ -58,6 +58,7 @@ from navreplay.ingest.ecef import (
     velocity_ned_from_course,
 )
 from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.platform import Platform
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
@@ -70,6 +71,8 @@ from navreplay.ingest.readers.tabular import _npy
 from navreplay.ingest.schema import FixType, TableName
 from navreplay.ingest.timebase import NS_PER_S, SECONDS_PER_WEEK, TimeBase, utc_to_gps_ns
 
+#: comma2k19 is recorded by comma.ai's devices in cars
+PLATFORM = Platform("ground", "comma2k19 (a car dataset)")
 NO_EPHEMERIS = (
     "raw pseudoranges (u-blox/Qualcomm) not convertible to gnss_obs: the segment carries no "
     "broadcast ephemeris, so satellite positions and clocks are unknown"
@@ -210,7 +213,7 @@ class Comma2k19Reader(LogReader):
             )
         if any(s.key == "global_pose" for s in streams):
             notes.append(CAMERA_POSE)
-        return Inventory(self.path, self.format, tuple(streams), tuple(notes))
+        return Inventory(self.path, self.format, tuple(streams), tuple(notes), PLATFORM)
 
     def clock(self) -> _Clock:
         """The boot-clock pairing from ``global_pose`` (cached)."""

@@ -48,6 +48,7 @@ from navreplay.ingest.arrays import I64
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import CorruptLogError
+from navreplay.ingest.platform import UNKNOWN, Platform, from_mav_type, from_px4_status
 from navreplay.ingest.readers.asof import AsofJoin, Left
 from navreplay.ingest.readers.base import (
     Batch,
@@ -70,6 +71,8 @@ from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
 log = logging.getLogger(__name__)
 
 JOIN_TOLERANCE_NS = 50_000_000
+_STATUS = "vehicle_status"
+_STATUS_FIELDS = ("system_type", "is_vtol", "is_rotary_wing", "vehicle_type")
 _HEADER = 16
 
 
@@ -91,6 +94,7 @@ class UlogReader(LogReader):
         from pyulog.core import ULogException
 
         names = [*(t.name for t in TOPICS), *{t.attitude or t.pair for t in TOPICS} - {""}]
+        names.append(_STATUS)
         printed = io.StringIO()
         try:
             with contextlib.redirect_stdout(printed):  # pyulog prints its warnings
@@ -102,7 +106,7 @@ class UlogReader(LogReader):
         finally:
             for line in printed.getvalue().splitlines():
                 log.info("%s: pyulog: %s", self.file, line)
-        if not self._ulog.data_list:
+        if not [d for d in self._ulog.data_list if d.name != _STATUS]:
             corrupt = " and reports the file corrupt" if self._ulog.file_corruption else ""
             raise CorruptLogError(
                 f"pyulog finds no data message of the topics navreplay converts{corrupt}",
@@ -171,7 +175,22 @@ class UlogReader(LogReader):
                     refused=refused,
                 )
             )
-        return Inventory(self.path, self.format, tuple(streams), (self._time_note(),))
+        platform = self._platform()
+        notes = (self._time_note(), f"platform: {platform.text()}")
+        return Inventory(self.path, self.format, tuple(streams), notes, platform)
+
+    def _platform(self) -> Platform:
+        """From the first ``vehicle_status`` (fields by version), else the MAV_TYPE parameter."""
+        for d in self._load().data_list:
+            if d.name == _STATUS and len(d.data["timestamp"]):
+                fields = {k: int(d.data[k][0]) for k in _STATUS_FIELDS if k in d.data}
+                found = from_px4_status(fields)
+                if found.known:
+                    return found
+        value = self._load().initial_parameters.get("MAV_TYPE")
+        if value is not None:
+            return from_mav_type(int(value), "parameter MAV_TYPE") or UNKNOWN
+        return UNKNOWN
 
     def _time_note(self) -> str:
         if self._offset_ns is None:
