@@ -64,13 +64,16 @@ def random_starts(spec: WindowsSpec, latest_s: float) -> list[float]:
     n = min(spec.count, random_fit(spec.length_s, spec.min_gap_s, spec.earliest_s, latest_s))
     if n < spec.count:
         log.warning(
-            "only %d of %d windows of %.0f s (%.0f s apart) fit in [%.1f, %.1f] s",
+            "only %d of %d windows of %.0f s (%.0f s apart) fit in [%.1f, %.1f] s: %d placed; "
+            "for more, shorten the scenario's windows (length_s, count, earliest_s, tail_s), "
+            "or let `navreplay analyze` fit them to the log",
             n,
             spec.count,
             spec.length_s,
             spec.min_gap_s,
             spec.earliest_s,
             latest_s,
+            n,
         )
     if n == 0:
         return []

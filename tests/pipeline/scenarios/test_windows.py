@@ -71,6 +71,7 @@ def test_random_placement_places_only_the_windows_that_fit(
         got = place_windows(spec, T0, END)
     assert len(got) == 6  # 6 x 60 s + 5 x 60 s gaps = 660 s fit in [120, 870]; 7 need 780
     assert "only 6 of 50" in caplog.text
+    assert "shorten the scenario's windows" in caplog.text  # and what to do
     short = place_windows(spec, T0, T0 + 100 * NS)
     assert short == []
 
