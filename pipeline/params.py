@@ -250,13 +250,13 @@ def overlay(base: Any, over: Any) -> Any:
     return over
 
 
-def effective_params(path: str | Path | None = None) -> tuple[dict[str, Any], str]:
-    """The parameters as plain data (the user's file over the built-in defaults, see the
-    module docstring) and a description of where they came from."""
+def effective_params(path: str | Path | None = None) -> dict[str, Any]:
+    """The parameters as plain data: the user's file (``params_source``) laid over the
+    built-in defaults (see the module docstring)."""
     defaults = read_yaml(BUILTIN_PARAMS)
     source = params_source(path)
     if source is None:
-        return defaults, f"built-in defaults ({BUILTIN_PARAMS})"
+        return dict(defaults)
     data = read_yaml(source)
     if data is None:
         data = {}
@@ -264,15 +264,13 @@ def effective_params(path: str | Path | None = None) -> tuple[dict[str, Any], st
         raise ParamsError(
             "", "must be a mapping of sections (run:, filters:, ...)", source=str(source)
         )
-    return overlay(defaults, data), f"{source} over the built-in defaults"
+    return dict(overlay(defaults, data))
 
 
 def load_params(path: str | Path | None = None) -> Params:
     """Load and check the parameters: ``path`` (or ``./params.yaml`` when present) laid over
     the built-in defaults."""
-    data, _ = effective_params(path)
-    source = params_source(path)
-    return parse_params(data, source=str(source if source is not None else BUILTIN_PARAMS))
+    return parse_params(effective_params(path), source=params_label(path))
 
 
 def section(params: Params, dotted: str) -> Any:

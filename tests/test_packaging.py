@@ -11,6 +11,7 @@ import os
 import shutil
 import subprocess
 import sys
+import sysconfig
 import tomllib
 import zipfile
 from pathlib import Path
@@ -131,7 +132,7 @@ def test_analyze_runs_from_any_directory_with_the_wheel_installed(
     ).stdout.strip()  # fmt: skip
     # the dependencies: this environment's site-packages as a plain path (its .pth files,
     # among them the editable install of the checkout, are not processed)
-    deps = sysconfig_purelib()
+    deps = sysconfig.get_paths()["purelib"]
     Path(purelib, "navreplay_test_deps.pth").write_text(deps + "\n")
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NUMBA_CACHE_DIR")}
     env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
@@ -170,9 +171,3 @@ def test_analyze_runs_from_any_directory_with_the_wheel_installed(
         "windows"
     ]
     assert len(windows) == 1
-
-
-def sysconfig_purelib() -> str:
-    import sysconfig
-
-    return sysconfig.get_paths()["purelib"]

@@ -31,10 +31,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import yaml
 
-    from navreplay.pipeline.params import effective_params, load_params, section
+    from navreplay.pipeline.params import load_params, params_label, params_source, section
 
     params = load_params(args.params)  # checked: what a command would run with
-    _, source = effective_params(args.params)
+    user = params_source(args.params)
+    source = f"{user} over the built-in defaults" if user is not None else params_label()
     data = section(params, args.section) if args.section else None
     sys.stdout.write(f"# navreplay parameters: {source}\n")
     if args.section:
