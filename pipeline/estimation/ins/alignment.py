@@ -37,6 +37,7 @@ from scipy.spatial.transform import Rotation
 
 from navreplay.ingest.config import ImuNoise
 from navreplay.ingest.gnss import spp
+from navreplay.pipeline.estimation.ins import heading
 from navreplay.pipeline.estimation.ins.config import InitParams
 from navreplay.pipeline.estimation.ins.inputs import FixData, ImuData, ObsData
 from navreplay.pipeline.estimation.ins.models import ins
@@ -48,6 +49,13 @@ log = logging.getLogger(__name__)
 
 #: 1-sigma of a single-point velocity from Doppler, m/s (a few cm/s per rate, DOP ~2).
 SPP_SPEED_SIGMA_MPS = 0.2
+#: platforms (``ingest.platform``) whose GNSS course gives the heading once they move; the
+#: others (multirotor, VTOL) take it from motion
+COURSE_IS_HEADING = ("ground", "fixed_wing", "unknown")
+#: the specific force at the start is averaged over +-0.25 s (a GNSS epoch needs that much IMU)
+_HALF_NS = 250_000_000
+#: floor on the yaw 1-sigma of a heading from motion (the attitude filter's own errors), rad
+_MIN_MOTION_YAW_SIGMA = math.radians(1.0)
 
 
 @dataclass(frozen=True)
@@ -97,6 +105,7 @@ class _Track:
     sig_h: np.ndarray
     sig_v: np.ndarray
     clock: np.ndarray  # (K, 2) clock bias, drift from SPP (NaN from fixes)
+    raw_sig_h: np.ndarray  # the fixes' own horizontal 1-sigma (sig_h: inflated for correlation)
 
 
 def _spp(rows: F64) -> tuple[F64, float, F64, float] | None:
@@ -156,7 +165,8 @@ def _track_from_fixes(fixes: FixData) -> _Track | None:
             # per axis; white fix errors (correlated ones difference to less)
             sig_speed[k] = math.hypot(raw_sig_h[lo], raw_sig_h[hi]) / (ts[hi] - ts[lo])
     clock = np.full((t.size, 2), math.nan)
-    return _Track(t, llh, vel, sig_speed, differenced, f[:, me.FX_SIG_H], f[:, me.FX_SIG_V], clock)
+    sig_v = f[:, me.FX_SIG_V]
+    return _Track(t, llh, vel, sig_speed, differenced, f[:, me.FX_SIG_H], sig_v, clock, raw_sig_h)
 
 
 def _track_from_obs(obs: ObsData) -> _Track | None:
@@ -183,6 +193,7 @@ def _track_from_obs(obs: ObsData) -> _Track | None:
         np.full(k, 5.0),
         np.full(k, 8.0),
         np.array(clock),
+        np.full(k, 5.0),
     )
 
 
@@ -209,48 +220,69 @@ def _level(f_b: F64, a_minus_g: F64, yaw: float) -> tuple[float, float]:
     return roll, pitch
 
 
-def _static_gyro_bias(
-    imu: ImuData, lo: int, hi: int, init: InitParams, c_bn: F64, lat: float, h: float
-) -> tuple[F64, float]:
-    """Gyro bias from the last static window in samples ``lo:hi`` (zero and 0 s if none)."""
+def _static_window(
+    imu: ImuData, lo: int, hi: int, init: InitParams, g: float, *, last: bool = True
+) -> tuple[int, int]:
+    """The last (or first) run of static samples in ``lo:hi``, as absolute sample indices
+    ``(start, end)`` if it lasts ``init.static_window_s`` or more, else ``(0, 0)``."""
     f, w = imu.data[lo:hi, :3], imu.data[lo:hi, 3:]
-    g = gravity(lat, h)
     static = (np.abs(np.linalg.norm(f, axis=1) - g) < init.static_accel_tol_mps2) & (
         np.linalg.norm(w, axis=1) < init.static_gyro_tol_radps
     )
     if not static.any():
-        return np.zeros(3), 0.0
-    # last run of static samples
-    end = int(np.flatnonzero(static)[-1]) + 1
-    start = end
-    while start > 0 and static[start - 1]:
-        start -= 1
-    t = imu.t_ns[lo:hi]
-    dur = (t[end - 1] - t[start]) * 1e-9
-    if dur < init.static_window_s:
+        return 0, 0
+    if last:
+        end = int(np.flatnonzero(static)[-1]) + 1
+        start = end
+        while start > 0 and static[start - 1]:
+            start -= 1
+    else:
+        start = int(np.flatnonzero(static)[0])
+        end = start
+        while end < static.size and static[end]:
+            end += 1
+    if (imu.t_ns[lo + end - 1] - imu.t_ns[lo + start]) * 1e-9 < init.static_window_s:
+        return 0, 0
+    return lo + start, lo + end
+
+
+def _static_gyro_bias(
+    imu: ImuData, lo: int, hi: int, init: InitParams, c_bn: F64, lat: float, h: float
+) -> tuple[F64, float]:
+    """Gyro bias from the last static window in samples ``lo:hi`` (zero and 0 s if none)."""
+    start, end = _static_window(imu, lo, hi, init, gravity(lat, h))
+    if end == 0:
         return np.zeros(3), 0.0
     w_ie_n = np.array([OMEGA_IE * math.cos(lat), 0.0, -OMEGA_IE * math.sin(lat)])
-    return w[start:end].mean(axis=0) - c_bn.T @ w_ie_n, float(dur)
+    dur = (imu.t_ns[end - 1] - imu.t_ns[start]) * 1e-9
+    return imu.data[start:end, 3:].mean(axis=0) - c_bn.T @ w_ie_n, float(dur)
 
 
 def _initial_navigation(
-    imu: ImuData, lo: int, hi: int, track: _Track, k: int, lever_b: F64
+    imu: ImuData,
+    lo: int,
+    hi: int,
+    track: _Track,
+    k: int,
+    lever_b: F64,
+    yaw: float | None = None,
+    vel: F64 | None = None,
 ) -> tuple[F64, F64]:
     """Full state (biases and clock zero) at track epoch ``k``, and its C_b^n: heading from
-    the GNSS velocity, roll and pitch from the specific force, IMU position from the antenna's
-    (lever arm removed)."""
+    the GNSS velocity (or ``yaw``), roll and pitch from the specific force, IMU position from
+    the antenna's (lever arm removed), velocity the track's (or ``vel``)."""
     t_imu = imu.t_ns[lo:hi]
     t0 = int(track.t_ns[k])
-    v = track.vel[k]
-    yaw = math.atan2(v[1], v[0])
+    v = track.vel[k] if vel is None else vel
+    if yaw is None:
+        yaw = math.atan2(v[1], v[0])
     a_n = np.zeros(3)
     lo_k, hi_k = max(k - 1, 0), min(k + 1, track.t_ns.size - 1)
     dt = (track.t_ns[hi_k] - track.t_ns[lo_k]) * 1e-9
     if hi_k > lo_k and 0 < dt <= 2.5 and np.isfinite(track.vel[[lo_k, hi_k]]).all():
         a_n = (track.vel[hi_k] - track.vel[lo_k]) / dt
     lat, lon, h_ant = track.llh[k]
-    half = 250_000_000
-    win = (t_imu >= t0 - half) & (t_imu <= t0 + half)
+    win = (t_imu >= t0 - _HALF_NS) & (t_imu <= t0 + _HALF_NS)
     f_b = imu.data[lo:hi][win, :3].mean(axis=0)
     g_n = np.array([0.0, 0.0, gravity(lat, h_ant)])
     roll, pitch = _level(f_b, a_n - g_n, yaw)
@@ -285,14 +317,27 @@ def _confirmed(moving: np.ndarray, t_ns: np.ndarray, epochs: int) -> np.ndarray:
     return ok
 
 
-def why_not_aligned(fixes: FixData | None, obs: ObsData | None, init: InitParams) -> str:
+def why_not_aligned(
+    fixes: FixData | None,
+    obs: ObsData | None,
+    init: InitParams,
+    *,
+    course_is_heading: bool = True,
+) -> str:
     """Why ``align`` found no start in a log: what its GNSS speed showed against the tests."""
     track = _track_from_fixes(fixes) if fixes is not None else None
     if track is None and obs is not None:
         track = _track_from_obs(obs)
+    motion = (
+        f"a heading from motion within {math.degrees(init.motion_yaw_sigma_max_rad):.3g} deg "
+        "1-sigma (the horizontal velocity must change: a turn, a start, a stop)"
+    )
     need = (
         f"a horizontal GNSS speed of at least {init.align_speed_mps:g} m/s and "
-        f"{init.align_sigmas:g} times its own 1-sigma at {init.align_epochs} consecutive epochs"
+        f"{init.align_sigmas:g} times its own 1-sigma at {init.align_epochs} consecutive "
+        f"epochs, or {motion}"
+        if course_is_heading
+        else f"{motion} (the course of this platform is not its heading)"
     )
     if track is None:
         return f"no GNSS epoch to start from (alignment needs {need})"
@@ -306,7 +351,7 @@ def why_not_aligned(fixes: FixData | None, obs: ObsData | None, init: InitParams
         f"alignment needs {need}; the log's best epoch had {speed[k]:.2f} m/s at "
         f"{speed[k] / track.sig_speed[k]:.1f} sigma (speed {source}, 1-sigma "
         f"{track.sig_speed[k]:.2f} m/s), fastest {np.nanmax(speed):.2f} m/s: a static or bench "
-        "log, no fix, or a vehicle too slow for a heading from its course (for a slow ground "
+        "log, no fix, or a vehicle too slow and too steady for a heading (for a slow ground "
         "vehicle, lower filters.<name>.init.align_speed_mps)"
     )
 
@@ -320,9 +365,15 @@ def align(
     noise: ImuNoise,
     lever_b: F64,
     n: int,
+    *,
+    course_is_heading: bool = True,
 ) -> Alignment | None:
-    """Coarse alignment of one IMU segment (see the module docstring); None if the segment
-    never reaches the alignment speed with GNSS available."""
+    """Coarse alignment of one IMU segment (see the module docstring); None if no heading can
+    be found with GNSS available.
+
+    ``course_is_heading`` (a ground vehicle, an aeroplane, an unknown platform): the heading
+    comes from the GNSS course once the vehicle moves, else (and for a multirotor always) from
+    motion (``heading``)."""
     lo, hi = segment
     t_imu = imu.t_ns[lo:hi]
     track = _track_from_fixes(fixes) if fixes is not None else None
@@ -330,38 +381,120 @@ def align(
         track = _track_from_obs(obs)
     if track is None:
         return None
-    half = 250_000_000
+    inside = (track.t_ns - _HALF_NS >= t_imu[0]) & (track.t_ns + _HALF_NS <= t_imu[-1])
+    start = _course_start(track, init) & inside if course_is_heading else None
+    if start is not None and start.any():
+        k = int(np.flatnonzero(start)[0])
+        v = track.vel[k]
+        speed = math.hypot(v[0], v[1])
+        yaw_sigma = max(init.yaw_sigma_rad, math.atan2(float(track.sig_speed[k]), speed))
+        x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b)
+        return _finish(imu, segment, track, k, x0, c_bn, yaw_sigma, "gnss_velocity", obs, init,
+                       noise, lever_b, n)  # fmt: skip
+    mh = _motion_heading(imu, segment, track, inside, init, noise)
+    if mh is None:
+        return None
+    ok = inside[inside] & (mh.sigma <= init.motion_yaw_sigma_max_rad)
+    if not ok.any():
+        return None
+    j = int(np.flatnonzero(ok)[0])
+    k = int(np.flatnonzero(inside)[j])
+    vel = track.vel[k].copy()
+    if track.differenced[k] or not np.isfinite(vel).all():
+        vel = np.array(
+            [mh.vel_ne[j, 0], mh.vel_ne[j, 1], 0.0 if not np.isfinite(vel[2]) else vel[2]]
+        )
+    x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b, mh.yaw_at(j), vel)
+    yaw_sigma = max(float(mh.sigma[j]), _MIN_MOTION_YAW_SIGMA)
+    return _finish(imu, segment, track, k, x0, c_bn, yaw_sigma, "motion_heading", obs, init,
+                   noise, lever_b, n)  # fmt: skip
+
+
+def _course_start(track: _Track, init: InitParams) -> np.ndarray:
+    """Epochs from which the course gives the heading: fast enough, over the speed's own noise,
+    confirmed by the next epochs."""
     speed = np.hypot(track.vel[:, 0], track.vel[:, 1])
     moving = (
         np.isfinite(speed)
         & (speed >= init.align_speed_mps)
         & (speed >= init.align_sigmas * track.sig_speed)
     )
-    ok = _confirmed(moving, track.t_ns, init.align_epochs)
-    ok &= (track.t_ns - half >= t_imu[0]) & (track.t_ns + half <= t_imu[-1])
-    if not ok.any():
+    return _confirmed(moving, track.t_ns, init.align_epochs)
+
+
+def _motion_heading(
+    imu: ImuData,
+    segment: tuple[int, int],
+    track: _Track,
+    inside: np.ndarray,
+    init: InitParams,
+    noise: ImuNoise,
+) -> heading.MotionHeading | None:
+    """``heading.estimate`` over the segment's GNSS epochs, the gyros corrected by the first
+    static window's mean rate (earth rate included: the level frame turns with the earth)."""
+    lo, hi = segment
+    if inside.sum() < 2:
         return None
-    k = int(np.flatnonzero(ok)[0])
+    lat, h = float(track.llh[inside][0, 0]), float(track.llh[inside][0, 2])
+    s0, s1 = _static_window(imu, lo, hi, init, gravity(lat, h))
+    bias = imu.data[s0:s1, 3:].mean(axis=0) if s1 > s0 else np.zeros(3)
+    vel = np.where(track.differenced[:, None], math.nan, track.vel)
+    return heading.estimate(
+        imu.t_ns[lo:hi],
+        imu.data[lo:hi],
+        bias,
+        track.t_ns[inside],
+        track.llh[inside],
+        vel[inside],
+        track.raw_sig_h[inside],
+        track.sig_speed[inside],
+        init,
+        noise,
+    )
+
+
+def _finish(
+    imu: ImuData,
+    segment: tuple[int, int],
+    track: _Track,
+    k: int,
+    x0: F64,
+    c_bn: F64,
+    yaw_sigma: float,
+    method: str,
+    obs: ObsData | None,
+    init: InitParams,
+    noise: ImuNoise,
+    lever_b: F64,
+    n: int,
+) -> Alignment:
+    """Gyro bias, clock and covariance of a start at track epoch ``k``."""
+    lo, _ = segment
     t0 = int(track.t_ns[k])
-    x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b)
     lat, h_ant = track.llh[k, 0], track.llh[k, 2]
-    i_start = int(np.searchsorted(t_imu, t0))
-    bg, static_s = _static_gyro_bias(imu, lo, lo + i_start, init, c_bn, lat, h_ant)
+    i_start = lo + int(np.searchsorted(imu.t_ns[lo : segment[1]], t0))
+    bg, static_s = _static_gyro_bias(imu, lo, i_start, init, c_bn, lat, h_ant)
+    if not static_s:  # a start at rest (a heading from motion): the rest that follows it
+        i_rest = min(segment[1], i_start + int(np.searchsorted(imu.t_ns[i_start:], t0 + 60e9)))
+        start, end = _static_window(imu, i_start, i_rest, init, gravity(lat, h_ant), last=False)
+        if end and imu.t_ns[start] - t0 < _HALF_NS:
+            bg, static_s = _static_gyro_bias(imu, start, end, init, c_bn, lat, h_ant)
     x0[ins.X_BG : ins.X_BG + 3] = bg
     if n > ins.N_LOOSE:
         x0[ins.X_CB], x0[ins.X_CD] = _clock(x0, obs, t0, lever_b, track.clock[k])
     sig_h = max(init.pos_sigma_m, float(track.sig_h[k]))
     sig_v = max(init.pos_sigma_m, float(track.sig_v[k]))
     d = [sig_h, sig_h, sig_v] + [init.vel_sigma_mps] * 3
-    yaw_sigma = max(init.yaw_sigma_rad, math.atan2(float(track.sig_speed[k]), float(speed[k])))
     d += [init.roll_pitch_sigma_rad] * 2 + [yaw_sigma]
     d += [max(noise.accel_bias_sigma_mps2, 1e-6)] * 3
     d += [max(noise.gyro_bias_sigma_radps, OMEGA_IE if static_s else 1e-7)] * 3
     d += [init.clock_bias_sigma_m, init.clock_drift_sigma_mps]
     P0 = np.diag(np.square(d[:n]))
-    method = "gnss_velocity" + ("+static_gyro_bias" if static_s else "")
-    log.info("aligned at t=%d ns: %s, speed %.1f m/s", t0, method, speed[k])
-    return Alignment(t0, x0, P0, method, float(speed[k]), static_s)
+    method += "+static_gyro_bias" if static_s else ""
+    speed = math.hypot(x0[ins.X_VEL], x0[ins.X_VEL + 1])
+    log.info("aligned at t=%d ns: %s, speed %.1f m/s, yaw sigma %.1f deg", t0, method, speed,
+             math.degrees(yaw_sigma))  # fmt: skip
+    return Alignment(t0, x0, P0, method, speed, static_s)
 
 
 def _clock(

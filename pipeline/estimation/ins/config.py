@@ -52,6 +52,13 @@ class InitParams:
         yaw_sigma_rad: initial heading 1-sigma, rad.
         clock_bias_sigma_m: initial receiver clock bias 1-sigma (tight coupling), m.
         clock_drift_sigma_mps: initial receiver clock drift 1-sigma (tight coupling), m/s.
+        motion_yaw_sigma_max_rad: a heading from motion (``heading``: a multirotor, or a
+            vehicle whose course never gives one) starts the filter at the first epoch where
+            its 1-sigma is this small, rad.
+        tilt_tau_s: time constant of the tilt filter of the heading from motion, s (long:
+            a multirotor's specific force leans with its acceleration).
+        drift_horizon_s: the heading from motion may wander by the gyro bias sigma times this
+            horizon per square-root second (a random walk covering the bias's drift), s.
     """
 
     align_speed_mps: float = 2.0
@@ -66,6 +73,9 @@ class InitParams:
     yaw_sigma_rad: float = 0.1
     clock_bias_sigma_m: float = 10.0
     clock_drift_sigma_mps: float = 1.0
+    motion_yaw_sigma_max_rad: float = 0.15
+    tilt_tau_s: float = 20.0
+    drift_horizon_s: float = 60.0
 
     def __post_init__(self) -> None:
         positive(self, *(f.name for f in fields(self)))

@@ -124,6 +124,11 @@ def imu_white_noise(imu: ImuData) -> tuple[float, float]:
     return float(density[:3].max()), float(density[3:].max())
 
 
+def _reported(acc: F64) -> F64:
+    """A reported accuracy, NaN where it is absent or not positive."""
+    return np.where(acc > 0.0, acc, math.nan)
+
+
 def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
     """Receiver fixes -> ``fix`` rows with floored accuracies; NaN blocks skipped (F11).
 
@@ -151,8 +156,9 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
     )
     fix[:, me.FX_LAT], fix[:, me.FX_LON], fix[:, me.FX_ALT] = np.radians(lat), np.radians(lon), alt
     fix_type = np.asarray(table.column("fix_type").to_numpy(), dtype=np.int64)
-    h_acc = float_column(table, "h_acc_m")
-    v_acc = float_column(table, "v_acc_m")
+    # an accuracy of zero is one the receiver did not report (PX4 SITL writes 0)
+    h_acc = _reported(float_column(table, "h_acc_m"))
+    v_acc = _reported(float_column(table, "v_acc_m"))
     fix[:, me.FX_SIG_H] = np.maximum(
         np.where(np.isfinite(h_acc), h_acc, gnss.pos_sigma_default_m), gnss.pos_sigma_floor_m
     )
@@ -169,7 +175,7 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
         fix[:, me.FX_SIG_H] *= math.sqrt(inflate)
         fix[:, me.FX_SIG_V] *= math.sqrt(inflate)
         fix[:, me.FX_POS_INFL] = inflate  # gated against the marginal variance
-    s_acc = float_column(table, "speed_acc_mps")
+    s_acc = _reported(float_column(table, "speed_acc_mps"))
     fix[:, me.FX_SIG_VEL] = np.maximum(
         np.where(np.isfinite(s_acc), s_acc, gnss.vel_sigma_default_mps), gnss.vel_sigma_floor_mps
     )

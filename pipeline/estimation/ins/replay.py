@@ -41,7 +41,12 @@ from navreplay.pipeline.estimation.core.runlog import RunLog
 from navreplay.pipeline.estimation.core.tables import ReplayInputError
 from navreplay.pipeline.estimation.core.unscented import ukf_weights
 from navreplay.pipeline.estimation.ins import inputs as inp
-from navreplay.pipeline.estimation.ins.alignment import Alignment, align, why_not_aligned
+from navreplay.pipeline.estimation.ins.alignment import (
+    COURSE_IS_HEADING,
+    Alignment,
+    align,
+    why_not_aligned,
+)
 from navreplay.pipeline.estimation.ins.config import FILTER_KINDS, FilterKind, InsFilterParams
 from navreplay.pipeline.estimation.ins.kernels.records import Fading, Schedule, Settings
 from navreplay.pipeline.estimation.ins.models import ins, ins_errors
@@ -249,10 +254,12 @@ def run_filter(
     duration = 0.0
     compile_s = 0.0
     meas = _measurements(kind.coupling, fixes, obs)
+    course_is_heading = sensors is None or sensors.platform.kind in COURSE_IS_HEADING
     for k_seg, seg in enumerate(imu_data.segments):
         al: Alignment | None = initial
         if initial is None or k_seg > 0:
-            al = align(imu_data, seg, fixes, obs, params.init, noise_model, setup.lever_b, setup.n)
+            al = align(imu_data, seg, fixes, obs, params.init, noise_model, setup.lever_b,
+                       setup.n, course_is_heading=course_is_heading)  # fmt: skip
         if al is None:
             events.append(tb.Event(int(imu_data.t_ns[seg[0]]), "no_alignment", "imu"))
             continue
@@ -277,7 +284,9 @@ def run_filter(
             break
     if not alignments and status == "ok":
         status = "not_aligned"
-        failure = "the filter never aligned: " + why_not_aligned(fixes, obs, params.init)
+        failure = "the filter never aligned: " + why_not_aligned(
+            fixes, obs, params.init, course_is_heading=course_is_heading
+        )
         log.warning("filter %s: %s", name, failure)
     events.sort(key=lambda e: e.t_ns)
     return RunResult(
