@@ -222,6 +222,7 @@ class DatasetConfig:
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     truth: StreamConfig = field(default_factory=StreamConfig)
     estimator: StreamConfig = field(default_factory=StreamConfig)
+    mag: StreamConfig = field(default_factory=StreamConfig)
     mavlink: MavlinkConfig = field(default_factory=MavlinkConfig)
     csv: tuple[CsvSource, ...] = ()
 

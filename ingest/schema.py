@@ -41,6 +41,7 @@ class TableName(StrEnum):
     VEHICLE = "vehicle"
     TRUTH = "truth"
     ESTIMATOR = "estimator"
+    MAG = "mag"
 
 
 class FixType:
@@ -241,6 +242,21 @@ SPECS: Mapping[TableName, TableSpec] = {
     ),
     TableName.ESTIMATOR: TableSpec(
         TableName.ESTIMATOR, _NAV_SOLUTION, key=("t_ns",), extra_float_columns=True
+    ),
+    TableName.MAG: TableSpec(
+        TableName.MAG,
+        (
+            _T_NS,
+            _f(
+                "mag_x_gauss",
+                "magnetic flux density, body FRD x (forward), gauss (1 G = 100 uT); the axes "
+                "of the imu table (same frame conversion and mounting rotation)",
+            ),
+            _f("mag_y_gauss", "magnetic flux density, body FRD y (right), gauss"),
+            _f("mag_z_gauss", "magnetic flux density, body FRD z (down), gauss"),
+        ),
+        key=("t_ns",),
+        extra_float_columns=True,
     ),
 }
 
