@@ -113,7 +113,7 @@ def _imu(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Converted:
 
 def _mag(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Converted:
     """ArduPilot ``MAG``: milligauss -> gauss; ``Health`` 0 -> NaN (counted)."""
-    cols = {f"mag_{a}_gauss": fmt.scaled(rec, f"Mag{a.upper()}") * 1e-3 for a in "xyz"}
+    cols = {f"mag_{a}_gauss": fmt.scaled(rec, f"Mag{a.upper()}") / 1000.0 for a in "xyz"}
     counters: dict[str, int] = {}
     if "Health" in fmt.columns:
         bad = np.asarray(rec["Health"]) == 0
