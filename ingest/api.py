@@ -236,6 +236,7 @@ def _ingest(
             )
             for table, plan in plans.items()
         }
+        _follow_imu(sinks)
         for index in _file_order(opened):
             o = opened[index]
             routes = {
@@ -297,6 +298,12 @@ def _ingest(
         write_meta(tmp, meta)
         atomic_write_json(tmp / REPORT_NAME, report)
     return IngestResult(out_dir, rows, report)
+
+
+def _follow_imu(sinks: dict[TableName, TableSink]) -> None:
+    """The magnetometer gets the IMU's mounting rotation (one body frame for both)."""
+    if TableName.MAG in sinks and TableName.IMU in sinks:
+        sinks[TableName.MAG].follow(sinks[TableName.IMU])
 
 
 #: what each format lets ingest verify; a format not listed has no checksums at all

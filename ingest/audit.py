@@ -34,6 +34,7 @@ LIMITS: dict[str, float] = {
     **{f"acc_{a}_mps2": 2000.0 for a in "xyz"},
     **{f"gyro_{a}_radps": 100.0 for a in "xyz"},
     **{f"vel_{a}_mps": 1000.0 for a in "ned"},
+    **{f"mag_{a}_gauss": 100.0 for a in "xyz"},
     "lat_deg": 90.0,
     "lon_deg": 180.0,
     "alt_m": 100_000.0,

@@ -80,9 +80,11 @@ class ImuConfig:
     Attributes:
         topic: ROS topic, MAVLink/DataFlash message or ULog topic to read (default: automatic).
         instance: sensor instance for logs with several IMUs (default: the first).
-        frame: axis convention of the source; ``flu`` (REP-103) is converted to FRD.
+        frame: axis convention of the source; ``flu`` (REP-103) is converted to FRD; the
+            magnetometer (``mag`` table) is taken to share it.
         mounting_rpy_deg: roll, pitch, yaw (deg) rotating sensor axes into body FRD, applied
-            after the frame conversion; absent: detected from gravity at rest and reported.
+            after the frame conversion; absent: detected from gravity at rest and reported;
+            the magnetometer gets the same rotation.
         accel_units: ``g`` scales by 9.80665 (recorded in provenance); ``auto`` checks the
             static magnitude and refuses implausible units.
         gyro_units: ``degps`` scales to rad/s; ``auto`` checks the rate at rest.
@@ -222,6 +224,7 @@ class DatasetConfig:
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     truth: StreamConfig = field(default_factory=StreamConfig)
     estimator: StreamConfig = field(default_factory=StreamConfig)
+    mag: StreamConfig = field(default_factory=StreamConfig)
     mavlink: MavlinkConfig = field(default_factory=MavlinkConfig)
     csv: tuple[CsvSource, ...] = ()
 

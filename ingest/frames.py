@@ -32,18 +32,24 @@ Vec3 = tuple[float, float, float]
 ACC = ("acc_x_mps2", "acc_y_mps2", "acc_z_mps2")
 GYRO = ("gyro_x_radps", "gyro_y_radps", "gyro_z_radps")
 VEL_NED = ("vel_n_mps", "vel_e_mps", "vel_d_mps")
+MAG = ("mag_x_gauss", "mag_y_gauss", "mag_z_gauss")
 
 
 def flu_to_frd(columns: dict[str, np.ndarray], table: str) -> list[str]:
     """Convert a block's vector columns from FLU/ENU to FRD/NED in place; returns what changed.
 
-    imu: y and z of specific force and angular rate negate. vehicle: ``yaw_rate_radps`` and
+    imu: y and z of specific force and angular rate negate; mag: y and z of the magnetic
+    field negate. vehicle: ``yaw_rate_radps`` and
     ``steer_rad`` negate (positive left in FLU, positive right in FRD). gnss/truth velocity
     (if present): ENU -> NED.
     """
     changed: list[str] = []
     if table == "imu":
         for name in (ACC[1], ACC[2], GYRO[1], GYRO[2]):
+            columns[name] = -columns[name]
+            changed.append(name)
+    elif table == "mag":
+        for name in (MAG[1], MAG[2]):
             columns[name] = -columns[name]
             changed.append(name)
     elif table == "vehicle":
@@ -107,9 +113,14 @@ def tilt_deg(f_sensor: F64) -> float:
     return math.degrees(math.acos(max(-1.0, min(1.0, -float(f_sensor[2]) / norm))))
 
 
-def rotate_imu(columns: dict[str, np.ndarray], c_body_sensor: F64) -> None:
-    """Apply ``v_body = C @ v_sensor`` to specific force and angular rate, in place."""
-    for names in (ACC, GYRO):
+def rotate_imu(
+    columns: dict[str, np.ndarray],
+    c_body_sensor: F64,
+    vectors: tuple[tuple[str, str, str], ...] = (ACC, GYRO),
+) -> None:
+    """Apply ``v_body = C @ v_sensor`` to specific force and angular rate (or the given
+    column triples: ``(MAG,)`` for the magnetometer), in place."""
+    for names in vectors:
         v = np.stack([columns[n] for n in names])
         out = c_body_sensor @ v
         for k, n in enumerate(names):

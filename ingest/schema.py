@@ -5,6 +5,11 @@ time base; the navigation frame is NED and the body frame FRD; units are in the 
 A null means "not provided by the source", NaN means "provided but invalid"; the two stay
 distinct.
 
+``mag`` (optional: only logs with a magnetometer have it) holds the magnetic field in gauss on
+the body FRD axes of the ``imu`` table: the same frame conversion and the same mounting
+rotation are applied to both, so the field and the specific force can be combined directly
+(tilt-compensated heading: ``pipeline.estimation.ins.magheading``).
+
 ``gnss_obs`` conventions (what the tightly coupled filters rely on):
 
 - ``sat_{x,y,z}_m`` and ``sat_v{x,y,z}_mps`` are the satellite state at transmit time, expressed
@@ -41,6 +46,7 @@ class TableName(StrEnum):
     VEHICLE = "vehicle"
     TRUTH = "truth"
     ESTIMATOR = "estimator"
+    MAG = "mag"
 
 
 class FixType:
@@ -241,6 +247,21 @@ SPECS: Mapping[TableName, TableSpec] = {
     ),
     TableName.ESTIMATOR: TableSpec(
         TableName.ESTIMATOR, _NAV_SOLUTION, key=("t_ns",), extra_float_columns=True
+    ),
+    TableName.MAG: TableSpec(
+        TableName.MAG,
+        (
+            _T_NS,
+            _f(
+                "mag_x_gauss",
+                "magnetic flux density, body FRD x (forward), gauss (1 G = 100 uT); the axes "
+                "of the imu table (same frame conversion and mounting rotation)",
+            ),
+            _f("mag_y_gauss", "magnetic flux density, body FRD y (right), gauss"),
+            _f("mag_z_gauss", "magnetic flux density, body FRD z (down), gauss"),
+        ),
+        key=("t_ns",),
+        extra_float_columns=True,
     ),
 }
 

@@ -8,6 +8,10 @@ Final rows gather into blocks of ``block_rows``. The first block decides units a
 (``ingest.plausibility``) before anything is written, so the Parquet provenance can record
 those decisions; every block is then scaled/rotated, audited (``StreamAudit``) and appended
 through ``TableWriter``.
+
+The magnetometer (``mag``) follows the IMU: its blocks wait until the IMU sink has decided its
+mounting, then get the same rotation, so the field and the specific force share one body
+frame (``follow``).
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import pyarrow as pa
 from navreplay.ingest.audit import StreamAudit
 from navreplay.ingest.companion import TOLERANCE_NS, Companion
 from navreplay.ingest.config import DatasetConfig
-from navreplay.ingest.frames import flu_to_frd
+from navreplay.ingest.frames import MAG, flu_to_frd, rotate_imu
 from navreplay.ingest.hygiene import Rows, StreamCleaner
 from navreplay.ingest.plausibility import GnssDecision, ImuDecision, decide_gnss, decide_imu
 from navreplay.ingest.readers.base import Batch
@@ -104,10 +108,20 @@ class TableSink:
             else None
         )
         self.unusable_rows = 0  # rows a filter cannot use (``USABLE``): NaN/inf in a key column
+        self.leader: TableSink | None = None  # the IMU sink whose mounting this one follows
+        self.mounting_note = ""
+        self._mag_rotation: np.ndarray | None = None
         self._block: list[Rows] = []
         self._block_len = 0
         self._writer: TableWriter | None = None
         self._last_path = Path()
+
+    def follow(self, imu: TableSink) -> None:
+        """Rotate this table's vectors (the magnetometer's) by ``imu``'s mounting decision."""
+        self.leader = imu
+
+    def _waiting_for_leader(self) -> bool:
+        return self.leader is not None and self.leader._writer is None
 
     def push(
         self,
@@ -140,7 +154,7 @@ class TableSink:
         if source_base != self.base:
             cols["t_ns"] = convert(cols["t_ns"], source_base, self.base)
         frame = batch.frame or frame
-        if self.table == TableName.IMU and self.config.imu.frame != "auto":
+        if self.table in (TableName.IMU, TableName.MAG) and self.config.imu.frame != "auto":
             frame = self.config.imu.frame  # the descriptor knows better than the log
         if frame in ("flu", "enu"):
             changed = flu_to_frd(cols, self.table.value)
@@ -154,7 +168,7 @@ class TableSink:
         if len(rows):
             self._block.append(rows)
             self._block_len += len(rows)
-        if self._block_len >= self.block_rows and not final:
+        if self._block_len >= self.block_rows and not final and not self._waiting_for_leader():
             self._flush()
 
     def finish(self) -> int:
@@ -186,6 +200,8 @@ class TableSink:
             self.imu.apply(rows.columns)
         if self.gnss is not None:
             self.gnss.apply(rows.columns)
+        if self._mag_rotation is not None:
+            rotate_imu(rows.columns, self._mag_rotation, (MAG,))
         self.audit.observe(rows.columns, rows.offsets)
         needed = [rows.columns[c] for c in USABLE.get(self.table, ()) if c in rows.columns]
         if needed:
@@ -207,11 +223,25 @@ class TableSink:
             self._block_len = len(rows) - cut
         return rows.take(np.arange(cut))
 
+    def _decide_mag(self) -> None:
+        """The IMU's mounting decision, taken over for the magnetic field."""
+        imu = None if self.leader is None else self.leader.imu
+        if imu is None:
+            self.mounting_note = "none (no IMU table to follow)"
+        elif imu.mounting_source == "none":
+            self.mounting_note = "none (the IMU needed none)"
+        else:
+            rpy = ", ".join(f"{a:.2f}" for a in imu.mounting_rpy_deg)
+            self.mounting_note = f"the IMU's ({imu.mounting_source}): roll, pitch, yaw {rpy} deg"
+            self._mag_rotation = imu.c_body_sensor
+
     def _decide(self, rows: Rows) -> None:
         if self.table == TableName.IMU:
             self.imu = decide_imu(rows.columns, self.config.imu, self._last_path, self.plan.key)
         elif self.table == TableName.GNSS:
             self.gnss = decide_gnss(rows.columns, self.config.gnss, self._last_path, self.plan.key)
+        elif self.table == TableName.MAG:
+            self._decide_mag()
 
     def _open(self) -> None:
         extra = {
@@ -223,6 +253,8 @@ class TableSink:
         for decision in (self.imu, self.gnss):
             if decision is not None:
                 extra.update(decision.provenance)
+        if self.table == TableName.MAG:
+            extra["mag_mounting"] = self.mounting_note or "none (no rows)"
         prov = Provenance.create(self.table, sources=self.sources, params=self.params, extra=extra)
         self._writer = self.stack.enter_context(TableWriter(self.path, self.table, prov))
 
@@ -252,6 +284,8 @@ class TableSink:
         }
         if self.companion is not None:
             out["companion"] = self.companion.report()
+        if self.table == TableName.MAG:
+            out["mounting"] = self.mounting_note or "none (no rows)"
         if self.imu is not None:
             out["plausibility"] = self.imu.report
         if self.gnss is not None:

@@ -45,7 +45,7 @@ def codes(result: IngestResult) -> dict[str, str]:
 
 def test_copter33_2015_timems_log(tmp_path: Path) -> None:
     result = run("ap_copter33_2015_log171.bin", tmp_path)
-    assert result.tables == {"imu": 11916, "gnss": 1198, "estimator": 2383}
+    assert result.tables == {"imu": 11916, "gnss": 1198, "estimator": 2383, "mag": 2384}
     assert result.report["time_base"]["base"] == "gps"
     assert result.report["limits"] == []
     notes = result.report["files"][0]["inventory_notes"]
@@ -70,7 +70,7 @@ def test_copter33_2015_timems_log(tmp_path: Path) -> None:
 
 def test_px4_sdlog2_2015_log(tmp_path: Path) -> None:
     result = run("px4_sdlog2_2015_purdue.px4log", tmp_path)
-    assert result.tables == {"imu": 5742, "gnss": 354}
+    assert result.tables == {"imu": 5742, "gnss": 354, "mag": 5742}
     notes = result.report["files"][0]["inventory_notes"]
     assert "platform: PX4FMU_V2 44d2c4a1e5c0a044a1cbf69bc1199454f9c0238c" in notes
     assert result.report["time_base"]["base"] == "gps"

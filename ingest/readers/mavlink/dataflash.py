@@ -3,7 +3,8 @@
 Each block of the file is framed by a compiled scan (``ingest.readers.mavlink.dfscan``), records are
 grouped by type, and each group is decoded with one structured-dtype view built from the
 log's own FMT records and pymavlink's format-character table (``ingest.readers.mavlink.dfformat``);
-``ingest.readers.mavlink.dfmsgs`` turns IMU, GPS+GPA, XKF1/NKF1 and SIM into canonical columns.
+``ingest.readers.mavlink.dfmsgs`` turns IMU, GPS+GPA, XKF1/NKF1, SIM and MAG into canonical
+columns.
 
 Streams are keyed ``NAME[i]`` for types with an instance column (``IMU[0]``, ``GPS[1]``,
 ``XKF1[2]``: the EKF core) and by name otherwise; ``StreamInfo.instance`` is ``i``.
@@ -100,13 +101,13 @@ class DataFlashReader(LogReader):
             streams.append(
                 StreamInfo(
                     key=f"{name}[{inst}]" if s.instanced.get(name) else name,
-                    msgtype=name,
+                    msgtype=spec.message,
                     count=count,
                     start_ns=int(t[0]),
                     end_ns=int(t[1]),
                     table=spec.table,
                     time_base=s.base,
-                    frame="frd" if spec.table == TableName.IMU else "ned",
+                    frame="frd" if spec.table in (TableName.IMU, TableName.MAG) else "ned",
                     instance=inst,
                     detail=unusable or spec.detail,
                 )

@@ -30,8 +30,10 @@ import numpy.typing as npt
 from navreplay.ingest.arrays import I64
 from navreplay.ingest.readers.mavlink.dfformat import FMT_TYPE, DfFormat
 from navreplay.ingest.readers.mavlink.dfmsgs import (
+    BY_MESSAGE,
     BY_NAME,
     LOCATION_SCALING_FACTOR_INV,
+    PX4_BY_MESSAGE,
     PX4_BY_NAME,
     DfExtras,
     DfStream,
@@ -142,8 +144,13 @@ class DfSurvey:
 
     @property
     def specs(self) -> dict[str, DfStream]:
-        """The messages that feed tables, by name, for this log's flavour."""
+        """The streams that feed tables, by stream name, for this log's flavour."""
         return PX4_BY_NAME if self.px4 else BY_NAME
+
+    @property
+    def by_message(self) -> dict[str, tuple[DfStream, ...]]:
+        """The streams that feed tables, by the message they are read from."""
+        return PX4_BY_MESSAGE if self.px4 else BY_MESSAGE
 
     @property
     def clock_name(self) -> str:
@@ -220,7 +227,7 @@ class DfSurvey:
         for type_, n in sorted(self.per_type.items()):
             fmt = self.formats.current.get(type_)
             name = fmt.name if fmt is not None else f"type {type_}"
-            if name not in self.specs:
+            if name not in self.by_message:
                 out[name] = out.get(name, 0) + n
         return out
 
@@ -293,26 +300,29 @@ def _block(s: DfSurvey, rec: Records) -> None:
                 _records(s, rec, idx, fmt, time_us[idx])
                 continue
             bad = s.formats.unusable.get(type_)
-            if bad is not None and bad.name in s.specs:
-                key = (bad.name, 0)
+            if bad is None:
+                continue
+            for spec in s.by_message.get(bad.name, ()):
+                key = (spec.name, 0)
                 s.counts[key] += len(idx)
                 s.first_us.setdefault(key, 0)
                 s.last_us[key] = 0
-                s.instanced[bad.name] = "I" in bad.columns or "C" in bad.columns
-                s.unusable_detail[bad.name] = f"FMT unusable: {bad.reason}"
+                s.instanced[spec.name] = "I" in bad.columns or "C" in bad.columns
+                s.unusable_detail[spec.name] = f"FMT unusable: {bad.reason}"
 
 
 def _records(
     s: DfSurvey, rec: Records, idx: npt.NDArray[np.intp], fmt: DfFormat, t_us: I64
 ) -> None:
     name = fmt.name
-    spec = s.specs.get(name)
-    if spec is not None:
+    for spec in s.by_message.get(name, ()):
+        if not spec.present(fmt):
+            continue
         inst = instances(spec.instance, fmt, rec, idx)
-        s.instanced[name] = fmt.instance_column is not None
+        s.instanced[spec.name] = fmt.instance_column is not None
         for i in np.flatnonzero(np.bincount(inst)).tolist():
             sel = inst == i
-            key = (name, int(i))
+            key = (spec.name, int(i))
             s.counts[key] += int(sel.sum())
             s.first_us.setdefault(key, int(t_us[sel][0]))
             s.last_us[key] = int(t_us[sel][-1])

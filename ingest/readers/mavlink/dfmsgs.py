@@ -15,6 +15,11 @@ XKF1[C]     EKF3 (NKF1: EKF2) core C: ``Roll``/``Pitch``/``Yaw`` deg, ``VN/VE/VD
             result matches the autopilot's ``POS`` message; ``EKF1`` (2014-2015 NavEKF, no
             ``ORGN`` logged) from an origin estimated from the GPS fixes
 SIM         SITL truth: ``Roll/Pitch/Yaw`` deg, ``Lat/Lng`` deg, ``Alt`` m; no velocity
+MAG[I]      ``MagX/Y/Z`` milligauss, body FRD, offsets and motor compensation already applied
+            (ArduPilot logs the corrected field and the offsets beside it); also legacy
+            MAG2, MAG3; rows with ``Health`` 0 are NaN (counted as ``mag_unhealthy``)
+IMU.mag     legacy PX4 (sdlog2) ``IMU`` ``MagX/Y/Z`` gauss, body FRD: the same records as the
+            IMU stream, a stream of their own (``suffix``) feeding the mag table
 ==========  ===========================================================================
 
 MSL heights become ellipsoidal with the log's undulation (per row from GPA, else the log's
@@ -75,6 +80,9 @@ class DfStream:
             ``I``/``C`` column gives it.
         join: a message of the same instance joined by nearest time, with its conversion.
         detail: what ``--list`` shows.
+        suffix: appended to the message name to name the stream when the message feeds a
+            second table (legacy PX4 ``IMU`` -> ``IMU.mag``).
+        needs: a column the message's format must have for the stream to exist (``MagX``).
     """
 
     message: str
@@ -83,9 +91,17 @@ class DfStream:
     instance: int = 0
     join: tuple[str, Convert] | None = None
     detail: str = ""
+    suffix: str = ""
+    needs: str = ""
 
-    def key(self, fmt: DfFormat, instance: int) -> str:
-        return f"{self.message}[{instance}]" if fmt.instance_column else self.message
+    def present(self, fmt: DfFormat) -> bool:
+        """Whether records of format ``fmt`` carry this stream."""
+        return not self.needs or self.needs in fmt.columns
+
+    @property
+    def name(self) -> str:
+        """The stream's name: the message's, with the suffix."""
+        return self.message + self.suffix
 
 
 def _imu(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Converted:
@@ -93,6 +109,24 @@ def _imu(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Converted:
     cols = {f"acc_{a}_mps2": fmt.scaled(rec, f"Acc{a.upper()}") for a in "xyz"}
     cols |= {f"gyro_{a}_radps": fmt.scaled(rec, f"{gyr}{a.upper()}") for a in "xyz"}
     return Converted(cols)
+
+
+def _mag(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Converted:
+    """ArduPilot ``MAG``: milligauss -> gauss; ``Health`` 0 -> NaN (counted)."""
+    cols = {f"mag_{a}_gauss": fmt.scaled(rec, f"Mag{a.upper()}") / 1000.0 for a in "xyz"}
+    counters: dict[str, int] = {}
+    if "Health" in fmt.columns:
+        bad = np.asarray(rec["Health"]) == 0
+        if bad.any():
+            counters["mag_unhealthy"] = int(bad.sum())
+            cols = {name: np.where(bad, np.nan, v) for name, v in cols.items()}
+    return Converted(cols, counters=counters, info={"units": "milligauss scaled to gauss"})
+
+
+def _px4_mag(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Converted:
+    """Legacy PX4 (sdlog2) ``IMU`` ``MagX/Y/Z``, gauss."""
+    cols = {f"mag_{a}_gauss": fmt.scaled(rec, f"Mag{a.upper()}") for a in "xyz"}
+    return Converted(cols, info={"units": "gauss"})
 
 
 def _msl_to_ellipsoid(alt_msl: F64, und: F64 | None, ex: DfExtras) -> tuple[F64, dict[str, int]]:
@@ -225,6 +259,7 @@ def _sim(rec: np.ndarray, fmt: DfFormat, ex: DfExtras, _t: I64) -> Converted:
 
 _IMU = TableName.IMU
 _EST = TableName.ESTIMATOR
+_MAG = TableName.MAG
 STREAMS: tuple[DfStream, ...] = (
     DfStream("IMU", _IMU, _imu, detail="rad/s, m/s^2"),
     DfStream("IMU2", _IMU, _imu, instance=1, detail="rad/s, m/s^2 (legacy second IMU)"),
@@ -237,8 +272,11 @@ STREAMS: tuple[DfStream, ...] = (
     DfStream("NKF1", _EST, _ekf, detail="EKF2 core output, position from ORGN"),
     DfStream("EKF1", _EST, _ekf, detail="EKF (2014-2015 NavEKF) output, position from ORGN"),
     DfStream("SIM", TableName.TRUTH, _sim, detail="SITL truth (no velocity)"),
+    DfStream("MAG", _MAG, _mag, detail="milligauss -> gauss, body FRD"),
+    DfStream("MAG2", _MAG, _mag, instance=1, detail="milligauss (legacy second compass)"),
+    DfStream("MAG3", _MAG, _mag, instance=2, detail="milligauss (legacy third compass)"),
 )
-BY_NAME = {s.message: s for s in STREAMS}
+BY_NAME = {s.name: s for s in STREAMS}
 
 #: Legacy PX4 (sdlog2, ``.px4log``, until 2016): the same framing, PX4's own messages; the
 #: IMUs are ``IMU``, ``IMU1``, ``IMU2``; records are timed by the ``TIME`` record before them.
@@ -247,6 +285,44 @@ PX4_STREAMS: tuple[DfStream, ...] = (
     DfStream("IMU1", _IMU, _imu, instance=1, detail="rad/s, m/s^2 (PX4 sdlog2, second IMU)"),
     DfStream("IMU2", _IMU, _imu, instance=2, detail="rad/s, m/s^2 (PX4 sdlog2, third IMU)"),
     DfStream("GPS", TableName.GNSS, _px4_gps, detail="TIME paired with GPSTime (UTC); EPH/EPV"),
+    DfStream(
+        "IMU",
+        _MAG,
+        _px4_mag,
+        detail="MagX/Y/Z gauss of the IMU records",
+        suffix=".mag",
+        needs="MagX",
+    ),
+    DfStream(
+        "IMU1",
+        _MAG,
+        _px4_mag,
+        instance=1,
+        detail="gauss (second IMU's compass)",
+        suffix=".mag",
+        needs="MagX",
+    ),
+    DfStream(
+        "IMU2",
+        _MAG,
+        _px4_mag,
+        instance=2,
+        detail="gauss (third IMU's compass)",
+        suffix=".mag",
+        needs="MagX",
+    ),
 )
-PX4_BY_NAME = {s.message: s for s in PX4_STREAMS}
+PX4_BY_NAME = {s.name: s for s in PX4_STREAMS}
+
+
+def by_message(specs: dict[str, DfStream]) -> dict[str, tuple[DfStream, ...]]:
+    """The streams of each message (a legacy PX4 ``IMU`` feeds both imu and mag)."""
+    out: dict[str, tuple[DfStream, ...]] = {}
+    for spec in specs.values():
+        out[spec.message] = (*out.get(spec.message, ()), spec)
+    return out
+
+
+BY_MESSAGE = by_message(BY_NAME)
+PX4_BY_MESSAGE = by_message(PX4_BY_NAME)
 JOIN_COLUMNS = ("h_acc_m", "v_acc_m", "speed_acc_mps", "und")

@@ -20,6 +20,11 @@ SIMSTATE            ArduPilot SITL truth: attitude (rad), ``lat/lng`` 1e-7 deg; 
                     or velocity (alt NaN, velocity null)
 SIM_STATE           common-set simulator truth: attitude, ``lat_int/lon_int`` 1e-7 deg (else
                     the float ``lat/lon`` deg), ``alt`` m, ``vn/ve/vd`` m/s
+RAW_IMU.mag,        the magnetometer fields of the IMU messages -> ``mag`` (streams of their
+SCALED_IMU[2|3].mag own, named with the ``.mag`` suffix): ``x/y/zmag`` mgauss (ArduPilot's
+HIGHRES_IMU.mag     RAW_IMU too), gauss in HIGHRES_IMU; body FRD; a stream exists only where
+                    some message carries a field (not all three 0: no compass), and rows of
+                    0, 0, 0 are NaN (``mag_not_reported``)
 ==================  ========================================================================
 
 Heights: the canonical ``alt_m`` is ellipsoidal. ``alt_ellipsoid`` is used where the packet
@@ -79,6 +84,10 @@ class MavStream:
         instance: the instance when the message name implies it.
         join: a message joined to each row by nearest time, with its own conversion.
         detail: what ``--list`` shows.
+        suffix: appended to the message name to name the stream when the message feeds a
+            second table (``RAW_IMU.mag``).
+        carries: the fields of which one must be non-zero for a message to carry the
+            stream's data (a compass), or () for every message.
     """
 
     message: str
@@ -89,12 +98,31 @@ class MavStream:
     instance: int = 0
     join: tuple[str, str, Callable[[Rec, Extras], Converted]] | None = None
     detail: str = ""
+    suffix: str = ""
+    carries: tuple[str, ...] = ()
+
+    @property
+    def name(self) -> str:
+        """The stream's name: the message's, with the suffix."""
+        return self.message + self.suffix
 
     def key(self, instance: int) -> str:
         """Stream key: the name, with ``[n]`` for an instance n > 0 read from a field."""
         if self.instance_field is None or instance == 0:
-            return self.message
-        return f"{self.message}[{instance}]"
+            return self.name
+        return f"{self.name}[{instance}]"
+
+    def present(self, rec: Rec) -> npt.NDArray[np.bool_]:
+        """Which decoded messages carry the stream's data."""
+        names = rec.dtype.names or ()
+        if not self.carries:
+            return np.ones(len(rec), bool)
+        if not all(f in names for f in self.carries):
+            return np.zeros(len(rec), bool)
+        carried: npt.NDArray[np.bool_] = np.logical_or.reduce(
+            [np.asarray(rec[f]) != 0 for f in self.carries]
+        )
+        return carried
 
 
 def _f64(rec: Rec, name: str, per: float = 1.0) -> npt.NDArray[np.float64]:
@@ -115,6 +143,33 @@ def _imu_highres(rec: Rec, _ex: Extras) -> Converted:
     upd = np.asarray(rec["fields_updated"], dtype=np.int64)
     partial = int(((upd & 0x3F) != 0x3F).sum())
     return Converted(cols, counters={"highres_imu_not_all_updated": partial} if partial else {})
+
+
+_MAG_FIELDS = ("xmag", "ymag", "zmag")
+
+
+def _mag(rec: Rec, per: float, units: str) -> Converted:
+    """``x/y/zmag`` in units of 1/``per`` gauss; messages of 0, 0, 0 (no compass) -> NaN."""
+    cols = {f"mag_{a}_gauss": _f64(rec, f"{a}mag", per) for a in "xyz"}
+    missing = np.logical_and.reduce([np.asarray(rec[f]) == 0 for f in _MAG_FIELDS])
+    counters: dict[str, int] = {}
+    if missing.any():
+        counters["mag_not_reported"] = int(missing.sum())
+        cols = {k: np.where(missing, np.nan, v) for k, v in cols.items()}
+    return Converted(cols, counters=counters, info={"units": units})
+
+
+def _mag_scaled(rec: Rec, _ex: Extras) -> Converted:
+    return _mag(rec, 1e3, "mgauss scaled to gauss")
+
+
+def _mag_highres(rec: Rec, _ex: Extras) -> Converted:
+    out = _mag(rec, 1.0, "gauss")
+    upd = np.asarray(rec["fields_updated"], dtype=np.int64)
+    stale = int(((upd & 0x1C0) != 0x1C0).sum())
+    if stale:
+        out.counters["highres_mag_not_updated"] = stale
+    return out
 
 
 def _height(
@@ -258,6 +313,29 @@ STREAMS: tuple[MavStream, ...] = (
     ),
     MavStream("SIMSTATE", TableName.TRUTH, None, _simstate, detail="SITL truth (no alt/vel)"),
     MavStream("SIM_STATE", TableName.TRUTH, None, _sim_state, detail="simulator truth"),
+    *(
+        MavStream(
+            name,
+            TableName.MAG,
+            time,
+            convert,
+            field,
+            instance=inst,
+            detail=units,
+            suffix=".mag",
+            carries=_MAG_FIELDS,
+        )
+        for name, time, convert, field, inst, units in (
+            ("RAW_IMU", "time_usec", _mag_scaled, "id", 0, "mgauss"),
+            ("SCALED_IMU", "time_boot_ms", _mag_scaled, None, 0, "mgauss"),
+            ("SCALED_IMU2", "time_boot_ms", _mag_scaled, None, 1, "mgauss"),
+            ("SCALED_IMU3", "time_boot_ms", _mag_scaled, None, 2, "mgauss"),
+            ("HIGHRES_IMU", "time_usec", _mag_highres, "id", 0, "gauss"),
+        )
+    ),
 )
 
-BY_NAME = {s.message: s for s in STREAMS}
+BY_NAME = {s.name: s for s in STREAMS}
+BY_MESSAGE: dict[str, tuple[MavStream, ...]] = {}
+for _s in STREAMS:
+    BY_MESSAGE[_s.message] = (*BY_MESSAGE.get(_s.message, ()), _s)

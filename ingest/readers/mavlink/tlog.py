@@ -108,13 +108,13 @@ class TlogReader(LogReader):
             streams.append(
                 StreamInfo(
                     key=spec.key(inst),
-                    msgtype=name,
+                    msgtype=spec.message,
                     count=count,
                     start_ns=self._to_base(s.first_stamp_us[key] * 1000 + seg0),
                     end_ns=self._to_base(s.last_stamp_us[key] * 1000 + seg0),
                     table=spec.table,
                     time_base=s.base,
-                    frame="frd" if spec.table == TableName.IMU else "ned",
+                    frame="frd" if spec.table in (TableName.IMU, TableName.MAG) else "ned",
                     instance=inst,
                     detail=spec.detail,
                 )
@@ -286,7 +286,11 @@ class TlogReader(LogReader):
         dmg.count("packets_framed", stats.packets)
         if lost:
             dmg.count("packets_lost_seq_gaps", lost)
-        other = sum(c for (sender, _, _), c in s.counts.items() if sender != s.vehicle)
+        other = sum(
+            c
+            for (sender, name, _), c in s.counts.items()
+            if sender != s.vehicle and not BY_NAME[name].suffix  # a packet counted once
+        )
         if other:
             dmg.count("packets_from_other_senders", other)
             dmg.note(f"{other} convertible packets from senders other than the vehicle ignored")

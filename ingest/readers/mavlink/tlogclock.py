@@ -39,7 +39,7 @@ from navreplay.ingest.platform import UNKNOWN, Platform, from_heartbeats, with_q
 from navreplay.ingest.readers.mavlink._mavscan import VALID, gather
 from navreplay.ingest.readers.mavlink.mavclock import ROLLOVER_NS, BootTracker, OffsetAccumulator
 from navreplay.ingest.readers.mavlink.mavdialect import Dialect, MessageDef
-from navreplay.ingest.readers.mavlink.mavmsgs import BY_NAME, MavStream
+from navreplay.ingest.readers.mavlink.mavmsgs import BY_MESSAGE, MavStream
 from navreplay.ingest.readers.mavlink.tlogscan import Packets, ScanStats, scan_blocks
 from navreplay.ingest.timebase import TimeBase
 
@@ -247,19 +247,21 @@ def _streams(
 ) -> None:
     for msgid in np.unique(p.msgid[mine]).tolist():
         name = dialect.msg_name(msgid)
-        spec = BY_NAME.get(name)
-        if spec is None:
+        specs = BY_MESSAGE.get(name)
+        if specs is None:
             continue
         idx = np.flatnonzero(mine & (p.msgid == msgid))
         mdef = dialect.message(msgid)
         rec = decode(p, idx, mdef)
-        inst = instances(spec, rec)
-        for i in np.unique(inst).tolist():
-            sel = idx[inst == i]
-            key = (sender, name, int(i))
-            s.counts[key] += len(sel)
-            s.first_stamp_us.setdefault(key, int(p.stamp_us[sel[0]]))
-            s.last_stamp_us[key] = int(p.stamp_us[sel[-1]])
+        for spec in specs:
+            carried = spec.present(rec)
+            inst = instances(spec, rec)
+            for i in np.unique(inst[carried]).tolist():
+                sel = idx[(inst == i) & carried]
+                key = (sender, spec.name, int(i))
+                s.counts[key] += len(sel)
+                s.first_stamp_us.setdefault(key, int(p.stamp_us[sel[0]]))
+                s.last_stamp_us[key] = int(p.stamp_us[sel[-1]])
         if name in _EPOCH_NOW:
             usec = rec["time_usec"].astype(np.int64)
             epoch = usec >= EPOCH_MIN_US

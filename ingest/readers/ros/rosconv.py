@@ -22,6 +22,9 @@ geometry_msgs/TwistWithCovarianceStamped on a     gnss       vel_{n,e,d}_mps fro
 GNSS topic (name with gps, gnss, fix, navsat or   (velocity  twist; speed_acc_mps = sqrt of the mean
 ublox: a receiver's velocity, e.g. ``/gps/vel``)  companion) linear variance (null when all 0);
                                                              joined to the fixes by time
+sensor_msgs/MagneticField                         mag        mag_*_gauss <- magnetic_field (tesla
+                                                             x 1e4; FLU, or FRD when the
+                                                             frame_id ends in ``_ned``)
 any type with float64 lat_deg, lon_deg, alt_m     truth      every top-level float64 field
 (e.g. navreplay_msgs/msg/NavTruth)                           under its own name (truth columns
                                                              and sensor biases)
@@ -111,18 +114,23 @@ def conversion_for(
     return conv, None
 
 
+_TWISTS = {
+    "nav_msgs/msg/Odometry": "twist.twist",
+    _TWIST_COV: "twist.twist",
+    "geometry_msgs/msg/TwistStamped": "twist",
+}
+
+
 def _conversion(decoder: MessageDecoder) -> RosConversion | None:
     name = decoder.msgtype
     if name == "sensor_msgs/msg/Imu":
         return _imu(decoder)
     if name == "sensor_msgs/msg/NavSatFix":
         return _navsatfix(decoder)
-    if name == "nav_msgs/msg/Odometry":
-        return _twist(decoder, "twist.twist")
-    if name == _TWIST_COV:
-        return _twist(decoder, "twist.twist")
-    if name == "geometry_msgs/msg/TwistStamped":
-        return _twist(decoder, "twist")
+    if name == "sensor_msgs/msg/MagneticField":
+        return _magnetic_field(decoder)
+    if name in _TWISTS:
+        return _twist(decoder, _TWISTS[name])
     return _truth_like(decoder)
 
 
@@ -174,6 +182,27 @@ def _imu(decoder: MessageDecoder) -> RosConversion:
         return Converted(cols, {}, counters, {"frame_id": d.strings.get("header.frame_id", "")})
 
     return RosConversion(TableName.IMU, "flu", wants, convert, optional)
+
+
+#: gauss per tesla
+GAUSS_PER_TESLA = 1.0e4
+
+
+def _magnetic_field(decoder: MessageDecoder) -> RosConversion:
+    tl = _time(decoder)
+    wants = (*tl, *(f"magnetic_field.{a}" for a in _VEC), "header.frame_id")
+
+    def convert(d: Decoded, log_ns: I64) -> Converted:
+        t, fallback = _t_ns(d, tl, log_ns)
+        cols: Columns = {"t_ns": t}
+        for a in _VEC:
+            cols[f"mag_{a}_gauss"] = d.values[f"magnetic_field.{a}"].astype(np.float64) * (
+                GAUSS_PER_TESLA
+            )
+        info = {"frame_id": d.strings.get("header.frame_id", ""), "units": "tesla -> gauss"}
+        return Converted(cols, {}, {"time_from_log": fallback}, info)
+
+    return RosConversion(TableName.MAG, "flu", wants, convert)
 
 
 _STATUS_TO_FIX = {-1: FixType.NO_FIX, 0: FixType.FIX_3D, 1: FixType.DGPS, 2: FixType.RTK_FLOAT}

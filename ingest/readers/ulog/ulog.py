@@ -169,7 +169,7 @@ class UlogReader(LogReader):
                     end_ns=int(last),
                     table=None if refused else topic.table,
                     time_base=self.base,
-                    frame="frd" if topic.table == TableName.IMU else "ned",
+                    frame="frd" if topic.table in (TableName.IMU, TableName.MAG) else "ned",
                     instance=int(d.multi_id),
                     detail=f"not usable as imu: {refused}" if refused else topic.detail,
                     refused=refused,

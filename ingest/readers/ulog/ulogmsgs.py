@@ -66,6 +66,16 @@ def _accel(data: Data, _und: float | None) -> Converted:
     return Converted(cols, info={"time": "sensor_accel timestamp; sensor_gyro nearest in time"})
 
 
+def _magnetometer(data: Data, _und: float | None) -> Converted:
+    cols = {f"mag_{a}_gauss": _f(data, f"magnetometer_ga[{i}]") for i, a in enumerate("xyz")}
+    return Converted(cols, info={"units": "gauss (vehicle_magnetometer: calibrated, body frame)"})
+
+
+def _sensor_mag(data: Data, _und: float | None) -> Converted:
+    cols = {f"mag_{a}_gauss": _f(data, a) for a in "xyz"}
+    return Converted(cols, info={"units": "gauss (sensor_mag: the driver's, board frame)"})
+
+
 def gyro_columns(data: Data) -> dict[str, np.ndarray]:
     """``sensor_gyro`` ``x/y/z`` rad/s as the IMU's gyro columns."""
     return {f"gyro_{a}_radps": _f(data, a) for a in "xyz"}
@@ -216,5 +226,13 @@ TOPICS: tuple[UlogTopic, ...] = (
         _global_position,
         attitude="vehicle_attitude_groundtruth",
         detail="simulator truth (SITL) + vehicle_attitude_groundtruth",
+    ),
+    UlogTopic("vehicle_magnetometer", TableName.MAG, _magnetometer, detail="gauss, calibrated"),
+    UlogTopic(
+        "sensor_mag",
+        TableName.MAG,
+        _sensor_mag,
+        detail="gauss, the driver's (board frame since PX4 1.11)",
+        fallback_for="vehicle_magnetometer",
     ),
 )
