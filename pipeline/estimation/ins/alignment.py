@@ -28,6 +28,7 @@ The covariance ``P0`` (error coordinates of ``models.ins``) takes the 1-sigma va
 
 from __future__ import annotations
 
+import datetime as dt
 import logging
 import math
 from dataclasses import dataclass
@@ -37,9 +38,10 @@ from scipy.spatial.transform import Rotation
 
 from navreplay.ingest.config import ImuNoise
 from navreplay.ingest.gnss import spp
-from navreplay.pipeline.estimation.ins import heading
+from navreplay.ingest.timebase import gps_to_utc_ns
+from navreplay.pipeline.estimation.ins import heading, magheading
 from navreplay.pipeline.estimation.ins.config import InitParams
-from navreplay.pipeline.estimation.ins.inputs import FixData, ImuData, ObsData
+from navreplay.pipeline.estimation.ins.inputs import FixData, ImuData, MagData, ObsData
 from navreplay.pipeline.estimation.ins.models import ins
 from navreplay.pipeline.estimation.ins.models import measurement as me
 from navreplay.pipeline.estimation.ins.models.gnss import AN_DIM, AN_RE, AN_VE, antenna
@@ -54,6 +56,12 @@ SPP_SPEED_SIGMA_MPS = 0.2
 COURSE_IS_HEADING = ("ground", "fixed_wing", "unknown")
 #: the specific force at the start is averaged over +-0.25 s (a GNSS epoch needs that much IMU)
 _HALF_NS = 250_000_000
+#: the compass heading averages the field over +-1 s of the start
+_COMPASS_HALF_NS = 1_000_000_000
+#: 2000-01-01 in GPS nanoseconds: earlier times are a boot clock, not a date
+_GPS_2000_NS = 630_720_013_000_000_000
+#: GNSS speeds above this (and 3 sigma of their noise) are not at rest, m/s
+_REST_SPEED_MPS = 0.3
 #: floor on the yaw 1-sigma of a heading from motion (the attitude filter's own errors), rad
 _MIN_MOTION_YAW_SIGMA = math.radians(1.0)
 
@@ -221,14 +229,25 @@ def _level(f_b: F64, a_minus_g: F64, yaw: float) -> tuple[float, float]:
 
 
 def _static_window(
-    imu: ImuData, lo: int, hi: int, init: InitParams, g: float, *, last: bool = True
+    imu: ImuData,
+    lo: int,
+    hi: int,
+    init: InitParams,
+    g: float,
+    *,
+    last: bool = True,
+    moving: np.ndarray | None = None,
 ) -> tuple[int, int]:
     """The last (or first) run of static samples in ``lo:hi``, as absolute sample indices
-    ``(start, end)`` if it lasts ``init.static_window_s`` or more, else ``(0, 0)``."""
+    ``(start, end)`` if it lasts ``init.static_window_s`` or more, else ``(0, 0)``. ``moving``
+    (over ``lo:hi``) marks samples known not to be static (a car cruising straight passes the
+    IMU's tests)."""
     f, w = imu.data[lo:hi, :3], imu.data[lo:hi, 3:]
     static = (np.abs(np.linalg.norm(f, axis=1) - g) < init.static_accel_tol_mps2) & (
         np.linalg.norm(w, axis=1) < init.static_gyro_tol_radps
     )
+    if moving is not None:
+        static &= ~moving
     if not static.any():
         return 0, 0
     if last:
@@ -367,13 +386,15 @@ def align(
     n: int,
     *,
     course_is_heading: bool = True,
+    mag: MagData | None = None,
 ) -> Alignment | None:
     """Coarse alignment of one IMU segment (see the module docstring); None if no heading can
     be found with GNSS available.
 
     ``course_is_heading`` (a ground vehicle, an aeroplane, an unknown platform): the heading
     comes from the GNSS course once the vehicle moves, else (and for a multirotor always) from
-    motion (``heading``)."""
+    motion (``heading``) and the magnetometer (``mag``, ``magheading``), combined where both
+    are there."""
     lo, hi = segment
     t_imu = imu.t_ns[lo:hi]
     track = _track_from_fixes(fixes) if fixes is not None else None
@@ -381,7 +402,12 @@ def align(
         track = _track_from_obs(obs)
     if track is None:
         return None
+    # epochs with the IMU on both sides, and samples around them (not in a gap of the IMU)
     inside = (track.t_ns - _HALF_NS >= t_imu[0]) & (track.t_ns + _HALF_NS <= t_imu[-1])
+    around = np.searchsorted(t_imu, track.t_ns + _HALF_NS, "right") - np.searchsorted(
+        t_imu, track.t_ns - _HALF_NS, "left"
+    )
+    inside &= around >= 2
     start = _course_start(track, init) & inside if course_is_heading else None
     if start is not None and start.any():
         k = int(np.flatnonzero(start)[0])
@@ -392,22 +418,94 @@ def align(
         return _finish(imu, segment, track, k, x0, c_bn, yaw_sigma, "gnss_velocity", obs, init,
                        noise, lever_b, n)  # fmt: skip
     mh = _motion_heading(imu, segment, track, inside, init, noise)
-    if mh is None:
+    rows = np.flatnonzero(inside)
+    if rows.size == 0:
         return None
-    ok = inside[inside] & (mh.sigma <= init.motion_yaw_sigma_max_rad)
-    if not ok.any():
+    # the compass at the first epoch (at rest before a take-off), the motion heading's first
+    # trusted epoch otherwise; both where both are there
+    sig_m = mh.sigma if mh is not None else np.full(rows.size, math.inf)
+    trusted = np.flatnonzero(sig_m <= init.motion_yaw_sigma_max_rad)
+    compass = _compass(imu, segment, track, int(rows[0]), mag, init, lever_b)
+    if compass is not None:
+        j = 0
+    elif trusted.size:
+        j = int(trusted[0])
+    else:
         return None
-    j = int(np.flatnonzero(ok)[0])
-    k = int(np.flatnonzero(inside)[j])
+    k = int(rows[j])
     vel = track.vel[k].copy()
-    if track.differenced[k] or not np.isfinite(vel).all():
-        vel = np.array(
-            [mh.vel_ne[j, 0], mh.vel_ne[j, 1], 0.0 if not np.isfinite(vel[2]) else vel[2]]
+    if mh is not None and (track.differenced[k] or not np.isfinite(vel).all()):
+        vel[:2] = mh.vel_ne[j]
+        vel[2] = vel[2] if np.isfinite(vel[2]) else 0.0
+    estimates: list[tuple[str, float, float]] = []
+    if mh is not None and sig_m[j] <= 2.0 * init.motion_yaw_sigma_max_rad:
+        estimates.append(
+            ("motion_heading", mh.yaw_at(j), max(float(sig_m[j]), _MIN_MOTION_YAW_SIGMA))
         )
-    x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b, mh.yaw_at(j), vel)
-    yaw_sigma = max(float(mh.sigma[j]), _MIN_MOTION_YAW_SIGMA)
-    return _finish(imu, segment, track, k, x0, c_bn, yaw_sigma, "motion_heading", obs, init,
+    if compass is not None:
+        estimates.append(("magnetometer", compass.yaw_rad, compass.sigma_rad))
+    method, yaw, yaw_sigma = _combine(estimates)
+    x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b, yaw, vel)
+    return _finish(imu, segment, track, k, x0, c_bn, yaw_sigma, method, obs, init,
                    noise, lever_b, n)  # fmt: skip
+
+
+def _compass(
+    imu: ImuData,
+    segment: tuple[int, int],
+    track: _Track,
+    k: int,
+    mag: MagData | None,
+    init: InitParams,
+    lever_b: F64,
+) -> magheading.MagHeading | None:
+    """The magnetometer's heading over +-1 s of track epoch ``k``, levelled with the start's
+    roll and pitch; None without a magnetometer, a date on the clock (the World Magnetic Model
+    needs one), or a field that passes the calibration check within the alignment's bound."""
+    if mag is None:
+        return None
+    t0 = int(track.t_ns[k])
+    if t0 < _GPS_2000_NS:  # a boot clock, not GPS time: no date for the WMM
+        log.info("magnetometer not used for the heading: the log's clock is not GPS time")
+        return None
+    win = (mag.t_ns >= t0 - _COMPASS_HALF_NS) & (mag.t_ns <= t0 + _COMPASS_HALF_NS)
+    if win.sum() < magheading.MIN_SAMPLES:
+        return None
+    lo, hi = segment
+    x0, _ = _initial_navigation(imu, lo, hi, track, k, lever_b, 0.0, np.zeros(3))
+    q = x0[[ins.X_Q + 1, ins.X_Q + 2, ins.X_Q + 3, ins.X_Q]]
+    _, pitch, roll = Rotation.from_quat(q).as_euler("ZYX")
+    utc_ns = int(gps_to_utc_ns(np.array([t0], dtype=np.int64))[0])
+    when = dt.datetime.fromtimestamp(utc_ns * 1e-9, tz=dt.UTC)
+    lat, lon, h = track.llh[k]
+    got = magheading.mag_heading(
+        mag.t_ns[win], np.zeros(3), mag.field[win], math.degrees(lat), math.degrees(lon),
+        float(h), when, roll_pitch_rad=(float(roll), float(pitch)),
+    )  # fmt: skip
+    if got is None or not got.usable or got.sigma_rad > init.motion_yaw_sigma_max_rad:
+        log.info("magnetometer not used for the heading: %s", got.check if got else "no field")
+        return None
+    return got
+
+
+def _combine(estimates: list[tuple[str, float, float]]) -> tuple[str, float, float]:
+    """One heading from (method, yaw, sigma) estimates: inverse-variance weighted where they
+    agree within 3 sigma of their difference, else the tightest (and the disagreement
+    logged)."""
+    if len(estimates) == 1:
+        return estimates[0]
+    (m1, y1, s1), (m2, y2, s2) = estimates
+    diff = math.remainder(y2 - y1, 2.0 * math.pi)
+    if abs(diff) > 3.0 * math.hypot(s1, s2):
+        log.warning(
+            "the %s heading and the %s heading disagree by %.1f deg (1-sigma %.1f and %.1f): "
+            "using the %s", m1, m2, math.degrees(diff), math.degrees(s1), math.degrees(s2),
+            m1 if s1 <= s2 else m2,
+        )  # fmt: skip
+        return estimates[0] if s1 <= s2 else estimates[1]
+    w = s1**2 / (s1**2 + s2**2)
+    yaw = math.remainder(y1 + w * diff, 2.0 * math.pi)
+    return f"{m1}+{m2}", yaw, 1.0 / math.sqrt(1.0 / s1**2 + 1.0 / s2**2)
 
 
 def _course_start(track: _Track, init: InitParams) -> np.ndarray:
@@ -430,13 +528,17 @@ def _motion_heading(
     init: InitParams,
     noise: ImuNoise,
 ) -> heading.MotionHeading | None:
-    """``heading.estimate`` over the segment's GNSS epochs, the gyros corrected by the first
-    static window's mean rate (earth rate included: the level frame turns with the earth)."""
+    """``heading.estimate`` over the segment's GNSS epochs, the gyros corrected by the mean rate
+    of the first static window where GNSS says the vehicle is at rest (earth rate included:
+    the level frame turns with the earth)."""
     lo, hi = segment
     if inside.sum() < 2:
         return None
     lat, h = float(track.llh[inside][0, 0]), float(track.llh[inside][0, 2])
-    s0, s1 = _static_window(imu, lo, hi, init, gravity(lat, h))
+    speed = np.hypot(track.vel[:, 0], track.vel[:, 1])
+    fast = np.isfinite(speed) & (speed > np.maximum(_REST_SPEED_MPS, 3.0 * track.sig_speed))
+    moving = np.interp(imu.t_ns[lo:hi], track.t_ns, fast.astype(float)) > 0.0
+    s0, s1 = _static_window(imu, lo, hi, init, gravity(lat, h), last=False, moving=moving)
     bias = imu.data[s0:s1, 3:].mean(axis=0) if s1 > s0 else np.zeros(3)
     vel = np.where(track.differenced[:, None], math.nan, track.vel)
     return heading.estimate(

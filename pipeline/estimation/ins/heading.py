@@ -44,10 +44,6 @@ _GATE = 23.5
 _Q_C = 0.01**2
 #: state layout
 _P, _V, _U, _C = 0, 2, 4, 6
-#: time constant of the second pass's tilt filter, s: levelled on the track's specific force,
-#: not on gravity alone, it can follow it closely (less tilt from the gyro bias between
-#: corrections; on real multirotor logs 20 s gave 15 deg RMS against the onboard EKF3, 1 s 5)
-_REFERENCED_TILT_TAU_S = 1.0
 #: |u| must lie within this factor of 1 for a heading to be trusted
 _SCALE_TOL = 0.25
 
@@ -80,14 +76,12 @@ class MotionHeading:
 
 
 @njit(cache=True)
-def _ahrs(dt: F64, f: F64, w: F64, bias: F64, gain: float, f_ref: F64, q0: F64) -> tuple[F64, F64]:
+def _ahrs(dt: F64, f: F64, w: F64, bias: F64, gain: float, g: float, q0: F64) -> tuple[F64, F64]:
     """Tilt filter: (horizontal specific force in the level frame (N, 2), its heading (N,)).
 
     Gyro rates (minus ``bias``) integrated as body increments; roll and pitch pulled towards
-    the measured specific force: ``e = f_hat x C^T r_hat`` with ``r`` the specific force
-    expected in the level frame (``f_ref``: ``(0, 0, -g)``, or the GNSS acceleration minus
-    gravity), its weight falling to zero when ``|f|`` is 2 m/s^2 away from ``|r|``. ``q0``: w,
-    x, y, z of the start.
+    the measured specific force (``e = f_hat x C^T (0, 0, -1)``, weight falling to zero when
+    ``|f|`` is 2 m/s^2 away from gravity). ``q0``: w, x, y, z of the start.
     """
     n = f.shape[0]
     fa = np.empty((n, 2))
@@ -109,13 +103,9 @@ def _ahrs(dt: F64, f: F64, w: F64, bias: F64, gain: float, f_ref: F64, q0: F64) 
         yaw[i] = math.atan2(c10, c00)
         wx, wy, wz = w[i, 0] - bias[0], w[i, 1] - bias[1], w[i, 2] - bias[2]
         fn = math.sqrt(fx * fx + fy * fy + fz * fz)
-        rx, ry, rz = f_ref[i, 0], f_ref[i, 1], f_ref[i, 2]
-        rn = math.sqrt(rx * rx + ry * ry + rz * rz)
-        if fn > 0.0 and rn > 0.0:
-            k = gain * max(0.0, 1.0 - abs(fn - rn) / 2.0) / (fn * rn)
-            vx = c00 * rx + c10 * ry + c20 * rz  # C^T r: the expected direction of f
-            vy = c01 * rx + c11 * ry + c21 * rz
-            vz = c02 * rx + c12 * ry + c22 * rz
+        if fn > 0.0:
+            k = gain * max(0.0, 1.0 - abs(fn - g) / 2.0) / fn
+            vx, vy, vz = -c20, -c21, -c22  # C^T (0, 0, -1): the expected direction of f
             wx += k * (fy * vz - fz * vy)
             wy += k * (fz * vx - fx * vz)
             wz += k * (fx * vy - fy * vx)
@@ -194,9 +184,10 @@ def estimate(
 ) -> MotionHeading | None:
     """Heading from motion over one segment (see the module docstring).
 
-    Two passes: the first levels the frame on gravity alone; the second on the specific force
-    the first pass's track and heading predict (gravity minus the GNSS acceleration), so that a
-    sustained acceleration (a multirotor leaning into it, a car cornering) does not tilt it.
+    The frame is levelled on gravity alone, slowly (``init.tilt_tau_s``): an acceleration
+    leans it along the acceleration, which shrinks ``|u|`` but does not turn ``u``. (Levelling
+    it on the GNSS acceleration instead, rotated by a first estimate of ``psi0``, would feed
+    that estimate back as data: the second pass only echoes the first.)
 
     Args:
         t_imu, imu: the segment's IMU samples (N,), (N, 6) f_b, w_ib_b.
@@ -225,21 +216,10 @@ def estimate(
         [(llh[:, 0] - llh[0, 0]) * (rm + llh[:, 2]), (llh[:, 1] - llh[0, 1]) * (rn + llh[:, 2])
          * math.cos(llh[0, 0])]
     )  # fmt: skip
-    f_ref = np.zeros((t_s.size, 3))
-    f_ref[:, 2] = -g
-    for gain in (1.0 / init.tilt_tau_s, 1.0 / _REFERENCED_TILT_TAU_S):
-        fa, frame_yaw = _ahrs(dt, imu[:, :3], imu[:, 3:], gyro_bias, gain, f_ref, q0)
-        xs, Ps = _smooth(t_s, dt, fa, tg, pos, vel, sig_h, sig_vel, init, noise)
-        u = xs[:, _U : _U + 2]
-        psi0 = np.arctan2(u[:, 1], u[:, 0])
-        # the specific force the track predicts, in the level frame: (R(-psi0) a_h, a_d - g)
-        a_n = np.gradient(xs[:, _V : _V + 2], tg, axis=0)
-        a_d = np.gradient(np.nan_to_num(vel[:, 2]), tg)
-        psi = np.interp(t_s, tg, np.unwrap(psi0))
-        a_x, a_y = np.interp(t_s, tg, a_n[:, 0]), np.interp(t_s, tg, a_n[:, 1])
-        f_ref[:, 0] = np.cos(psi) * a_x + np.sin(psi) * a_y
-        f_ref[:, 1] = -np.sin(psi) * a_x + np.cos(psi) * a_y
-        f_ref[:, 2] = np.interp(t_s, tg, a_d) - g
+    fa, frame_yaw = _ahrs(dt, imu[:, :3], imu[:, 3:], gyro_bias, 1.0 / init.tilt_tau_s, g, q0)
+    xs, Ps = _smooth(t_s, dt, fa, tg, pos, vel, sig_h, sig_vel, init, noise)
+    u = xs[:, _U : _U + 2]
+    psi0 = np.arctan2(u[:, 1], u[:, 0])
     scale = np.hypot(u[:, 0], u[:, 1])
     perp = np.column_stack([-np.sin(psi0), np.cos(psi0)])
     var = np.einsum("ki,kij,kj->k", perp, Ps[:, _U : _U + 2, _U : _U + 2], perp)

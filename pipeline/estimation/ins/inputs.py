@@ -59,6 +59,26 @@ class ObsData:
     masked: int = 0
 
 
+@dataclass(frozen=True)
+class MagData:
+    """Magnetometer samples (the ``mag`` table): ``t_ns`` (K,), ``field`` (K, 3) gauss, body
+    FRD; rows with a non-finite component dropped."""
+
+    t_ns: I64
+    field: F64
+
+
+def prepare_mag(table: pa.Table) -> MagData | None:
+    """The ``mag`` table's finite samples in time order, or None if it has none."""
+    t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)
+    b = np.column_stack([float_column(table, f"mag_{a}_gauss") for a in "xyz"])
+    keep = np.isfinite(b).all(axis=1)
+    if not keep.any():
+        return None
+    order = np.argsort(t[keep], kind="stable")
+    return MagData(t[keep][order], np.ascontiguousarray(b[keep][order]))
+
+
 def prepare_imu(table: pa.Table, step: StepParams) -> ImuData:
     """Drop invalid, duplicated and backwards samples; find gaps and segments."""
     t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)

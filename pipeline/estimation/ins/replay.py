@@ -240,6 +240,7 @@ def run_filter(
     setup = make_setup(name, params, sensors, noise_model)
     fixes = inp.prepare_fixes(tables["gnss"], params.gnss) if "gnss" in tables else None
     obs = inp.prepare_obs(tables["gnss_obs"], params.gnss) if "gnss_obs" in tables else None
+    mag = inp.prepare_mag(tables["mag"]) if "mag" in tables else None
     if kind.coupling == "loose" and fixes is None:
         _table(tables, "gnss", name)
     if kind.coupling == "tight" and obs is None:
@@ -259,7 +260,7 @@ def run_filter(
         al: Alignment | None = initial
         if initial is None or k_seg > 0:
             al = align(imu_data, seg, fixes, obs, params.init, noise_model, setup.lever_b,
-                       setup.n, course_is_heading=course_is_heading)  # fmt: skip
+                       setup.n, course_is_heading=course_is_heading, mag=mag)  # fmt: skip
         if al is None:
             events.append(tb.Event(int(imu_data.t_ns[seg[0]]), "no_alignment", "imu"))
             continue

@@ -25,7 +25,7 @@ from navreplay.pipeline.estimation.ins.outputs import estimate_table, innovation
 from navreplay.pipeline.estimation.ins.replay import RunResult, run_filter
 from navreplay.pipeline.estimation.ins.tracks import ins_track
 
-INPUTS = (TableName.IMU, TableName.GNSS, TableName.GNSS_OBS, TableName.TRUTH)
+INPUTS = (TableName.IMU, TableName.GNSS, TableName.GNSS_OBS, TableName.MAG, TableName.TRUTH)
 
 
 def decode(

@@ -3,6 +3,7 @@ sideways; here a seoul_campus drive with the IMU turned about its z axis)."""
 
 from __future__ import annotations
 
+import datetime as dt
 import math
 from dataclasses import replace
 
@@ -13,9 +14,11 @@ from scipy.spatial.transform import Rotation
 
 from navreplay.ingest.meta import SensorMeta
 from navreplay.ingest.platform import Platform
+from navreplay.ingest.timebase import gps_to_utc_ns
 from navreplay.pipeline.estimation.config import FiltersParams
 from navreplay.pipeline.estimation.ins import inputs as inp
-from navreplay.pipeline.estimation.ins.alignment import align
+from navreplay.pipeline.estimation.ins.alignment import Alignment, align
+from navreplay.pipeline.estimation.ins.magheading import wmm_field
 from navreplay.pipeline.estimation.ins.models import ins
 from navreplay.pipeline.estimation.ins.replay import run_filter
 from tests.pipeline.estimation.conftest import Tables, seoul, t0_ns
@@ -108,3 +111,80 @@ def test_no_heading_from_motion_without_motion(filters: FiltersParams) -> None:
     assert r.failure is not None
     assert "heading from motion" in r.failure
     assert "course of this platform is not its heading" in r.failure
+
+
+def with_compass(tables: Tables, mounting_deg: float = 0.0) -> Tables:
+    """A magnetometer on the IMU's axes (or turned ``mounting_deg`` about z from them) reading
+    the WMM field of the place and date through the truth attitude, 0.002 G of noise."""
+    truth = tables["truth"]
+    t = truth.column("t_ns").to_numpy()
+    lat = truth.column("lat_deg")[0].as_py()
+    lon = truth.column("lon_deg")[0].as_py()
+    when = dt.datetime.fromtimestamp(int(gps_to_utc_ns(t[:1])[0]) * 1e-9, tz=dt.UTC)
+    wmm = wmm_field(lat, lon, truth.column("alt_m")[0].as_py(), when)
+    d = wmm.declination_rad
+    m_n = np.array([wmm.horizontal_gauss * math.cos(d), wmm.horizontal_gauss * math.sin(d),
+                    wmm.down_gauss])  # fmt: skip
+    ypr = np.column_stack([truth.column(c).to_numpy() for c in ("yaw_rad", "pitch_rad",
+                                                                "roll_rad")])  # fmt: skip
+    body = Rotation.from_euler("ZYX", ypr) * Rotation.from_euler("z", mounting_deg, degrees=True)
+    m_b = body.inv().apply(m_n)
+    m_b += np.random.default_rng(0).normal(0.0, 0.002, m_b.shape)
+    mag = pa.table({"t_ns": t, **{f"mag_{a}_gauss": m_b[:, j] for j, a in enumerate("xyz")}})
+    return dict(tables, mag=mag)
+
+
+def test_a_compass_starts_the_filter_at_rest_and_joins_the_heading_from_motion(
+    filters: FiltersParams, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A multirotor with a calibrated compass: the filter starts at the first fix, the compass
+    heading and the one from motion combined (a tighter sigma than either). A compass mounted
+    30 deg off the IMU's axes (its field passes the calibration check: strength and inclination
+    do not depend on the heading) disagrees with the heading from motion by far more than their
+    sigmas: the tighter one is used, and the disagreement said."""
+    tables, sensors = turned(*seoul(120.0, 6, stationary_s=20.0), 90.0)
+    p = filters.lc_ekf
+    imu = inp.prepare_imu(tables["imu"], p.step)
+    fixes = inp.prepare_fixes(tables["gnss"], p.gnss)
+    assert sensors.imu_noise is not None
+    lever = np.array(sensors.lever_arm_m)
+
+    def start(t: Tables) -> Alignment:
+        mag = inp.prepare_mag(t["mag"])
+        al = align(imu, imu.segments[0], fixes, None, p.init, sensors.imu_noise, lever,  # type: ignore[arg-type]
+                   ins.N_LOOSE, course_is_heading=False, mag=mag)  # fmt: skip
+        assert al is not None
+        return al
+
+    al = start(with_compass(tables))
+    assert al.method == "motion_heading+magnetometer+static_gyro_bias"
+    assert (al.t_ns - t0_ns(tables)) * 1e-9 <= 1.0
+    err = _yaw_error_deg(tables["truth"], al.t_ns, float(al.summary()["yaw_rad"]))  # type: ignore[arg-type]
+    sigma = math.degrees(math.sqrt(al.P0[ins.E_ATT + 2, ins.E_ATT + 2]))
+    assert abs(err) < 3.0 * sigma
+    assert sigma < 3.0  # the compass's floor alone is 3 deg
+    bad = start(with_compass(tables, mounting_deg=30.0))
+    assert bad.method == "motion_heading+static_gyro_bias"
+    assert "disagree" in caplog.text
+    err = _yaw_error_deg(tables["truth"], bad.t_ns, float(bad.summary()["yaw_rad"]))  # type: ignore[arg-type]
+    assert abs(err) < 3.0
+
+
+def test_no_start_inside_a_gap_of_the_imu(filters: FiltersParams) -> None:
+    """A 2 s gap in the IMU (shorter than a segment break) over the first fixes: the filter
+    starts at the first fix with IMU samples around it, its state finite (an ArduCopter 3.3
+    log ended in an indefinite covariance when the start fell in such a gap)."""
+    tables, sensors = turned(*seoul(120.0, 7, stationary_s=20.0), 90.0)
+    tables = with_compass(tables)
+    t0 = t0_ns(tables)
+    imu = tables["imu"]
+    t = imu.column("t_ns").to_numpy()
+    keep = (t < t0 + 500_000_000) | (t > t0 + 2_500_000_000)  # over the fixes at 1 and 2 s
+    tables = dict(tables, imu=imu.filter(pa.array(keep)))
+    r = run_filter(tables, sensors, "lc_ekf", filters.lc_ekf)
+    assert r.status == "ok"
+    al = r.alignments[0]
+    assert (al.t_ns - t0) * 1e-9 == pytest.approx(3.0)
+    assert "magnetometer" in al.method
+    assert np.isfinite(al.x0).all()
+    assert np.isfinite(al.P0).all()
