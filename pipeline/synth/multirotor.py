@@ -1,16 +1,15 @@
 """The ``multirotor_flight`` and ``bench_static`` datasets: a quadrotor's MAVLink tlog.
 
 ``multirotor_flight`` (``synth.multirotor_flight``, defaults in
-``pipeline.synth.multirotor_params``) is a flight of about 174 s whose heading is not its
-course:
+``pipeline.synth.multirotor_params``) is a flight of 177 s whose heading is not its course:
 
 1. 20 s at rest on the ground, armed (heading 30 deg);
 2. vertical take-off to 10 m at 2 m/s, 5 s hover;
 3. yaw in place by 180 deg in 8 s (peak 42 deg/s), 3 s hover;
 4. sideways at 4 m/s (body y along the track: course = yaw + 90 deg) for 14 s, 3 s hover;
 5. backwards at 3 m/s (course = yaw + 180 deg) for 12 s, 3 s hover;
-6. two figure eights (60 m long, 2 m up and down, 4-8 m/s, 2.3 m/s^2 of horizontal
-   acceleration, about 13 deg of tilt) in 71 s, yawing by -90 deg in their middle;
+6. two figure eights (60 m long, 2 m up and down, 3.7-8 m/s once at speed, up to 2.5 m/s^2
+   of horizontal acceleration and 14 deg of tilt) in 73 s, yawing by -90 deg in their middle;
 7. 5 s hover, landing at 1.5 m/s, 15 s at rest on the ground.
 
 The motion is built from C2 profiles of time (``pipeline.synth.profile``): the NED velocity of
@@ -25,12 +24,13 @@ yaw is free; the body rate w.r.t. NED follows analytically from the jerk and the
 Simpson's rule (``trajectory.integrate_geodetic``); ``imu.ideal_imu`` gives the exact IMU, so
 the noise-free IMU integrates back onto the truth.
 
-Sensors: consumer MEMS IMU at 200 Hz (``imu.corrupt``: turn-on biases 0.08 m/s^2 and 0.2 deg/s
-1-sigma per axis, white noise, bias random walk, 0.2 % scale factors); magnetometer with every
-IMU sample, ``C_n^b B_n + hard_iron + noise`` in gauss, ``B_n`` the WMM2025 field of the place
-(``MagParams``); GPS fixes at 5 Hz of the antenna (12 cm above the IMU): Gauss-Markov position
-errors (1 m horizontal, 1.8 m vertical, 20 s), white velocity noise 0.1 m/s, reported as
-``h_acc``, ``v_acc`` and ``vel_acc``.
+Sensors: consumer MEMS IMU at 200 Hz (``imu.corrupt``: white noise, bias random walk, 0.2 %
+scale factors; fixed turn-on biases of 0.05-0.08 m/s^2 and 0.15-0.25 deg/s per axis from
+``turn_on_bias``, where the declared noise model says 0.08 m/s^2 and 0.2 deg/s 1-sigma); a
+magnetometer with every IMU sample, ``C_n^b B_n + hard_iron + noise`` in gauss, ``B_n`` the
+WMM2025 field of the place (``MagParams``); GPS fixes at 5 Hz of the antenna (12 cm above the
+IMU): Gauss-Markov position errors (1 m horizontal, 1.8 m vertical, 20 s), white velocity noise
+0.1 m/s, reported as ``h_acc``, ``v_acc`` and ``vel_acc``.
 
 ``bench_static`` is the same vehicle and sensors at rest on a slightly tilted bench for 60 s,
 disarmed, its receiver reporting no fix (fix type 1, 3 satellites, lat/lon 0).
@@ -44,6 +44,7 @@ holds the true IMU biases (``acc_bias_*_mps2``, ``gyro_bias_*_radps``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import NamedTuple
@@ -430,7 +431,13 @@ def raw_log(params: MultirotorFlightParams, seed: int, *, bench: bool = False) -
     n = motion.t_s.size
     t_ns = _t_ns(params, n)
     acc, gyro = ideal_imu(motion)
-    acc_m, gyro_m, acc_b, gyro_b = corrupt(acc, gyro, params.imu_rate_hz, params.imu, rng)
+    drawn = dataclasses.replace(params.imu, accel_bias_sigma_mps2=0.0, gyro_bias_sigma_radps=0.0)
+    acc_m, gyro_m, acc_b, gyro_b = corrupt(acc, gyro, params.imu_rate_hz, drawn, rng)
+    b0 = params.turn_on_bias
+    acc_b += np.array(b0.accel_mps2)
+    gyro_b += np.radians(b0.gyro_dps)
+    acc_m += np.array(b0.accel_mps2)
+    gyro_m += np.radians(b0.gyro_dps)
     mag = magnetometer(motion, params, rng)
     g_rows = np.arange(0, n, params.imu_rate_hz // params.gnss_rate_hz)
     gnss = (

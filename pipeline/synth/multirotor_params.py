@@ -132,6 +132,23 @@ class FlightPlan:
 
 
 @dataclass(frozen=True)
+class TurnOnBias:
+    """``turn_on_bias``: the constant IMU biases of this vehicle, body FRD, per axis.
+
+    They replace the random draw of ``imu.*_bias_sigma`` (which stay the declared filter
+    prior), so the test bed has turn-on biases of the size a consumer IMU shows, whatever the
+    seed; the bias random walk, scale factors and noise are still drawn.
+
+    Attributes:
+        accel_mps2: accelerometer biases.
+        gyro_dps: gyro biases, deg/s.
+    """
+
+    accel_mps2: tuple[float, float, float] = (0.06, -0.08, 0.05)
+    gyro_dps: tuple[float, float, float] = (0.15, -0.25, 0.2)
+
+
+@dataclass(frozen=True)
 class MultirotorGnss:
     """``gnss``: the receiver's fixes (position, velocity and their accuracies).
 
@@ -222,7 +239,8 @@ class MultirotorFlightParams:
         gnss_rate_hz: GPS_RAW_INT rate; must divide the IMU rate.
         truth_rate_hz: SIM_STATE truth rate; must divide the IMU rate.
         flight: the flight's phases.
-        imu: the IMU error model (``pipeline.synth.imu.corrupt``).
+        imu: the IMU error model (``pipeline.synth.imu.corrupt``) and the declared noise model.
+        turn_on_bias: the IMU's constant biases (instead of a draw of ``imu``'s sigmas).
         gnss: the receiver.
         mag: the magnetometer.
         bench: the ``bench_static`` variant.
@@ -235,6 +253,7 @@ class MultirotorFlightParams:
     truth_rate_hz: int = 50
     flight: FlightPlan = field(default_factory=FlightPlan)
     imu: ImuErrors = CONSUMER_MEMS
+    turn_on_bias: TurnOnBias = field(default_factory=TurnOnBias)
     gnss: MultirotorGnss = field(default_factory=MultirotorGnss)
     mag: MagParams = field(default_factory=MagParams)
     bench: BenchParams = field(default_factory=BenchParams)
