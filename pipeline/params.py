@@ -35,6 +35,7 @@ from navreplay.pipeline.outages.config import OutagesParams
 from navreplay.pipeline.scenarios.config import ScenariosParams
 from navreplay.pipeline.synth.car import CarSpeedRampParams
 from navreplay.pipeline.synth.fwekf import FwekfReferenceParams
+from navreplay.pipeline.synth.multirotor_params import MultirotorFlightParams
 from navreplay.pipeline.synth.seoul_params import SeoulCampusParams
 from navreplay.pipeline.synth.tractor import TractorStraightParams
 
@@ -54,6 +55,7 @@ class SynthParams:
     tractor_straight: TractorStraightParams
     fwekf_reference: FwekfReferenceParams
     car_speed_ramp: CarSpeedRampParams
+    multirotor_flight: MultirotorFlightParams
 
 
 @dataclass(frozen=True)

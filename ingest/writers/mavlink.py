@@ -8,7 +8,8 @@ Message mapping (canonical tables use ``t_ns`` on the UNIX clock; every ``time_u
 every tlog stamp is that time in microseconds):
 
 - ``imu`` -> ``HIGHRES_IMU``: specific force (m/s^2) and angular rate (rad/s) in body FRD as
-  float32, ``fields_updated = 0x3F`` (accelerometer and gyro only).
+  float32, ``fields_updated = 0x3F`` (accelerometer and gyro only); with ``mag_gauss``, the
+  magnetic field in body FRD (gauss) in ``xmag/ymag/zmag`` and ``fields_updated = 0x1FF``.
 - ``gnss`` -> ``GPS_RAW_INT``: lat/lon in 1e-7 deg, ``alt`` and ``alt_ellipsoid`` in mm (no
   geoid model: both carry the ellipsoidal height), ``vel`` ground speed in cm/s and ``cog`` in
   cdeg from ``vel_n/vel_e`` (UINT16_MAX when unknown; ``cog`` also when the speed rounds to 0),
@@ -16,8 +17,9 @@ every tlog stamp is that time in microseconds):
   (no DOP simulated), ``satellites_visible`` UINT8_MAX when unknown. ``vel_d`` has no field.
 - ``truth`` -> ``SIMSTATE`` (ArduPilot SITL's truth message: attitude, true IMU, lat/lng in
   1e-7 deg) and ``SIM_STATE`` (common set: quaternion, attitude, lat/lon/alt, NED velocity,
-  ``lat_int/lon_int`` in 1e-7 deg), both at each truth sample.
-- ``HEARTBEAT`` and ``SYSTEM_TIME`` once per second from the first record.
+  ``lat_int/lon_int`` in 1e-7 deg), both at each truth sample (or those of ``truth_messages``).
+- ``HEARTBEAT`` (``base_mode`` with the armed flag when ``armed``) and ``SYSTEM_TIME`` once per
+  second from the first record.
 
 ``as_logged_imu`` and ``as_logged_gnss`` return the canonical tables exactly as a reader decodes
 them from the log (float32 IMU, integer-scaled GNSS), so callers can keep reference tables
@@ -47,8 +49,14 @@ _STAMP = struct.Struct(">Q")
 MAV_TYPE_GENERIC = mavlink.MAV_TYPE_GENERIC
 MAV_TYPE_FIXED_WING = mavlink.MAV_TYPE_FIXED_WING
 MAV_TYPE_GROUND_ROVER = mavlink.MAV_TYPE_GROUND_ROVER
+MAV_TYPE_QUADROTOR = mavlink.MAV_TYPE_QUADROTOR
 #: HIGHRES_IMU.fields_updated: xacc, yacc, zacc, xgyro, ygyro, zgyro.
 HIGHRES_IMU_ACC_GYRO = 0x3F
+#: HIGHRES_IMU.fields_updated: the above and xmag, ymag, zmag.
+HIGHRES_IMU_ACC_GYRO_MAG = 0x1FF
+#: the truth messages ``write_tlog`` can write
+TRUTH_MESSAGES = ("SIMSTATE", "SIM_STATE")
+_ARMED_MODE = mavlink.MAV_MODE_FLAG_SAFETY_ARMED | mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 
 
 class TlogWriter(AtomicWriter):
@@ -218,6 +226,9 @@ def write_tlog(
     truth: pa.Table | None = None,
     truth_imu: pa.Table | None = None,
     mav_type: int = MAV_TYPE_GENERIC,
+    mag_gauss: F64 | None = None,
+    truth_messages: tuple[str, ...] = TRUTH_MESSAGES,
+    armed: bool = False,
 ) -> int:
     """Write canonical tables as a tlog (see the module docstring); returns the packet count.
 
@@ -228,12 +239,22 @@ def write_tlog(
             the same ``t_ns``) for the SIMSTATE/SIM_STATE acceleration and gyro fields; zeros
             when absent.
         mav_type: ``MAV_TYPE`` of the HEARTBEAT.
+        mag_gauss: the magnetic field in body FRD, gauss, one row per imu row (n, 3), for the
+            HIGHRES_IMU ``xmag/ymag/zmag`` fields.
+        truth_messages: which of ``TRUTH_MESSAGES`` carry the truth.
+        armed: the HEARTBEAT says the vehicle is armed (``MAV_MODE_FLAG_SAFETY_ARMED``).
 
     Raises:
-        IngestError: times are not whole microseconds, or truth_imu does not match truth.
+        IngestError: times are not whole microseconds, truth_imu does not match truth, or
+            mag_gauss does not match imu.
     """
     path = Path(path)
     imu_v = np.stack([_col(imu, c) for c in _IMU_COLS], axis=1) if imu is not None else None
+    mag = _mag_fields(imu, mag_gauss, path)
+    unknown = set(truth_messages) - set(TRUTH_MESSAGES)
+    if unknown:
+        raise ValueError(f"truth_messages: {sorted(unknown)} not among {TRUTH_MESSAGES}")
+    base_mode = _ARMED_MODE if armed else 0
     gps = _gps_fields(gnss) if gnss is not None else None
     tr = _truth_fields(truth, truth_imu, path) if truth is not None else None
     with TlogWriter(path) as w:
@@ -248,7 +269,7 @@ def write_tlog(
                     mav.heartbeat_encode(
                         mav_type,
                         mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                        0,
+                        base_mode,
                         0,
                         mavlink.MAV_STATE_ACTIVE,
                     ),
@@ -257,14 +278,17 @@ def write_tlog(
                 next_beat = t0 + ((t_us - t0) // 1_000_000 + 1) * 1_000_000
             if stream == 0 and imu_v is not None:
                 a = imu_v[i].tolist()
+                m, updated = (
+                    ([0.0, 0.0, 0.0], HIGHRES_IMU_ACC_GYRO)
+                    if mag is None
+                    else (mag[i].tolist(), HIGHRES_IMU_ACC_GYRO_MAG)
+                )
                 w.write(
                     t_us,
-                    mav.highres_imu_encode(
-                        t_us, *a, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, HIGHRES_IMU_ACC_GYRO, 0
-                    ),
+                    mav.highres_imu_encode(t_us, *a, *m, 0.0, 0.0, 0.0, 0.0, updated, 0),
                 )
             elif stream == 1 and tr is not None:
-                _write_truth(w, t_us, tr, i)
+                _write_truth(w, t_us, tr, i, truth_messages)
             elif stream == 2 and gps is not None:
                 g = {k: int(v[i]) for k, v in gps.items()}
                 w.write(
@@ -287,6 +311,18 @@ def write_tlog(
                     ),
                 )
         return w.packets
+
+
+def _mag_fields(imu: pa.Table | None, mag_gauss: F64 | None, path: Path) -> F64 | None:
+    if mag_gauss is None:
+        return None
+    mag = np.asarray(mag_gauss, dtype=np.float64)
+    if imu is None or mag.shape != (imu.num_rows, 3):
+        rows = 0 if imu is None else imu.num_rows
+        raise IngestError(
+            f"mag_gauss has shape {mag.shape}; the imu table needs ({rows}, 3)", path=path
+        )
+    return mag
 
 
 def _truth_fields(truth: pa.Table, truth_imu: pa.Table | None, path: Path) -> dict[str, F64]:
@@ -323,12 +359,17 @@ def _euler_to_quat(roll: F64, pitch: F64, yaw: F64) -> F64:
     )
 
 
-def _write_truth(w: TlogWriter, t_us: int, tr: dict[str, F64], i: int) -> None:
+def _write_truth(
+    w: TlogWriter, t_us: int, tr: dict[str, F64], i: int, messages: tuple[str, ...]
+) -> None:
     rpy = [float(tr[c][i]) for c in ("roll_rad", "pitch_rad", "yaw_rad")]
     imu = [float(tr[c][i]) for c in _IMU_COLS]
     lat, lon = float(tr["lat_deg"][i]), float(tr["lon_deg"][i])
     lat_e7, lon_e7 = round(lat * 1e7), round(lon * 1e7)
-    w.write(t_us, w.mav.simstate_encode(*rpy, *imu, lat_e7, lon_e7))
+    if "SIMSTATE" in messages:
+        w.write(t_us, w.mav.simstate_encode(*rpy, *imu, lat_e7, lon_e7))
+    if "SIM_STATE" not in messages:
+        return
     q = tr["q"][i].tolist()
     vel = [float(tr[c][i]) for c in ("vel_n_mps", "vel_e_mps", "vel_d_mps")]
     w.write(

@@ -19,6 +19,7 @@ if TYPE_CHECKING:
     from navreplay.ingest.meta import SensorMeta
     from navreplay.pipeline.synth.car import CarSpeedRampParams
     from navreplay.pipeline.synth.fwekf import FwekfReferenceParams
+    from navreplay.pipeline.synth.multirotor_params import MultirotorFlightParams
     from navreplay.pipeline.synth.seoul_params import SeoulCampusParams
     from navreplay.pipeline.synth.tractor import TractorStraightParams
 
@@ -30,6 +31,8 @@ DATASETS: dict[str, str] = {
     "fwekf_reference": "navreplay.pipeline.synth.fwekf",
     "fwekf_reference_noise_free": "navreplay.pipeline.synth.fwekf",
     "car_speed_ramp": "navreplay.pipeline.synth.car",
+    "multirotor_flight": "navreplay.pipeline.synth.multirotor",
+    "bench_static": "navreplay.pipeline.synth.multirotor",
 }
 
 
@@ -70,3 +73,6 @@ class SynthSection(Protocol):
 
     @property
     def car_speed_ramp(self) -> CarSpeedRampParams: ...
+
+    @property
+    def multirotor_flight(self) -> MultirotorFlightParams: ...

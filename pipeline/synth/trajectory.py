@@ -204,7 +204,7 @@ def sample(
     psi = yaw0_rad + yr.antiderivative()(t2)
     cpsi, spsi = np.cos(psi), np.sin(psi)
     vel = np.stack([v * cpsi, v * spsi, -g * v], axis=-1)
-    lat, lon, h = _integrate_geodetic(lat0_rad, lon0_rad, h0_m, vel, 1.0 / rate_hz)
+    lat, lon, h = integrate_geodetic(lat0_rad, lon0_rad, h0_m, vel, 1.0 / rate_hz)
     s = slice(0, None, 2)
     vdot_n = np.stack(
         [vdot * cpsi - v * spsi * r, vdot * spsi + v * cpsi * r, -(gdot * v + g * vdot)], axis=-1
@@ -219,10 +219,10 @@ def sample(
         axis=-1,
     )[s]
     rpy = np.stack([phi, theta, np.arctan2(spsi, cpsi)], axis=-1)[s]
-    return Motion(t2[s], lat, lon, h, vel[s], vdot_n, rpy, w_nb, _quats(rpy))
+    return Motion(t2[s], lat, lon, h, vel[s], vdot_n, rpy, w_nb, quats_from_rpy(rpy))
 
 
-def _quats(rpy: F64) -> F64:
+def quats_from_rpy(rpy: F64) -> F64:
     """q_wxyz of C_b^n = Rz(yaw) Ry(pitch) Rx(roll) for every row, scalar part >= 0."""
     cr, sr = np.cos(rpy[:, 0] / 2), np.sin(rpy[:, 0] / 2)
     cp, sp = np.cos(rpy[:, 1] / 2), np.sin(rpy[:, 1] / 2)
@@ -245,7 +245,7 @@ def _simpson(f2: F64, dt: float) -> F64:
     return np.concatenate(([0.0], np.cumsum(steps)))
 
 
-def _integrate_geodetic(
+def integrate_geodetic(
     lat0: float, lon0: float, h0: float, vel2: F64, dt: float
 ) -> tuple[F64, F64, F64]:
     """Paper 001 eq. 1 integrated with Simpson's rule on the grid and its midpoints.
@@ -253,6 +253,14 @@ def _integrate_geodetic(
     The radii of curvature depend on the latitude being integrated; three fixed-point passes
     (each shrinking the error by ~1e-5, the relative change of the radii over the drive)
     converge far below a micrometre.
+
+    Args:
+        lat0, lon0, h0: the start (rad, m).
+        vel2: NED velocity on the grid and its midpoints, (2N - 1, 3).
+        dt: the grid step, s.
+
+    Returns:
+        latitude, longitude and height on the grid, (N,) each.
     """
     h = h0 - _simpson(vel2[:, 2], dt)
     h2 = np.empty(vel2.shape[0])  # heights on the grid and (interpolated, for the radii) between

@@ -127,3 +127,64 @@ def test_imu_is_logged_as_float32_and_merged_in_time_order(tmp_path: Path) -> No
     logged = as_logged_imu(imu)
     decoded = [m["xacc"] for _, m in messages(path) if m["mavpackettype"] == "HIGHRES_IMU"]
     assert decoded == logged["acc_x_mps2"].to_pylist() != cols["acc_x_mps2"].tolist()
+
+
+def truth_table(n: int) -> pa.Table:
+    t = T0_NS + np.arange(n, dtype=np.int64) * 10_000_000
+    return from_columns(
+        "truth",
+        {
+            "t_ns": t,
+            "lat_deg": np.full(n, 47.4),
+            "lon_deg": np.full(n, 8.5),
+            "alt_m": np.full(n, 500.0),
+            "vel_n_mps": np.full(n, 1.0),
+            "vel_e_mps": np.zeros(n),
+            "vel_d_mps": np.zeros(n),
+            "roll_rad": np.zeros(n),
+            "pitch_rad": np.zeros(n),
+            "yaw_rad": np.full(n, 0.5),
+        },
+    )
+
+
+def test_magnetometer_truth_messages_and_armed_heartbeat(tmp_path: Path) -> None:
+    n = 3
+    t = T0_NS + np.arange(n, dtype=np.int64) * 10_000_000
+    cols = {f"acc_{a}_mps2": np.zeros(n) for a in "xyz"} | {
+        f"gyro_{a}_radps": np.zeros(n) for a in "xyz"
+    }
+    imu = from_columns("imu", {"t_ns": t, **cols})
+    mag = np.array([[0.2, 0.01, 0.43], [0.21, -0.02, 0.44], [0.0, 0.5, -0.1]])
+    path = tmp_path / "mag.tlog"
+    write_tlog(
+        path,
+        imu=imu,
+        truth=truth_table(n),
+        mav_type=mavutil.mavlink.MAV_TYPE_QUADROTOR,
+        mag_gauss=mag,
+        truth_messages=("SIM_STATE",),
+        armed=True,
+    )
+    msgs = [m for _, m in messages(path)]
+    hi = [m for m in msgs if m["mavpackettype"] == "HIGHRES_IMU"]
+    got = np.array([[m["xmag"], m["ymag"], m["zmag"]] for m in hi])
+    np.testing.assert_array_equal(got, mag.astype(np.float32))
+    assert {m["fields_updated"] for m in hi} == {0x1FF}
+    types = {m["mavpackettype"] for m in msgs}
+    assert "SIM_STATE" in types
+    assert "SIMSTATE" not in types
+    beat = next(m for m in msgs if m["mavpackettype"] == "HEARTBEAT")
+    assert beat["type"] == mavutil.mavlink.MAV_TYPE_QUADROTOR
+    assert beat["base_mode"] & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    # without them: no magnetometer, both truth messages, disarmed
+    plain = tmp_path / "plain.tlog"
+    write_tlog(plain, imu=imu, truth=truth_table(n))
+    msgs = [m for _, m in messages(plain)]
+    assert {m["fields_updated"] for m in msgs if m["mavpackettype"] == "HIGHRES_IMU"} == {0x3F}
+    assert {"SIMSTATE", "SIM_STATE"} <= {m["mavpackettype"] for m in msgs}
+    assert next(m for m in msgs if m["mavpackettype"] == "HEARTBEAT")["base_mode"] == 0
+    with pytest.raises(IngestError, match=r"mag_gauss has shape \(2, 3\)"):
+        write_tlog(tmp_path / "bad.tlog", imu=imu, mag_gauss=mag[:2])
+    with pytest.raises(ValueError, match="SIM_STAT"):
+        write_tlog(tmp_path / "bad.tlog", truth=truth_table(n), truth_messages=("SIM_STAT",))

@@ -1,4 +1,5 @@
-"""`navreplay synth` for the vehicle datasets: tractor (CSV), fwekf (tlog), car (CSV)."""
+"""`navreplay synth` for the vehicle datasets: tractor (CSV), fwekf (tlog), car (CSV),
+multirotor and bench (tlog)."""
 
 from __future__ import annotations
 
@@ -26,6 +27,8 @@ FILES = {
         "car_speed_ramp_truth.csv",
         "car_speed_ramp_vehicle.csv",
     ],
+    "multirotor_flight": ["multirotor_flight.tlog"],
+    "bench_static": ["bench_static.tlog"],
 }
 
 
@@ -36,6 +39,8 @@ def short_params(tmp_path_factory: pytest.TempPathFactory) -> Path:
     synth["tractor_straight"]["duration_s"] = 2.0
     synth["fwekf_reference"].update(alignment_s=1.0, motion_s=2.0)
     synth["car_speed_ramp"].update(ramp_s=8.0, hold_s=2.0)
+    synth["multirotor_flight"]["flight"].update(eights=1, landed_s=2.0)
+    synth["multirotor_flight"]["bench"]["duration_s"] = 5.0
     path = tmp_path_factory.mktemp("params") / "params.yaml"
     path.write_text(yaml.safe_dump(data))
     return path
