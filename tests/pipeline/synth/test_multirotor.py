@@ -253,12 +253,12 @@ def test_the_magnetometer_is_in_the_raw_log(
     assert PARAMS.mag.declination_deg == pytest.approx(3.66, abs=0.01)
 
 
-def test_the_tlog_ingests_as_a_multirotor_with_imu_gnss_and_truth(
+def test_the_tlog_ingests_as_a_multirotor_with_imu_gnss_mag_and_truth(
     flight_dir: Path, tmp_path: Path
 ) -> None:
     # without a descriptor, as a user's log: the HEARTBEAT says multirotor
     res = ingest([flight_dir / "multirotor_flight.tlog"], tmp_path / "auto")
-    assert res.tables == {"imu": 35401, "gnss": 886, "truth": 8851}
+    assert res.tables == {"imu": 35401, "gnss": 886, "mag": 35401, "truth": 8851}
     platform = read_meta(tmp_path / "auto").sensors.platform
     assert (platform.kind, platform.source) == (
         "multirotor",
