@@ -54,7 +54,7 @@ STATUS_TEXT = {
 }
 
 
-N_STREAMS = 4
+N_STREAMS = 5
 
 
 @njit(cache=True, error_model="numpy")
@@ -169,8 +169,9 @@ def streams_to_reset(
     """Streams that have been rejected (``stream_health``) for the timeout or longer (F2).
 
     ``reject_since[stream]`` holds the time (ns) of the first rejection of the current run of
-    rejections, -1 if the stream was last accepted. Stream ``keep`` is never reset (the INS
-    filters' NHC pseudo-measurement, the vehicle filters' yaw rate; -1: none).
+    rejections, -1 if the stream was last accepted. Streams ``keep`` and after are never reset
+    (the INS filters' NHC and standstill pseudo-measurements, the vehicle filters' yaw rate:
+    resetting the states they hold would let a wrong constraint in; -1: none).
 
     Returns:
         (N_STREAMS,) flags, 1 = reset that stream's states now.
@@ -178,7 +179,7 @@ def streams_to_reset(
     seen, ok = stream_health(blocks, nb_, accepted)
     out = np.zeros(N_STREAMS, np.int64)
     for s in range(N_STREAMS):
-        if s == keep or not seen[s] or ok[s] or reject_since[s] < 0:
+        if 0 <= keep <= s or not seen[s] or ok[s] or reject_since[s] < 0:
             continue
         if (t_ns - reject_since[s]) * 1e-9 >= timeout_s:
             out[s] = 1

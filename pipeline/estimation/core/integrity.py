@@ -21,6 +21,11 @@ its NIS, dimension and whether it was accepted), and gives the run a status:
   normalized innovations (the variance of a sum of squares of an AR(1) sequence). The run is
   inconsistent when more than ``fail_fraction`` of a stream's windows fail.
 
+The ``standstill`` stream (an INS filter's zero-velocity and zero-rate updates) does not
+make a run diverged: its misfit says the vehicle was taken for at rest when it was not (a
+hover in a simulator without vibration), which the gate handles, not that the estimate left
+the sensors; it still counts towards ``inconsistent``.
+
 Rejected blocks count: a filter that rejects everything has, by construction, no accepted
 innovation that disagrees with it. The monitor runs on every family's output (``contract.
 RunOutput.decode``); its verdict only ever lowers a run's status (a run the kernel already
@@ -202,8 +207,16 @@ def assess(innovations: pa.Table, p: IntegrityParams, t0_ns: int | None = None) 
     return _verdict(streams, p, t0)
 
 
+#: pseudo-measurements of an assumed condition, not of a sensor: never ``diverged``
+ASSUMED = frozenset({"standstill"})
+
+
 def _verdict(streams: dict[str, StreamIntegrity], p: IntegrityParams, t0: int) -> Integrity:
-    diverged = [(s.diverged_ns, k) for k, s in streams.items() if s.diverged_ns is not None]
+    diverged = [
+        (s.diverged_ns, k)
+        for k, s in streams.items()
+        if s.diverged_ns is not None and k not in ASSUMED
+    ]
     if diverged:
         at, name = min(diverged)
         return Integrity(

@@ -274,6 +274,55 @@ class NhcParams:
 
 
 @dataclass(frozen=True)
+class StandstillParams:
+    """Standstill detection and the zero-velocity / zero-angular-rate updates at rest
+    (``ins.standstill``, ``models.standstill``), for every INS filter.
+
+    Attributes:
+        enabled: detect standstill and fuse ZUPT and ZARU while it lasts.
+        window_s: the IMU window whose spread is tested, centred on each sample, s.
+        noise_factor: at rest while the spread (RMS about the window's mean) of the specific
+            force and of the angular rate stays below this many times the IMU's own sample
+            noise (the dataset's noise model, or the one measured in the log).
+        max_rate_radps: the mean angular rate of a window at rest stays below this: above
+            any plausible gyro bias (a turn-on bias of 1 deg/s on every axis is 1.7 deg/s),
+            below a turn; a slower turn in place is left to the ZARU's gate.
+        gnss_speed_mps: a GNSS velocity (or, without one, the displacement of the fixes over
+            ``gnss_baseline_s``) faster than this and 3 sigma of its own noise vetoes rest.
+        gnss_baseline_s: the least time between the fixes differenced without a velocity, s.
+        vel_sigma_mps: 1-sigma of the zero-velocity pseudo-measurement.
+        rate_sigma_radps: floor of the zero-angular-rate 1-sigma (vibration, quantization),
+            added to the gyro noise averaged over the update interval.
+        max_speed_mps: no update while the filter's own speed exceeds this plus 3 sigma of
+            it: a vehicle cruising at constant speed without vibration (a simulator) passes
+            the IMU's tests.
+    """
+
+    enabled: bool = True
+    window_s: float = 1.0
+    noise_factor: float = 3.0
+    max_rate_radps: float = 0.05
+    gnss_speed_mps: float = 0.5
+    gnss_baseline_s: float = 4.0
+    vel_sigma_mps: float = 0.02
+    rate_sigma_radps: float = 0.0005
+    max_speed_mps: float = 0.5
+
+    def __post_init__(self) -> None:
+        positive(
+            self,
+            "window_s",
+            "noise_factor",
+            "max_rate_radps",
+            "gnss_speed_mps",
+            "gnss_baseline_s",
+            "vel_sigma_mps",
+            "rate_sigma_radps",
+            "max_speed_mps",
+        )
+
+
+@dataclass(frozen=True)
 class UkfParams:
     """Scaled unscented transform (Van der Merwe) of the total-state UKF (paper 001).
 
@@ -309,6 +358,7 @@ class InsFilterParams:
         ukf: the unscented transform (required by and only by UKF filters).
         fuzzy: the fuzzy fading factor (required by and only by ``fwekf``, paper 004).
         integrity: the integrity monitor's tests (``core.integrity``).
+        standstill: standstill detection and the ZUPT / ZARU updates at rest.
     """
 
     imu_noise: ImuNoise
@@ -322,6 +372,7 @@ class InsFilterParams:
     ukf: UkfParams | None = None
     fuzzy: FuzzyParams | None = None
     integrity: IntegrityParams = field(default_factory=IntegrityParams)
+    standstill: StandstillParams = field(default_factory=StandstillParams)
 
 
 @dataclass(frozen=True)

@@ -331,6 +331,7 @@ def build_schedule(
     stops = np.full((all_t.size, me.STOP_COLS), -1, dtype=np.int64)
     stops[:, me.ST_T] = all_t
     stops[:, me.ST_NHC] = 0
+    stops[:, me.ST_STILL] = 0  # replay.py flags the standstill (``standstill.flag_stops``)
     stops[:, me.ST_OUT] = np.isin(all_t, grid).astype(np.int64)
     for col, ts in ((me.ST_FIX, fix_t), (me.ST_OBS, obs_t)):
         if ts is None:
@@ -347,7 +348,7 @@ def build_schedule(
 def max_rows(stops: I64, obs_start: I64, coupling_tight: bool) -> int:
     """Most measurement rows one stop can carry (sizes the kernels' work arrays)."""
     sats = int(np.max(np.diff(obs_start))) if coupling_tight and obs_start.size > 1 else 0
-    return 6 + 2 * sats + 2
+    return 6 + 2 * sats + 2 + 6  # fix, satellites, NHC, standstill
 
 
 def interpolate_input(t_ns: I64, data: F64, t: int) -> tuple[int, F64]:

@@ -57,6 +57,7 @@ class _Run:
         n, m_max = self.cfg.n, self.sched.m_max
         self.t_cur = int(self.sched.t0)
         self.i = int(self.sched.i0)
+        self.still = np.zeros(me.STILL_COLS)
         self.u = self.sched.u0.copy()
         self.step = ins.Stepping(self.cfg.substeps, self.cfg.max_step_s, self.cfg.gap_s)
         self.out = ins.span_work()
@@ -87,13 +88,16 @@ class _Run:
         return self.out.acc
 
     def advance(self, i_next: int, t: int) -> None:
+        span_s = (t - self.t_cur) * 1e-9  # the standstill rows' values, used at rest only
+        cm.fill_still(self.still, self.sched.imu, self.i, i_next, self.out.u_end[3:6], span_s,
+                      self.cfg)  # fmt: skip
         self.i = i_next
         self.u[:] = self.out.u_end
         self.t_cur = t
 
     def epoch(self, t: int, m: int, nb_: int) -> Epoch:
         """The epoch at ``t`` of ``m`` rows in ``nb_`` blocks (after ``advance`` to ``t``)."""
-        return Epoch(t, m, nb_, self.u[3:6].copy())
+        return Epoch(t, m, nb_, self.u[3:6].copy(), self.still.copy())
 
     def predict_nominal(self, X: F64, t: int) -> None:
         """Propagate the nominal state ``X`` to ``t`` (the cursor moves with it), and the
@@ -104,7 +108,7 @@ class _Run:
     def prepare(self, kf: Any, t: int, stop: I64, X: F64) -> tuple[int, int]:
         """``ekf_prepare`` of the epoch at ``stop`` on the covariance of the error-state
         filter ``kf``; returns (rows, accepted rows) (``buf.acc_rows``)."""
-        m, nb_ = self.layout(stop)
+        m, nb_ = self.layout(stop, X[ins.X_VEL : ins.X_VEL + 3], np.asarray(kf.P, dtype=float))
         if m == 0:
             return 0, 0
         P = np.ascontiguousarray(kf.P)
@@ -129,10 +133,13 @@ class _Run:
             self.log.counts[rl.CNT_STOP] = k + 1
         return status
 
-    def layout(self, stop: I64) -> tuple[int, int]:
+    def layout(self, stop: I64, v: F64, P: F64) -> tuple[int, int]:
+        """The rows and blocks of the epoch at ``stop`` (``v``, ``P``: the filter's velocity
+        and covariance, whether a standstill update applies)."""
+        at_rest = bool(cm.rest_plausible(stop, v, P, self.cfg))
         m, nb_ = me.epoch_layout(
-            stop, self.fix, self.obs, self.sched.obs_start, self.cfg.nhc_on, self.buf.rows,
-            self.buf.blocks,
+            stop, self.fix, self.obs, self.sched.obs_start, self.cfg.nhc_on, at_rest,
+            self.buf.rows, self.buf.blocks,
         )  # fmt: skip
         return int(m), int(nb_)
 
@@ -220,7 +227,8 @@ def run_ukf_filterpy(
         P = np.ascontiguousarray(ukf.P)
         ok = gt.keep_pd(P, n, run.L, t, log.ev_i, log.ev_f, log.counts)
         ukf.P = P
-        m, nb_ = run.layout(stop)
+        x = np.asarray(ukf.x, dtype=float)
+        m, nb_ = run.layout(stop, x[ins.E_VEL : ins.E_VEL + 3], np.asarray(ukf.P, dtype=float))
         if ok and m > 0:
             _ukf_update(ukf, points, run, t, q_ref, m, nb_)
         ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, X)
@@ -244,10 +252,10 @@ def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb
     sc = np.empty(n)
     ins.coords_scale(Xm, n, sc)
     z, r = np.empty(m), np.empty(m)
-    me.epoch_z(rows, m, run.fix, run.obs, ref, cfg.nhc_sigma, z, r)
+    ep = run.epoch(t, m, nb_)
+    me.epoch_z(rows, m, run.fix, run.obs, ref, cfg.nhc_sigma, ep.still, z, r)
     dr = np.empty(m)
     me.gate_shift(rows, m, run.fix, r, dr)
-    ep = run.epoch(t, m, nb_)
     pred = RowPrediction(rows, m, ref, ep.w_ib_b, cfg.lever_b)
     h_ref = np.empty(m)  # as the kernel: rows relative to the mean's prediction
     me.epoch_h(Xm, rows, m, run.obs, ref, ep.w_ib_b, cfg.lever_b, h_ref)

@@ -41,6 +41,7 @@ from navreplay.pipeline.estimation.core.runlog import RunLog
 from navreplay.pipeline.estimation.core.tables import ReplayInputError
 from navreplay.pipeline.estimation.core.unscented import ukf_weights
 from navreplay.pipeline.estimation.ins import inputs as inp
+from navreplay.pipeline.estimation.ins import standstill
 from navreplay.pipeline.estimation.ins.alignment import (
     COURSE_IS_HEADING,
     Alignment,
@@ -173,11 +174,62 @@ def make_setup(
         noise=noise,
         lever_b=lever,
         nhc_sigma=nhc_sigma,
+        still_on=bool(params.standstill.enabled),
+        still_sigma=np.array(
+            [
+                params.standstill.vel_sigma_mps,
+                params.standstill.rate_sigma_radps,
+                params.standstill.max_speed_mps,
+            ]
+        ),
         gate=gate,
         wm=wm,
         wc=wc,
     )
     return FilterSetup(name, kind.estimator, settings, fz)
+
+
+#: platforms whose quiet IMU may be a hover: at rest only on the ground (``standstill``)
+AIRCRAFT = ("multirotor", "fixed_wing", "vtol")
+
+
+def _standstill(
+    imu: inp.ImuData,
+    noise: ImuNoise,
+    fixes: inp.FixData | None,
+    params: InsFilterParams,
+    sensors: SensorMeta | None,
+) -> I64:
+    """The standstill intervals of the run (``standstill.detect``; an aircraft's on the ground
+    only), logged."""
+    lat = h = 0.0
+    if fixes is not None and fixes.usable.any():
+        first = fixes.fix[np.flatnonzero(fixes.usable)[0]]
+        lat, h = float(first[me.FX_LAT]), float(first[me.FX_ALT])
+    kind = sensors.platform.kind if sensors is not None else "unknown"
+    aircraft = kind in AIRCRAFT
+    still = standstill.detect(
+        imu, noise, fixes, params.standstill, params.init, lat, h, aircraft=aircraft
+    )
+    if still.size:
+        total_s = float((still[:, 1] - still[:, 0]).sum()) * 1e-9
+        log.info("standstill: %d interval(s), %.1f s in all (zero-velocity and angular-rate "
+                 "updates)", len(still), total_s)  # fmt: skip
+    return still
+
+
+def _require(
+    tables: Mapping[str, pa.Table],
+    name: str,
+    kind: FilterKind,
+    fixes: inp.FixData | None,
+    obs: inp.ObsData | None,
+) -> None:
+    """``ReplayInputError`` if the table the filter's coupling reads is absent or empty."""
+    if kind.coupling == "loose" and fixes is None:
+        _table(tables, "gnss", name)
+    if kind.coupling == "tight" and obs is None:
+        _table(tables, "gnss_obs", name)
 
 
 def _table(tables: Mapping[str, pa.Table], name: str, filt: str) -> pa.Table:
@@ -241,10 +293,7 @@ def run_filter(
     fixes = inp.prepare_fixes(tables["gnss"], params.gnss) if "gnss" in tables else None
     obs = inp.prepare_obs(tables["gnss_obs"], params.gnss) if "gnss_obs" in tables else None
     mag = inp.prepare_mag(tables["mag"]) if "mag" in tables else None
-    if kind.coupling == "loose" and fixes is None:
-        _table(tables, "gnss", name)
-    if kind.coupling == "tight" and obs is None:
-        _table(tables, "gnss_obs", name)
+    _require(tables, name, kind, fixes, obs)
     events = list(imu_data.events)
     events += list(fixes.events) if fixes is not None and kind.coupling == "loose" else []
     events += list(obs.events) if obs is not None and kind.coupling == "tight" else []
@@ -256,6 +305,7 @@ def run_filter(
     compile_s = 0.0
     meas = _measurements(kind.coupling, fixes, obs)
     course_is_heading = sensors is None or sensors.platform.kind in COURSE_IS_HEADING
+    still = _standstill(imu_data, noise_model, fixes, params, sensors)
     for k_seg, seg in enumerate(imu_data.segments):
         al: Alignment | None = initial
         if initial is None or k_seg > 0:
@@ -266,7 +316,7 @@ def run_filter(
             continue
         alignments.append(al)
         out, code, t_fail, seg_events, seg_compile_s, alpha = _run_segment(
-            kernel, setup, params, kind, imu_data, seg, meas, al
+            kernel, setup, params, kind, imu_data, seg, meas, al, still
         )
         compile_s += seg_compile_s
         parts.append(out)
@@ -392,8 +442,10 @@ def _run_segment(
     seg: tuple[int, int],
     meas: _Measurements,
     al: Alignment,
+    still: I64,
 ) -> tuple[tuple[I64, F64, F64, I64, F64], int, int, list[tb.Event], float, F64]:
-    """Run ``kernel`` over the IMU samples ``seg`` of ``imu`` from the alignment ``al``."""
+    """Run ``kernel`` over the IMU samples ``seg`` of ``imu`` from the alignment ``al``
+    (``still``: the standstill intervals, ``standstill.detect``)."""
     lo, hi = seg
     imu_t = imu.t_ns[lo:hi]
     imu_d = imu.data[lo:hi]
@@ -401,6 +453,7 @@ def _run_segment(
     fix_arr, fix_t, obs_arr, obs_start, obs_t = meas
     nhc_rate = params.nhc.rate_hz if kind.nhc and params.nhc is not None else None
     stops = inp.build_schedule(al.t_ns, t_end, params.step.step_s, fix_t, obs_t, nhc_rate)
+    stops[:, me.ST_STILL] = standstill.flag_stops(stops[:, me.ST_T], al.t_ns, still)
     m_max = inp.max_rows(stops, obs_start, kind.coupling == "tight")
     i0, u0 = inp.interpolate_input(imu_t, imu_d, al.t_ns)
     n = setup.n

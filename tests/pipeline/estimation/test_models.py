@@ -219,7 +219,8 @@ def test_propagate_sigmas_refuses_more_states_than_lanes() -> None:
 
 
 def epoch(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray]:
-    """A fix (position + velocity), four satellites and the NHC pair at ``X``."""
+    """A fix (position + velocity), four satellites, the NHC pair and the standstill rows
+    (zero velocity, zero angular rate) at ``X``."""
     rng = np.random.default_rng(0)
     r0 = geodetic_to_ecef(X[0], X[1], X[2])
     obs = np.zeros((4, me.OBS_COLS))
@@ -234,15 +235,24 @@ def epoch(X: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, np.ndarray, np.nd
     fix[0, me.FX_POS_DIM], fix[0, me.FX_VEL_DIM] = 3, 3
     rows = np.zeros((40, 2), np.int64)
     blocks = np.zeros((40, 4), np.int64)
-    stop = np.array([0, 0, 0, 1, 1])
-    m, nb_ = me.epoch_layout(stop, fix, obs, np.array([0, 4]), True, rows, blocks)
-    assert (m, nb_) == (16, 7)
+    stop = np.array([0, 0, 0, 1, 1, 1])
+    m, nb_ = me.epoch_layout(stop, fix, obs, np.array([0, 4]), True, True, rows, blocks)
+    assert (m, nb_) == (22, 9)
+    assert me.epoch_layout(stop, fix, obs, np.array([0, 4]), True, False, rows, blocks) == (16, 7)
     return rows, obs, m, blocks, fix
 
 
 @pytest.mark.parametrize(
     ("kind", "tol"),
-    [("pos", 1e-6), ("vel", 2e-4), ("pr", 1e-4), ("prr", 2e-4), ("nhc", 1e-6)],
+    [
+        ("pos", 1e-6),
+        ("vel", 2e-4),
+        ("pr", 1e-4),
+        ("prr", 2e-4),
+        ("nhc", 1e-6),
+        ("zupt", 1e-9),
+        ("zaru", 1e-9),
+    ],
 )
 def test_measurement_jacobians_match_finite_differences(kind: str, tol: float) -> None:
     """Rows of ``epoch_jac`` against central differences of ``epoch_h`` (the EKF's H).
@@ -265,7 +275,8 @@ def test_measurement_jacobians_match_finite_differences(kind: str, tol: float) -
         return out
 
     H_fd = central_differences(X, eps, h)
-    kinds = {"pos": (0, 1, 2), "vel": (3, 4, 5), "pr": (6,), "prr": (7,), "nhc": (8, 9)}
+    kinds = {"pos": (0, 1, 2), "vel": (3, 4, 5), "pr": (6,), "prr": (7,), "nhc": (8, 9),
+             "zupt": (10, 11, 12), "zaru": (13, 14, 15)}  # fmt: skip
     sel = np.isin(rows[:m, 0], kinds[kind])
     np.testing.assert_allclose(H[sel], H_fd[sel], rtol=1e-4, atol=tol)
 

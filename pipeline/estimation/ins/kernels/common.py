@@ -37,7 +37,15 @@ from navreplay.pipeline.estimation.core.runlog import (
 )
 from navreplay.pipeline.estimation.ins.kernels.records import EpochBuffers, Settings
 from navreplay.pipeline.estimation.ins.models.ins import E_CB, E_POS, E_VEL, N_LOOSE, X_VEL
-from navreplay.pipeline.estimation.ins.models.measurement import S_NHC, S_OBS, S_VEL
+from navreplay.pipeline.estimation.ins.models.measurement import (
+    S_NHC,
+    S_OBS,
+    S_VEL,
+    ST_STILL,
+    STILL_RATE,
+    STILL_SIG_RATE,
+    STILL_SIG_VEL,
+)
 from navreplay.pipeline.nav.earth import F64, I64
 
 
@@ -55,6 +63,43 @@ def epoch_buffers(m_max: int, n: int) -> EpochBuffers:
         np.empty(m_max, np.int64),
         -np.ones(N_STREAMS, np.int64),
     )
+
+
+@njit(cache=True, error_model="numpy")
+def rest_plausible(stop: I64, v: F64, P: F64, s: Settings) -> bool:
+    """The standstill updates apply at ``stop``: it is flagged at rest (``ST_STILL``) and the
+    filter's speed ``|v|`` (velocity error-state variances in ``P``) is within
+    ``max_speed + 3 sigma`` of zero (``still_sigma[2]``)."""
+    if not s.still_on or stop[ST_STILL] <= 0:
+        return False
+    speed2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    var = P[E_VEL, E_VEL] + P[E_VEL + 1, E_VEL + 1] + P[E_VEL + 2, E_VEL + 2]
+    lim = s.still_sigma[2] + 3.0 * math.sqrt(max(var, 0.0))
+    return bool(speed2 <= lim * lim)
+
+
+@njit(cache=True, error_model="numpy")
+def fill_still(
+    still: F64, imu: F64, i0: int, i1: int, w_now: F64, span_s: float, s: Settings
+) -> None:
+    """The standstill rows' values of the epoch ending a span (``measurement.STILL_COLS``):
+    the ZUPT sigma, the mean angular rate of the IMU samples ``i0:i1`` of the span (``w_now``
+    if it holds none) and its sigma, the gyro white noise averaged over the span
+    (``sqrt(psd / span_s)``) with the configured floor (vibration, quantization)."""
+    for a in range(3):
+        still[STILL_RATE + a] = 0.0
+    if i1 > i0:
+        for i in range(i0, i1):
+            for a in range(3):
+                still[STILL_RATE + a] += imu[i, 3 + a]
+        for a in range(3):
+            still[STILL_RATE + a] /= i1 - i0
+    else:
+        for a in range(3):
+            still[STILL_RATE + a] = w_now[a]
+    still[STILL_SIG_VEL] = s.still_sigma[0]
+    floor = s.still_sigma[1]
+    still[STILL_SIG_RATE] = math.sqrt(s.noise[1] / max(span_s, 1e-3) + floor * floor)
 
 
 @njit(cache=True, error_model="numpy")

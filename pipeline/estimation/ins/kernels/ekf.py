@@ -38,7 +38,9 @@ from navreplay.pipeline.estimation.ins.kernels.common import (
     check_state,
     close_gating,
     epoch_buffers,
+    fill_still,
     reset_timed_out,
+    rest_plausible,
 )
 from navreplay.pipeline.estimation.ins.kernels.records import (
     Epoch,
@@ -47,6 +49,7 @@ from navreplay.pipeline.estimation.ins.kernels.records import (
     Settings,
 )
 from navreplay.pipeline.estimation.ins.models.ins import (
+    X_VEL,
     ImuSpan,
     Stepping,
     inject,
@@ -56,7 +59,9 @@ from navreplay.pipeline.estimation.ins.models.ins import (
 from navreplay.pipeline.estimation.ins.models.ins_errors import transition
 from navreplay.pipeline.estimation.ins.models.measurement import (
     ST_OUT,
+    ST_STILL,
     ST_T,
+    STILL_COLS,
     epoch_h,
     epoch_jac,
     epoch_layout,
@@ -88,11 +93,11 @@ def ekf_prepare(
     Returns:
         the number of accepted rows.
     """
-    t_ns, m, nb_, w_ib_b = ep
+    t_ns, m, nb_, w_ib_b, _ = ep
     n, lever_b, gate = cfg.n, cfg.lever_b, cfg.gate
     rows, blocks, z, r, nu, H, S = buf.rows, buf.blocks, buf.z, buf.r, buf.nu, buf.H, buf.S
     ref = X[:3].copy()
-    epoch_z(rows, m, fix, obs, ref, cfg.nhc_sigma, z, r)
+    epoch_z(rows, m, fix, obs, ref, cfg.nhc_sigma, ep.still, z, r)
     dr = np.empty(m)
     gate_shift(rows, m, fix, r, dr)
     hx = np.empty(m)
@@ -142,6 +147,7 @@ def run_ekf(
     sw = span_work()
     u = sched.u0.copy()
     buf = epoch_buffers(m_max, n)
+    still = np.zeros(STILL_COLS)
     record_output(sched.t0, X, P, log)
     t_cur = sched.t0
     i = sched.i0
@@ -149,15 +155,21 @@ def run_ekf(
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
+        i_prev = i
         i = propagate_span(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), step, sw, True)
         for j in range(6):
             u[j] = sw.u_end[j]
+        if stop[ST_STILL] > 0:
+            fill_still(still, sched.imu, i_prev, i, u[3:6], (t - t_cur) * 1e-9, cfg)
         t_cur = t
         transition(X, sw.acc, cfg.noise, n, Phi, Qd)
         propagate_cov(P, Phi, Qd, n, tmp)
-        m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
+        at_rest = rest_plausible(stop, X[X_VEL : X_VEL + 3], P, cfg)
+        m, nb_ = epoch_layout(
+            stop, fix, obs, sched.obs_start, cfg.nhc_on, at_rest, buf.rows, buf.blocks
+        )
         if m > 0:
-            ma = ekf_prepare(Epoch(t, m, nb_, u[3:6]), X, P, fix, obs, cfg, buf, log)
+            ma = ekf_prepare(Epoch(t, m, nb_, u[3:6], still), X, P, fix, obs, cfg, buf, log)
             if ma > 0:
                 dx, ok = joseph_update(P, n, buf.H, buf.S, buf.r, buf.nu, buf.acc_rows, ma)
                 if ok:

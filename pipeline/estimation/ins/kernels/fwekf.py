@@ -55,7 +55,12 @@ from navreplay.pipeline.estimation.core.gating import (
 from navreplay.pipeline.estimation.core.linalg import joseph_update
 from navreplay.pipeline.estimation.core.runlog import CNT_OUT, CNT_STOP, RunLog
 from navreplay.pipeline.estimation.ins.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
-from navreplay.pipeline.estimation.ins.kernels.common import check_state, epoch_buffers
+from navreplay.pipeline.estimation.ins.kernels.common import (
+    check_state,
+    epoch_buffers,
+    fill_still,
+    rest_plausible,
+)
 from navreplay.pipeline.estimation.ins.kernels.ekf import ekf_prepare
 from navreplay.pipeline.estimation.ins.kernels.records import (
     Epoch,
@@ -65,6 +70,7 @@ from navreplay.pipeline.estimation.ins.kernels.records import (
     Settings,
 )
 from navreplay.pipeline.estimation.ins.models.ins import (
+    X_VEL,
     ImuSpan,
     Stepping,
     inject,
@@ -76,7 +82,9 @@ from navreplay.pipeline.estimation.ins.models.measurement import (
     K_PR,
     ST_FIX,
     ST_OUT,
+    ST_STILL,
     ST_T,
+    STILL_COLS,
     epoch_layout,
 )
 from navreplay.pipeline.nav.earth import F64, I64
@@ -163,6 +171,7 @@ def run_fwekf(
     sw = span_work()
     u = sched.u0.copy()
     buf = epoch_buffers(sched.m_max, n)
+    still = np.zeros(STILL_COLS)
     ring = np.full((int(fz[FZ_WINDOW]), RING_COLS), math.nan)
     n_ring = 0
     alpha = 1.0
@@ -174,15 +183,21 @@ def run_fwekf(
     for k in range(stops.shape[0]):
         stop = stops[k]
         t = stop[ST_T]
+        i_prev = i
         i = propagate_span(X, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), step, sw, True)
         u[:] = sw.u_end
+        if stop[ST_STILL] > 0:
+            fill_still(still, sched.imu, i_prev, i, u[3:6], (t - t_cur) * 1e-9, cfg)
         t_cur = t
         transition(X, sw.acc, cfg.noise, n, Phi, Qd)
         a_k = alpha if stop[ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
         fade_prior(P, Phi, Qd, a_k)
-        m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
+        at_rest = rest_plausible(stop, X[X_VEL : X_VEL + 3], P, cfg)
+        m, nb_ = epoch_layout(
+            stop, fix, obs, sched.obs_start, cfg.nhc_on, at_rest, buf.rows, buf.blocks
+        )
         if m > 0:
-            ma = ekf_prepare(Epoch(t, m, nb_, u[3:6]), X, P, fix, obs, cfg, buf, log)
+            ma = ekf_prepare(Epoch(t, m, nb_, u[3:6], still), X, P, fix, obs, cfg, buf, log)
             if ma > 0:
                 dx, ok = weighted_update(P, n, buf, ma, a_k)
                 if ok:

@@ -43,7 +43,8 @@ class Settings(NamedTuple):
         n: error-state dimension (15 loose, 17 tight).
         substeps: RK4 substeps per IMU interval; max_step_s: longest RK4 step, s.
         gap_s: an IMU interval longer than this is a gap (bridged with inflated noise), s.
-        nhc_on: the non-holonomic constraint is applied.
+        nhc_on: the non-holonomic constraint is applied; still_on: the zero-velocity and
+            zero-angular-rate updates at rest are (``models.standstill``).
         timeout_s: a stream rejected this long is reset (F2).
         reset_pos_sigma_m, reset_vel_sigma_mps, reset_clock_sigma_m: the least 1-sigma a
             reset leaves on position, velocity and receiver clock bias.
@@ -52,6 +53,8 @@ class Settings(NamedTuple):
             scaled unscented transform's parameters (UKF only; zero otherwise).
         noise: ``ins_errors.noise_vector``; lever_b: antenna lever arm, body, m (3,).
         nhc_sigma: NHC 1-sigma, lateral and vertical, m/s (2,).
+        still_sigma: ZUPT 1-sigma (m/s), the floor of the ZARU 1-sigma (rad/s) and the
+            filter speed beyond which (plus 3 sigma) no standstill update applies (m/s) (3,).
         gate: chi-square threshold by block dimension, ``gate[d]`` (4,).
         wm, wc: the unscented weights (2n+1,) (UKF only; ones(1) otherwise).
     """
@@ -61,6 +64,7 @@ class Settings(NamedTuple):
     max_step_s: float
     gap_s: float
     nhc_on: bool
+    still_on: bool
     timeout_s: float
     reset_pos_sigma_m: float
     reset_vel_sigma_mps: float
@@ -74,6 +78,7 @@ class Settings(NamedTuple):
     noise: F64
     lever_b: F64
     nhc_sigma: F64
+    still_sigma: F64
     gate: F64
     wm: F64
     wc: F64
@@ -144,12 +149,14 @@ class Epoch(NamedTuple):
         t_ns: its time, ns.
         m, nb: rows and blocks it uses (``measurement.epoch_layout``).
         w_ib_b: the angular rate at the epoch, body, rad/s (3,) (antenna lever-arm velocity).
+        still: the standstill rows' values (``measurement.STILL_COLS``).
     """
 
     t_ns: int
     m: int
     nb: int
     w_ib_b: F64
+    still: F64
 
 
 class UkfState(NamedTuple):

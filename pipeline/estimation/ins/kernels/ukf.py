@@ -57,7 +57,9 @@ from navreplay.pipeline.estimation.ins.kernels.common import (
     check_state,
     close_gating,
     epoch_buffers,
+    fill_still,
     reset_timed_out,
+    rest_plausible,
 )
 from navreplay.pipeline.estimation.ins.kernels.records import (
     Epoch,
@@ -71,6 +73,7 @@ from navreplay.pipeline.estimation.ins.kernels.records import (
 from navreplay.pipeline.estimation.ins.kernels.unscented import sigma_h
 from navreplay.pipeline.estimation.ins.models.ins import (
     E_CB,
+    E_VEL,
     FULL_DIM,
     X_CB,
     X_CD,
@@ -86,7 +89,9 @@ from navreplay.pipeline.estimation.ins.models.ins import (
 from navreplay.pipeline.estimation.ins.models.ins_errors import transition
 from navreplay.pipeline.estimation.ins.models.measurement import (
     ST_OUT,
+    ST_STILL,
     ST_T,
+    STILL_COLS,
     epoch_h,
     epoch_layout,
     epoch_z,
@@ -165,7 +170,7 @@ def ukf_update(
     """Step 4 of the module docstring at epoch ``ep``, ``st`` updated in place; False if
     ``P`` was not positive definite."""
     n, wm, wc, gamma, gate = cfg.n, cfg.wm, cfg.wc, cfg.ukf_gamma, cfg.gate
-    t_ns, m, nb_, w_ib_b = ep
+    t_ns, m, nb_, w_ib_b, still = ep
     s, P, q_ref = st
     lever_b, rows, blocks, sig, L = cfg.lever_b, buf.rows, buf.blocks, ws.sig, ws.L
     ns = 2 * n + 1
@@ -176,7 +181,7 @@ def ukf_update(
     coords_scale(Xm, n, sc)
     z = np.empty(m)
     r = np.empty(m)
-    epoch_z(rows, m, fix, obs, ref, cfg.nhc_sigma, z, r)
+    epoch_z(rows, m, fix, obs, ref, cfg.nhc_sigma, still, z, r)
     dr = np.empty(m)
     gate_shift(rows, m, fix, r, dr)
     # predictions relative to the mean's: pseudoranges are ~2e7 m and their unscented average
@@ -292,6 +297,7 @@ def run_ukf(
     st = UkfState(s, P, q_ref)
     ws = sigma_work(n)
     buf = epoch_buffers(sched.m_max, n)
+    still = np.zeros(STILL_COLS)
     ev_i, ev_f, counts = log.ev_i, log.ev_f, log.counts
     record_output(sched.t0, x0, P0, log)
     t_cur = sched.t0
@@ -303,14 +309,20 @@ def run_ukf(
         i_next = ukf_predict(st, ImuSpan(sched.imu_t, sched.imu, i, t_cur, u, t), cfg, ws)
         ok = i_next >= 0
         if ok:
-            i = i_next
             for j in range(6):
                 u[j] = ws.prop.u_end[j]
+            if stop[ST_STILL] > 0:
+                fill_still(still, sched.imu, i, i_next, u[3:6], (t - t_cur) * 1e-9, cfg)
+            i = i_next
             t_cur = t
             ok = keep_pd(P, n, ws.L, t, ev_i, ev_f, counts)
-        m, nb_ = epoch_layout(stop, fix, obs, sched.obs_start, cfg.nhc_on, buf.rows, buf.blocks)
+        at_rest = rest_plausible(stop, s[E_VEL : E_VEL + 3], P, cfg)  # UKF velocity: scale 1
+        m, nb_ = epoch_layout(
+            stop, fix, obs, sched.obs_start, cfg.nhc_on, at_rest, buf.rows, buf.blocks
+        )
         if ok and m > 0:
-            ok = ukf_update(Epoch(t, m, nb_, u[3:6]), st, fix, obs, cfg, buf, ws, log) and keep_pd(
+            ep = Epoch(t, m, nb_, u[3:6], still)
+            ok = ukf_update(ep, st, fix, obs, cfg, buf, ws, log) and keep_pd(
                 P, n, ws.L, t, ev_i, ev_f, counts
             )
         to_full(s, q_ref, n, X)

@@ -1,11 +1,13 @@
 """One update epoch as stacked measurement rows: layout, values, predictions and Jacobians.
 
 An epoch (one stop of the replay loop) may carry a GNSS fix (loose coupling), the satellites
-of one ``gnss_obs`` epoch (tight coupling) and the NHC pair; all its rows are fused in one
+of one ``gnss_obs`` epoch (tight coupling), the NHC pair and, at rest, the zero-velocity and
+zero-angular-rate triples (``models.standstill``); all its rows are fused in one
 joint update (paper 001: "if both NHC and GPS observables are used at the same time ...").
 Rows are grouped into *blocks*, the units of gating: a fix's position (3 rows, 2 for a 2-D
 fix), its velocity (3, or 2 when the receiver gives speed and course only), one satellite's
-pseudorange and rate (1-2), the NHC pair (2).
+pseudorange and rate (1-2), the NHC pair (2), the ZUPT velocity (3) and the ZARU angular rate
+(3), the last two one ``standstill`` stream.
 
 Array layouts shared with ``pipeline.estimation.ins.inputs`` (which fills them) and the kernels:
 
@@ -18,7 +20,9 @@ Array layouts shared with ``pipeline.estimation.ins.inputs`` (which fills them) 
   and pseudorange rate (m/s), their 1-sigma, the satellite code (``sv_code``) and flags.
 - ``obs_start`` (E + 1,): rows of obs epoch ``e`` are ``obs_start[e]:obs_start[e + 1]``.
 - ``stop`` rows (``STOP_COLS``, int64): time (ns), fix index, obs epoch index (-1 = none),
-  NHC flag, output flag.
+  NHC flag, output flag, standstill flag (the span since the previous stop was at rest).
+- ``still`` (5,): the standstill rows' values of an epoch: ZUPT and ZARU 1-sigma (m/s,
+  rad/s) and the mean angular rate over the span (rad/s, body).
 - ``rows`` (m, 2): kind (``K_*``) and the fix or obs row it reads.
 - ``blocks`` (b, 4): first row, dimension, stream (``S_*``) and satellite code (-1 = none).
 
@@ -46,7 +50,9 @@ from navreplay.pipeline.estimation.ins.models.gnss import (
     pseudorange_rate_jac,
     velocity_jac,
 )
+from navreplay.pipeline.estimation.ins.models.ins import X_VEL
 from navreplay.pipeline.estimation.ins.models.nhc import body_velocity, nhc_jac
+from navreplay.pipeline.estimation.ins.models.standstill import zaru_h, zaru_jac, zupt_jac
 from navreplay.pipeline.nav.earth import F64, I64
 
 FX_LAT, FX_LON, FX_ALT, FX_VN, FX_VE, FX_VD = 0, 1, 2, 3, 4, 5
@@ -57,14 +63,19 @@ OB_SAT = 0  # 0..5: ECEF x, y, z (m), vx, vy, vz (m/s)
 OB_PR, OB_PRR, OB_SIG_PR, OB_SIG_PRR, OB_SV, OB_PR_OK, OB_PRR_OK = 6, 7, 8, 9, 10, 11, 12
 OBS_COLS = 13
 
-ST_T, ST_FIX, ST_OBS, ST_NHC, ST_OUT = 0, 1, 2, 3, 4
-STOP_COLS = 5
+ST_T, ST_FIX, ST_OBS, ST_NHC, ST_OUT, ST_STILL = 0, 1, 2, 3, 4, 5
+STOP_COLS = 6
 
-K_POS, K_VEL, K_PR, K_PRR, K_NHC = 0, 3, 6, 7, 8  # K_POS + axis, K_VEL + axis, K_NHC + 0/1
+# K_POS + axis, K_VEL + axis, K_NHC + 0/1, K_ZUPT + axis, K_ZARU + axis
+K_POS, K_VEL, K_PR, K_PRR, K_NHC, K_ZUPT, K_ZARU = 0, 3, 6, 7, 8, 10, 13
 
-S_POS, S_VEL, S_OBS, S_NHC = 0, 1, 2, 3
-STREAM_NAMES = ("gnss_pos", "gnss_vel", "gnss_obs", "nhc")
-STREAM_UNITS = ("m", "mps", "m|mps", "mps")
+# the pseudo-measurement streams come last: from S_NHC on, a stream is never reset
+S_POS, S_VEL, S_OBS, S_NHC, S_STILL = 0, 1, 2, 3, 4
+STREAM_NAMES = ("gnss_pos", "gnss_vel", "gnss_obs", "nhc", "standstill")
+STREAM_UNITS = ("m", "mps", "m|mps", "mps", "mps|radps")
+
+STILL_SIG_VEL, STILL_SIG_RATE, STILL_RATE = 0, 1, 2  # still[2:5]: mean angular rate
+STILL_COLS = 5
 
 
 def sv_code(sv: str) -> int:
@@ -99,6 +110,7 @@ def epoch_layout(
     obs: F64 | None,
     obs_start: I64,
     nhc_on: bool,
+    still_on: bool,
     rows: I64,
     blocks: I64,
 ) -> tuple[int, int]:
@@ -129,6 +141,9 @@ def epoch_layout(
                 nb_ += 1
     if nhc_on and stop[ST_NHC] > 0:
         m, nb_ = _add_block(rows, blocks, m, nb_, 2, S_NHC, K_NHC, -1)
+    if still_on and stop[ST_STILL] > 0:
+        m, nb_ = _add_block(rows, blocks, m, nb_, 3, S_STILL, K_ZUPT, -1)
+        m, nb_ = _add_block(rows, blocks, m, nb_, 3, S_STILL, K_ZARU, -1)
     return m, nb_
 
 
@@ -140,11 +155,13 @@ def epoch_z(
     obs: F64 | None,
     ref: F64,
     nhc_sigma: F64,
+    still: F64,
     z: F64,
     r: F64,
 ) -> None:
     """Measured values ``z`` and noise variances ``r`` of the rows (positions as NED offsets
-    from ``ref`` = (lat, lon, h) in metres; NHC pseudo-measurements are zero)."""
+    from ``ref`` = (lat, lon, h) in metres; NHC and ZUPT pseudo-measurements are zero, ZARU
+    the mean angular rate in ``still``)."""
     for k in range(m):
         kind, src = rows[k, 0], rows[k, 1]
         if kind < K_PR:
@@ -163,9 +180,15 @@ def epoch_z(
                 z[k] = obs[src, OB_PR] if pr else obs[src, OB_PRR]
                 sig = obs[src, OB_SIG_PR] if pr else obs[src, OB_SIG_PRR]
                 r[k] = sig * sig
-        else:
+        elif kind < K_ZUPT:
             z[k] = 0.0
             r[k] = nhc_sigma[kind - K_NHC] ** 2
+        elif kind < K_ZARU:
+            z[k] = 0.0
+            r[k] = still[STILL_SIG_VEL] ** 2
+        else:
+            z[k] = still[STILL_RATE + kind - K_ZARU]
+            r[k] = still[STILL_SIG_RATE] ** 2
 
 
 @njit(cache=True, error_model="numpy")
@@ -212,8 +235,12 @@ def epoch_h(
                     out[k] = pseudorange_h(ant, X, sat)
                 else:
                     out[k] = pseudorange_rate_h(ant, X, sat)
-        else:
+        elif kind < K_ZUPT:
             out[k] = body_velocity(X, ant, 1 + kind - K_NHC)
+        elif kind < K_ZARU:
+            out[k] = X[X_VEL + kind - K_ZUPT]
+        else:
+            out[k] = zaru_h(X, ant, kind - K_ZARU)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -236,5 +263,9 @@ def epoch_jac(
                     pseudorange_jac(ant, sat, n, H[k])
                 else:
                     pseudorange_rate_jac(ant, lever_b, sat, n, H[k])
-        else:
+        elif kind < K_ZUPT:
             nhc_jac(X, ant, 1 + kind - K_NHC, n, H[k])
+        elif kind < K_ZARU:
+            zupt_jac(kind - K_ZUPT, n, H[k])
+        else:
+            zaru_jac(X, ant, kind - K_ZARU, n, H[k])
