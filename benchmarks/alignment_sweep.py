@@ -327,13 +327,13 @@ def run_cells(
 
 
 def _quiet() -> None:
-    """The filters' own warnings (a divergence, no alignment) are in the outcomes already."""
+    """The filters' own warnings (a divergence, no alignment) are in the outcomes already: a
+    worker process leaves them out (the calling process's logging is left alone)."""
     logging.getLogger("navreplay").setLevel(logging.ERROR)
 
 
 def _task(args: tuple[str, float, int, tuple[Cell, ...], tuple[str, ...], bool]) -> list[Outcome]:
     kind, noise, seed, cells, filters, white = args
-    _quiet()
     return run_cells(
         load_params(REPO / "params.yaml"), kind, noise, seed, cells, filters, white=white
     )
@@ -355,7 +355,7 @@ def sweep(
     ]
     if workers <= 1:
         return [o for t in tasks for o in _task(t)]
-    with multiprocessing.get_context("spawn").Pool(min(workers, 2)) as pool:
+    with multiprocessing.get_context("spawn").Pool(min(workers, 2), initializer=_quiet) as pool:
         return [o for part in pool.imap(_task, tasks) for o in part]
 
 
