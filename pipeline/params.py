@@ -34,6 +34,7 @@ from navreplay.pipeline.experiments.vehicle_bands_config import VehicleBandsPara
 from navreplay.pipeline.outages.config import OutagesParams
 from navreplay.pipeline.scenarios.config import ScenariosParams
 from navreplay.pipeline.synth.car import CarSpeedRampParams
+from navreplay.pipeline.synth.car_drives import CarDriveParams
 from navreplay.pipeline.synth.fwekf import FwekfReferenceParams
 from navreplay.pipeline.synth.multirotor_params import MultirotorFlightParams
 from navreplay.pipeline.synth.seoul_params import SeoulCampusParams
@@ -48,7 +49,8 @@ _ID_RE = re.compile(r"^[a-z][a-z0-9_]*$")
 
 @dataclass(frozen=True)
 class SynthParams:
-    """``synth``: the synthesized datasets. ``seed`` seeds every random draw."""
+    """``synth``: the synthesized datasets. ``seed`` seeds every random draw. ``car_drives``:
+    the campus car on other drives, by dataset id (``pipeline.synth.car_drives``)."""
 
     seed: int
     seoul_campus: SeoulCampusParams
@@ -56,6 +58,7 @@ class SynthParams:
     fwekf_reference: FwekfReferenceParams
     car_speed_ramp: CarSpeedRampParams
     multirotor_flight: MultirotorFlightParams
+    car_drives: dict[str, CarDriveParams]
 
 
 @dataclass(frozen=True)

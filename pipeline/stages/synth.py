@@ -3,7 +3,8 @@
 Datasets: seoul_campus_cw, seoul_campus_ccw (paper 001 land-vehicle drive), tractor_straight
 (paper 000), fwekf_reference (paper 004), car_speed_ramp (paper 003), multirotor_flight (a
 quadrotor that hovers, yaws in place, flies sideways, backwards and figure eights) and
-bench_static (the same quadrotor at rest on a bench without a GPS fix). Parameters and the seed
+bench_static (the same quadrotor at rest on a bench without a GPS fix), and the campus car on
+other drives: car_rolling_start, car_parking_reverse, car_stop_and_go. Parameters and the seed
 come from the `synth` section of the parameter file; the same seed gives byte-identical files.
 
 examples:

@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from navreplay.ingest.gnss.ephemeris import Ephemeris
     from navreplay.ingest.meta import SensorMeta
     from navreplay.pipeline.synth.car import CarSpeedRampParams
+    from navreplay.pipeline.synth.car_drives import CarDriveParams
     from navreplay.pipeline.synth.fwekf import FwekfReferenceParams
     from navreplay.pipeline.synth.multirotor_params import MultirotorFlightParams
     from navreplay.pipeline.synth.seoul_params import SeoulCampusParams
@@ -33,6 +34,9 @@ DATASETS: dict[str, str] = {
     "car_speed_ramp": "navreplay.pipeline.synth.car",
     "multirotor_flight": "navreplay.pipeline.synth.multirotor",
     "bench_static": "navreplay.pipeline.synth.multirotor",
+    "car_rolling_start": "navreplay.pipeline.synth.car_drives",
+    "car_parking_reverse": "navreplay.pipeline.synth.car_drives",
+    "car_stop_and_go": "navreplay.pipeline.synth.car_drives",
 }
 
 
@@ -76,3 +80,6 @@ class SynthSection(Protocol):
 
     @property
     def multirotor_flight(self) -> MultirotorFlightParams: ...
+
+    @property
+    def car_drives(self) -> Mapping[str, CarDriveParams]: ...

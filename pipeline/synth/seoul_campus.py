@@ -35,7 +35,7 @@ from navreplay.pipeline.synth.columns import NED, RPY, axis_columns, imu_table
 from navreplay.pipeline.synth.seoul_params import NO_IMU_ERRORS, SeoulCampusParams
 from navreplay.pipeline.synth.trajectory import Leg
 
-__all__ = ["ROUTE", "SeoulCampusParams", "route", "simulate", "write_dataset"]
+__all__ = ["ROUTE", "SeoulCampusParams", "route", "simulate", "simulate_drive", "write_dataset"]
 
 Variant = Literal["cw", "ccw"]
 _VARIANT_KEY = {"cw": 1, "ccw": 2}
@@ -82,7 +82,24 @@ def simulate(params: SeoulCampusParams, *, seed: int, variant: Variant) -> Synth
     clocks) depends on ``seed`` only, so both variants see the same sky; every other draw also
     depends on the variant.
     """
-    legs = route(variant)
+    return simulate_drive(params, route(variant), seed=seed, stream=_VARIANT_KEY[variant])
+
+
+def simulate_drive(
+    params: SeoulCampusParams,
+    legs: list[Leg],
+    *,
+    seed: int,
+    stream: int,
+    start_speed_mps: float = 0.0,
+) -> SynthResult:
+    """The campus car, IMU and receiver on the drive ``legs`` (``trajectory.build_profiles``;
+    ``start_speed_mps``: a rolling start): canonical ``imu``, ``gnss``, ``gnss_obs`` and
+    ``truth`` tables.
+
+    The constellation is drawn from ``seed`` alone; the IMU, clock, observable and fix errors
+    from ``seed`` and ``stream`` (one stream per drive, so drives differ in their noise).
+    """
     profiles = trajectory.build_profiles(
         legs,
         params.stationary_s,
@@ -90,6 +107,7 @@ def simulate(params: SeoulCampusParams, *, seed: int, variant: Variant) -> Synth
         trajectory.Limits(
             params.max_accel_mps2, params.max_yaw_accel_radps2, params.max_grade_rate_ps
         ),
+        start_speed_mps=start_speed_mps,
     )
     motion = trajectory.sample(
         profiles,
@@ -107,8 +125,7 @@ def simulate(params: SeoulCampusParams, *, seed: int, variant: Variant) -> Synth
     t_ns = t0 + np.arange(n, dtype=np.int64) * dt_ns
     sky_rng = np.random.default_rng(np.random.SeedSequence([seed, 0]))
     imu_rng, clock_rng, obs_rng, fix_rng = (
-        np.random.default_rng(s)
-        for s in np.random.SeedSequence([seed, _VARIANT_KEY[variant]]).spawn(4)
+        np.random.default_rng(s) for s in np.random.SeedSequence([seed, stream]).spawn(4)
     )
     noisy = not params.noise_free
     imu_errors = params.imu if noisy else NO_IMU_ERRORS

@@ -1,18 +1,22 @@
 """Land-vehicle trajectories that obey the non-holonomic constraint exactly.
 
 A drive is a list of ``Leg`` (straights with optional hills, turns, stops) turned into three
-C2 profiles of time (``pipeline.synth.profile``): horizontal speed ``v``, yaw rate ``r`` and
-road grade ``g`` (tan of the pitch). From them, exactly:
+C2 profiles of time (``pipeline.synth.profile``): signed speed along the body x axis ``v``
+(negative: reversing), yaw rate ``r`` and road grade ``g`` (tan of the pitch). A drive starts
+at rest or, for a rolling start, already at ``start_speed_mps``. From them, exactly:
 
 - heading ``psi = psi0 + int r dt``; pitch ``theta = atan(g)``; roll ``phi = -k v r`` (the body
   leans out of a turn by ``k`` rad per m/s^2 of lateral acceleration);
 - NED velocity ``v_n = [v cos psi, v sin psi, -g v]``, so the velocity lies along body x: the
-  lateral and vertical body velocities are zero (non-holonomic constraint);
+  lateral and vertical body velocities are zero (non-holonomic constraint); reversing
+  (``v < 0``), the course is the heading plus 180 deg;
 - ``v_dot^n`` and the body rate w.r.t. NED ``w_nb^b`` (ZYX Euler kinematics) analytically;
 - latitude, longitude and height by Simpson's rule on the 2x-rate grid (paper 001 eq. 1).
 
 ``imu_from_motion`` (``pipeline.nav.mechanization``) then gives the exact IMU readings.
-Positive turn angles are to the right (clockwise seen from above, yaw increasing).
+Positive turn angles are to the right (clockwise seen from above, yaw increasing), whichever
+way the car rolls. Between a forward and a reversing leg a drive needs a ``stop`` (a car comes
+to rest before it changes direction; the profiles alone would pass through zero speed).
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 from scipy.interpolate import PPoly
 
+from navreplay.ingest.typed import FieldError
 from navreplay.pipeline.nav.earth import E2, F64, A
 from navreplay.pipeline.synth.profile import PEAK_SLOPE_FACTOR, ProfileBuilder
 
@@ -38,6 +43,8 @@ class Leg:
         kind: ``straight`` (hold ``speed_mps`` for ``duration_s``, optionally over a hill),
             ``turn`` (turn by ``angle_deg`` on radius ``radius_m`` at ``speed_mps``) or
             ``stop`` (brake to rest and wait ``duration_s``).
+        speed_mps: speed along the body x axis; negative: reversing (straights and turns).
+        angle_deg: heading change of a turn (positive: to the right, forwards or reversing).
         hill_m: on a straight, the height gained over its first half and lost over its second
             (negative: a dip).
     """
@@ -48,6 +55,14 @@ class Leg:
     angle_deg: float = 0.0
     radius_m: float = 1.0
     hill_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.kind != "stop" and self.speed_mps == 0.0:
+            raise FieldError("speed_mps", f"a {self.kind} needs a speed (a stop is a 'stop' leg)")
+        if self.duration_s < 0.0:
+            raise FieldError("duration_s", "must be >= 0")
+        if self.radius_m <= 0.0:
+            raise FieldError("radius_m", "must be > 0")
 
     def mirrored(self) -> Leg:
         """The same leg with left and right exchanged."""
@@ -81,13 +96,19 @@ class Profiles(NamedTuple):
 
 
 def build_profiles(
-    legs: list[Leg], stationary_s: float, duration_s: float, limits: Limits
+    legs: list[Leg],
+    stationary_s: float,
+    duration_s: float,
+    limits: Limits,
+    *,
+    start_speed_mps: float = 0.0,
 ) -> Profiles:
-    """Profiles of a drive: rest for ``stationary_s``, then the legs, cycled until
+    """Profiles of a drive: hold ``start_speed_mps`` (rest by default; a rolling start
+    otherwise, straight ahead) for ``stationary_s``, then the legs, cycled until
     ``duration_s`` is covered."""
     if not legs:
         raise ValueError("a drive needs at least one leg")
-    spd, yaw, grd = ProfileBuilder(), ProfileBuilder(), ProfileBuilder()
+    spd, yaw, grd = ProfileBuilder(value=start_speed_mps), ProfileBuilder(), ProfileBuilder()
 
     def hold(dt: float) -> None:
         for b in (spd, yaw, grd):
@@ -144,7 +165,7 @@ def _straight(
 def _turn(
     spd: ProfileBuilder, yaw: ProfileBuilder, grd: ProfileBuilder, leg: Leg, limits: Limits
 ) -> None:
-    r = math.copysign(leg.speed_mps / leg.radius_m, leg.angle_deg)
+    r = math.copysign(abs(leg.speed_mps) / leg.radius_m, leg.angle_deg)
     angle = math.radians(abs(leg.angle_deg))
     ramp = max(MIN_RAMP_S, PEAK_SLOPE_FACTOR * abs(r) / limits.yaw_accel_radps2)
     # the two ramps together turn by |r| * ramp
