@@ -414,8 +414,11 @@ def align(
         v = track.vel[k]
         speed = math.hypot(v[0], v[1])
         yaw_sigma = max(init.yaw_sigma_rad, math.atan2(float(track.sig_speed[k]), speed))
-        x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b)
-        return _finish(imu, segment, track, k, x0, c_bn, yaw_sigma, "gnss_velocity", obs, init,
+        yaw, yaw_sigma, method = _course_heading(
+            imu, segment, track, inside, k, init, noise, yaw_sigma
+        )
+        x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b, yaw)
+        return _finish(imu, segment, track, k, x0, c_bn, yaw_sigma, method, obs, init,
                        noise, lever_b, n)  # fmt: skip
     mh = _motion_heading(imu, segment, track, inside, init, noise)
     rows = np.flatnonzero(inside)
@@ -448,6 +451,47 @@ def align(
     x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b, yaw, vel)
     return _finish(imu, segment, track, k, x0, c_bn, yaw_sigma, method, obs, init,
                    noise, lever_b, n)  # fmt: skip
+
+
+def _course_heading(
+    imu: ImuData,
+    segment: tuple[int, int],
+    track: _Track,
+    inside: np.ndarray,
+    k: int,
+    init: InitParams,
+    noise: ImuNoise,
+    course_sigma: float,
+) -> tuple[float, float, str]:
+    """(heading, 1-sigma, method) at a course start (track epoch ``k``), checked against the
+    heading from motion where that is trusted there: the course if they agree within 3 sigma;
+    the course + 180 deg if the vehicle reverses (backing out of a bay faster than
+    ``align_speed_mps``); the heading from motion otherwise (an IMU not mounted along the
+    vehicle: its x axis is not the course)."""
+    v = track.vel[k]
+    course = math.atan2(v[1], v[0])
+    mh = _motion_heading(imu, segment, track, inside, init, noise)
+    j = int(np.searchsorted(np.flatnonzero(inside), k))
+    if mh is None or mh.sigma[j] > init.motion_yaw_sigma_max_rad:
+        return course, course_sigma, "gnss_velocity"
+    sig_mh = max(float(mh.sigma[j]), _MIN_MOTION_YAW_SIGMA)
+    bound = 3.0 * math.hypot(sig_mh, course_sigma)
+    off = math.remainder(mh.yaw_at(j) - course, 2.0 * math.pi)
+    if abs(off) <= bound:
+        return course, course_sigma, "gnss_velocity"
+    if abs(math.remainder(off - math.pi, 2.0 * math.pi)) <= bound:
+        log.warning(
+            "the vehicle reverses at its course start (the heading from motion is %.0f deg "
+            "from the course): heading = course + 180 deg",
+            math.degrees(off),
+        )
+        return math.remainder(course + math.pi, 2.0 * math.pi), course_sigma, "gnss_velocity"
+    log.warning(
+        "the heading from motion is %.0f deg from the course at the course start (1-sigma "
+        "%.1f deg): the IMU's x axis is not along the vehicle (set imu.mounting_rpy_deg in "
+        "dataset.yaml); using the heading from motion", math.degrees(off), math.degrees(sig_mh)
+    )  # fmt: skip
+    return mh.yaw_at(j), sig_mh, "motion_heading"
 
 
 def _compass(
@@ -535,9 +579,7 @@ def _motion_heading(
     if inside.sum() < 2:
         return None
     lat, h = float(track.llh[inside][0, 0]), float(track.llh[inside][0, 2])
-    speed = np.hypot(track.vel[:, 0], track.vel[:, 1])
-    fast = np.isfinite(speed) & (speed > np.maximum(_REST_SPEED_MPS, 3.0 * track.sig_speed))
-    moving = np.interp(imu.t_ns[lo:hi], track.t_ns, fast.astype(float)) > 0.0
+    moving = _gnss_moving(imu, lo, hi, track)
     s0, s1 = _static_window(imu, lo, hi, init, gravity(lat, h), last=False, moving=moving)
     bias = imu.data[s0:s1, 3:].mean(axis=0) if s1 > s0 else np.zeros(3)
     vel = np.where(track.differenced[:, None], math.nan, track.vel)
@@ -553,6 +595,14 @@ def _motion_heading(
         init,
         noise,
     )
+
+
+def _gnss_moving(imu: ImuData, lo: int, hi: int, track: _Track) -> np.ndarray:
+    """IMU samples ``lo:hi`` next to a GNSS epoch whose speed is over the rest threshold and
+    3 sigma of its own noise (a car cruising straight passes the IMU's static tests)."""
+    speed = np.hypot(track.vel[:, 0], track.vel[:, 1])
+    fast = np.isfinite(speed) & (speed > np.maximum(_REST_SPEED_MPS, 3.0 * track.sig_speed))
+    return np.asarray(np.interp(imu.t_ns[lo:hi], track.t_ns, fast.astype(float)) > 0.0)
 
 
 def _finish(
@@ -578,7 +628,10 @@ def _finish(
     bg, static_s = _static_gyro_bias(imu, lo, i_start, init, c_bn, lat, h_ant)
     if not static_s:  # a start at rest (a heading from motion): the rest that follows it
         i_rest = min(segment[1], i_start + int(np.searchsorted(imu.t_ns[i_start:], t0 + 60e9)))
-        start, end = _static_window(imu, i_start, i_rest, init, gravity(lat, h_ant), last=False)
+        moving = _gnss_moving(imu, i_start, i_rest, track)
+        start, end = _static_window(
+            imu, i_start, i_rest, init, gravity(lat, h_ant), last=False, moving=moving
+        )
         if end and imu.t_ns[start] - t0 < _HALF_NS:
             bg, static_s = _static_gyro_bias(imu, start, end, init, c_bn, lat, h_ant)
     x0[ins.X_BG : ins.X_BG + 3] = bg

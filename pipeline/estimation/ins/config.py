@@ -45,7 +45,8 @@ class InitParams:
         align_epochs: consecutive GNSS epochs that must pass both tests.
         static_window_s: shortest static window used for the gyro-bias estimate, s.
         static_accel_tol_mps2: static if the specific-force norm stays within this of g.
-        static_gyro_tol_radps: static if the angular-rate norm stays below this.
+        static_gyro_tol_radps: static if the angular-rate norm stays below this (above any
+            plausible gyro bias: a turn-on bias of 1 deg/s per axis is 0.03 rad/s).
         pos_sigma_m: initial position 1-sigma per axis (at least the fix accuracy), m.
         vel_sigma_mps: initial velocity 1-sigma per axis, m/s.
         roll_pitch_sigma_rad: initial roll and pitch 1-sigma, rad.
@@ -66,7 +67,7 @@ class InitParams:
     align_epochs: int = 3
     static_window_s: float = 2.0
     static_accel_tol_mps2: float = 0.3
-    static_gyro_tol_radps: float = 0.02
+    static_gyro_tol_radps: float = 0.05
     pos_sigma_m: float = 3.0
     vel_sigma_mps: float = 0.3
     roll_pitch_sigma_rad: float = 0.03
