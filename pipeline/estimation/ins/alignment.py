@@ -408,7 +408,7 @@ def align(
         t_imu, track.t_ns - _HALF_NS, "left"
     )
     inside &= around >= 2
-    start = _course_start(track, init) & inside if course_is_heading else None
+    start, mh = _course_or_motion(imu, segment, track, inside, init, noise, course_is_heading)
     if start is not None and start.any():
         k = int(np.flatnonzero(start)[0])
         v = track.vel[k]
@@ -420,7 +420,8 @@ def align(
         x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b, yaw)
         return _finish(imu, segment, track, k, x0, c_bn, yaw_sigma, method, obs, init,
                        noise, lever_b, n)  # fmt: skip
-    mh = _motion_heading(imu, segment, track, inside, init, noise)
+    if mh is None:
+        mh = _motion_heading(imu, segment, track, inside, init, noise)
     rows = np.flatnonzero(inside)
     if rows.size == 0:
         return None
@@ -451,6 +452,54 @@ def align(
     x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b, yaw, vel)
     return _finish(imu, segment, track, k, x0, c_bn, yaw_sigma, method, obs, init,
                    noise, lever_b, n)  # fmt: skip
+
+
+def _course_or_motion(
+    imu: ImuData,
+    segment: tuple[int, int],
+    track: _Track,
+    inside: np.ndarray,
+    init: InitParams,
+    noise: ImuNoise,
+    course_is_heading: bool,
+) -> tuple[np.ndarray | None, heading.MotionHeading | None]:
+    """The epochs a course start may take (None: the platform's course is not its heading,
+    or the course comes late and the heading from motion is trusted before it), and the
+    heading from motion if it was computed."""
+    start = _course_start(track, init) & inside if course_is_heading else None
+    if start is None or not start.any() or not _course_late(track, start, inside, init):
+        return start, None
+    mh = _motion_heading(imu, segment, track, inside, init, noise)
+    return (None if _trusted_before(mh, track, inside, start, init) else start), mh
+
+
+def _course_late(track: _Track, start: np.ndarray, inside: np.ndarray, init: InitParams) -> bool:
+    """The first course start comes more than ``course_wait_s`` after the first motion GNSS
+    confirms (over the rest threshold and 3 sigma of its own noise at ``align_epochs``
+    consecutive epochs)."""
+    speed = np.hypot(track.vel[:, 0], track.vel[:, 1])
+    fast = np.isfinite(speed) & (speed > np.maximum(_REST_SPEED_MPS, 3.0 * track.sig_speed))
+    moving = _confirmed(fast, track.t_ns, init.align_epochs) & inside
+    if not moving.any():
+        return False
+    t_course = track.t_ns[np.flatnonzero(start)[0]]
+    t_motion = track.t_ns[np.flatnonzero(moving)[0]]
+    return bool((t_course - t_motion) * 1e-9 > init.course_wait_s)
+
+
+def _trusted_before(
+    mh: heading.MotionHeading | None,
+    track: _Track,
+    inside: np.ndarray,
+    start: np.ndarray,
+    init: InitParams,
+) -> bool:
+    """The heading from motion is trusted at an epoch before the first course start."""
+    if mh is None:
+        return False
+    rows = np.flatnonzero(inside)
+    ok = rows[mh.sigma <= init.motion_yaw_sigma_max_rad]
+    return bool(ok.size and track.t_ns[ok[0]] < track.t_ns[np.flatnonzero(start)[0]])
 
 
 def _course_heading(

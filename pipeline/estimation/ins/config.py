@@ -60,6 +60,10 @@ class InitParams:
             a multirotor's specific force leans with its acceleration).
         drift_horizon_s: the heading from motion may wander by the gyro bias sigma times this
             horizon per square-root second (a random walk covering the bias's drift), s.
+        course_wait_s: a ground vehicle whose course start comes this long after its first
+            confirmed motion (reversing slower than ``align_speed_mps``, creeping, noisy
+            differenced fixes) starts from the heading from motion instead, where that is
+            trusted by then, s.
     """
 
     align_speed_mps: float = 2.0
@@ -77,6 +81,7 @@ class InitParams:
     motion_yaw_sigma_max_rad: float = 0.15
     tilt_tau_s: float = 20.0
     drift_horizon_s: float = 60.0
+    course_wait_s: float = 3.0
 
     def __post_init__(self) -> None:
         positive(self, *(f.name for f in fields(self)))

@@ -66,11 +66,6 @@ LATE_MOTION = (
     "estimate (static_gyro_tol_radps 0.05 finds the rest under a 1 deg/s bias), takes that "
     "long to get under its 8.6 deg bound from 5 m fixes"
 )
-REVERSING = (
-    "aligned 18.9 s after the first motion: the car reverses at 1.8 m/s, under "
-    "align_speed_mps (2 m/s), so the course start waits for the forward drive; the heading "
-    "from motion is only tried when no course start exists at all"
-)
 CREEPING = (
     "aligned 5.3 s after the first motion: a course start needs 5 sigma of the speed "
     "differenced from 1.5 m fixes (~5.3 m/s), reached 5.3 s into the first acceleration"
@@ -90,15 +85,7 @@ def _yaw(err: float, sigma: float, start: float, why: str) -> str:
 KNOWN: dict[tuple[sw.Cell, str], str] = {
     **{(sw.Cell("static", 1.0, 5.0, False), f): LATE_MOTION.format(50.3) for f in sw.FILTERS},
     **{(sw.Cell("rolling", 1.0, 5.0, False), f): LATE_MOTION.format(7.0) for f in sw.FILTERS},
-    **{(sw.Cell("reversing", 1.0, 5.0, True), f): REVERSING for f in sw.FILTERS},
-    **{(sw.Cell("reversing", 0.01, 0.5, True), f): REVERSING for f in sw.FILTERS},
     **{(sw.Cell("static", 1.0, 1.5, False), f): CREEPING for f in sw.FILTERS},
-    (sw.Cell("reversing", 1.0, 5.0, True), "tc_ekf"): REVERSING
-    + "; "
-    + _yaw(5.3, 2.73, 0.9, "tight coupling without NHC, 41 s after the late start"),
-    (sw.Cell("reversing", 1.0, 5.0, True), "tc_ukf"): REVERSING
-    + "; "
-    + _yaw(4.8, 2.65, 0.9, "tight coupling without NHC, 41 s after the late start"),
     (sw.Cell("static", 0.3, 5.0, False), "lc_ekf"): _yaw(
         10.5, 2.48, 8.9, "heading from motion 8.9 deg off, overconfident; " + LOOSE_YAW
     ),
