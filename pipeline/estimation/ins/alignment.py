@@ -408,20 +408,19 @@ def align(
         t_imu, track.t_ns - _HALF_NS, "left"
     )
     inside &= around >= 2
-    start, mh = _course_or_motion(imu, segment, track, inside, init, noise, course_is_heading)
+    # every start consults the heading from motion: a multirotor's, a late course's, and
+    # the check of a course start (reversing, an IMU not along the vehicle)
+    mh = _motion_heading(imu, segment, track, inside, init, noise)
+    start = _course_or_motion(track, inside, init, mh, course_is_heading)
     if start is not None and start.any():
         k = int(np.flatnonzero(start)[0])
         v = track.vel[k]
         speed = math.hypot(v[0], v[1])
         yaw_sigma = max(init.yaw_sigma_rad, math.atan2(float(track.sig_speed[k]), speed))
-        yaw, yaw_sigma, method = _course_heading(
-            imu, segment, track, inside, k, init, noise, yaw_sigma
-        )
+        yaw, yaw_sigma, method = _course_heading(track, inside, k, init, mh, yaw_sigma)
         x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b, yaw)
         return _finish(imu, segment, track, k, x0, c_bn, yaw_sigma, method, obs, init,
                        noise, lever_b, n)  # fmt: skip
-    if mh is None:
-        mh = _motion_heading(imu, segment, track, inside, init, noise)
     rows = np.flatnonzero(inside)
     if rows.size == 0:
         return None
@@ -455,31 +454,25 @@ def align(
 
 
 def _course_or_motion(
-    imu: ImuData,
-    segment: tuple[int, int],
     track: _Track,
     inside: np.ndarray,
     init: InitParams,
-    noise: ImuNoise,
+    mh: heading.MotionHeading | None,
     course_is_heading: bool,
-) -> tuple[np.ndarray | None, heading.MotionHeading | None]:
+) -> np.ndarray | None:
     """The epochs a course start may take (None: the platform's course is not its heading,
-    or the course comes late and the heading from motion is trusted before it), and the
-    heading from motion if it was computed."""
+    or the course comes late and the heading from motion ``mh`` is trusted before it)."""
     start = _course_start(track, init) & inside if course_is_heading else None
     if start is None or not start.any() or not _course_late(track, start, inside, init):
-        return start, None
-    mh = _motion_heading(imu, segment, track, inside, init, noise)
-    return (None if _trusted_before(mh, track, inside, start, init) else start), mh
+        return start
+    return None if _trusted_before(mh, track, inside, start, init) else start
 
 
 def _course_late(track: _Track, start: np.ndarray, inside: np.ndarray, init: InitParams) -> bool:
     """The first course start comes more than ``course_wait_s`` after the first motion GNSS
     confirms (over the rest threshold and 3 sigma of its own noise at ``align_epochs``
     consecutive epochs)."""
-    speed = np.hypot(track.vel[:, 0], track.vel[:, 1])
-    fast = np.isfinite(speed) & (speed > np.maximum(_REST_SPEED_MPS, 3.0 * track.sig_speed))
-    moving = _confirmed(fast, track.t_ns, init.align_epochs) & inside
+    moving = _confirmed(_fast(track), track.t_ns, init.align_epochs) & inside
     if not moving.any():
         return False
     t_course = track.t_ns[np.flatnonzero(start)[0]]
@@ -503,13 +496,11 @@ def _trusted_before(
 
 
 def _course_heading(
-    imu: ImuData,
-    segment: tuple[int, int],
     track: _Track,
     inside: np.ndarray,
     k: int,
     init: InitParams,
-    noise: ImuNoise,
+    mh: heading.MotionHeading | None,
     course_sigma: float,
 ) -> tuple[float, float, str]:
     """(heading, 1-sigma, method) at a course start (track epoch ``k``), checked against the
@@ -519,7 +510,6 @@ def _course_heading(
     vehicle: its x axis is not the course)."""
     v = track.vel[k]
     course = math.atan2(v[1], v[0])
-    mh = _motion_heading(imu, segment, track, inside, init, noise)
     j = int(np.searchsorted(np.flatnonzero(inside), k))
     if mh is None or mh.sigma[j] > init.motion_yaw_sigma_max_rad:
         return course, course_sigma, "gnss_velocity"
@@ -646,12 +636,20 @@ def _motion_heading(
     )
 
 
-def _gnss_moving(imu: ImuData, lo: int, hi: int, track: _Track) -> np.ndarray:
-    """IMU samples ``lo:hi`` next to a GNSS epoch whose speed is over the rest threshold and
-    3 sigma of its own noise (a car cruising straight passes the IMU's static tests)."""
+def _fast(track: _Track) -> np.ndarray:
+    """GNSS epochs whose horizontal speed is over the rest threshold and 3 sigma of its own
+    noise."""
     speed = np.hypot(track.vel[:, 0], track.vel[:, 1])
-    fast = np.isfinite(speed) & (speed > np.maximum(_REST_SPEED_MPS, 3.0 * track.sig_speed))
-    return np.asarray(np.interp(imu.t_ns[lo:hi], track.t_ns, fast.astype(float)) > 0.0)
+    fast: np.ndarray = np.isfinite(speed) & (
+        speed > np.maximum(_REST_SPEED_MPS, 3.0 * track.sig_speed)
+    )
+    return fast
+
+
+def _gnss_moving(imu: ImuData, lo: int, hi: int, track: _Track) -> np.ndarray:
+    """IMU samples ``lo:hi`` next to a ``_fast`` GNSS epoch (a car cruising straight passes
+    the IMU's static tests)."""
+    return np.asarray(np.interp(imu.t_ns[lo:hi], track.t_ns, _fast(track).astype(float)) > 0.0)
 
 
 def _finish(
