@@ -38,6 +38,8 @@ from navreplay.pipeline.estimation.core.windows import (
 )
 from navreplay.pipeline.estimation.ins.alignment import Alignment
 from navreplay.pipeline.estimation.ins.config import InsFilterParams
+from navreplay.pipeline.estimation.ins.fixnoise import FixNoise
+from navreplay.pipeline.estimation.ins.inputs import prepare_fixes
 from navreplay.pipeline.estimation.ins.replay import RunResult, run_filter
 from navreplay.pipeline.estimation.ins.tracks import (
     fixes_track,
@@ -87,6 +89,7 @@ class Job:
     tail_s: float
     mask_deg: float
     metrics: WindowMetricsParams
+    fix_noise: FixNoise | None = None  # learned from the whole log, not a window's slice
 
 
 def draw_starts(
@@ -170,8 +173,9 @@ def replay_start(job: Job, start: Start) -> list[dict[str, Any]]:
         )
         t_wall = time.perf_counter()
         r = run_filter(
-            applied.tables, job.sensors, job.name, job.params, backend=job.backend, initial=initial
-        )
+            applied.tables, job.sensors, job.name, job.params, backend=job.backend,
+            initial=initial, fix_noise=job.fix_noise,
+        )  # fmt: skip
         t_run = time.perf_counter() - t_wall
         if job.track.reference == "truth":
             # the truth around the replay only: interpolating the whole drive's truth for
@@ -264,6 +268,7 @@ def run_montecarlo(
         tail_s,
         mask_deg,
         metrics,
+        prepare_fixes(tables["gnss"], flagged.gnss).noise if "gnss" in tables else None,
     )
     t_wall = time.perf_counter()
     rows: list[dict[str, Any]] = []

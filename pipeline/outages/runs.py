@@ -137,7 +137,8 @@ class _Job:
         return apply_scenario(self.inputs.tables, scenario, spec, mask_deg=mask)
 
     def replay(self, scenario: str) -> RunOutput:
-        inputs = replace(self.inputs, tables=dict(self.apply(scenario).tables))
+        tables = dict(self.apply(scenario).tables)
+        inputs = replace(self.inputs, tables=tables, log_tables=self.inputs.tables)
         return self.family.run(inputs, self.name, self.params, self.backend)
 
 

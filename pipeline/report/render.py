@@ -158,6 +158,7 @@ def render_dataset(
         ("audit", "Data quality", audit.audit_section(data)),
         ("track", "Track", track),
         ("metrics", "Accuracy and consistency", sections.metrics(run_rows)),
+        ("noise", "Noise models", sections.noise(data.runs)),
         ("errors", "Errors against time", "".join(err_parts)),
         ("outages", "Outage windows", sections.windows(win_rows) + "".join(outage_parts)),
         (

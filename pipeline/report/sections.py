@@ -9,7 +9,7 @@ from typing import Any
 from navreplay.pipeline.report import html as h
 from navreplay.pipeline.report import markdown
 from navreplay.pipeline.report.experiments import CsvTable, Experiment
-from navreplay.pipeline.report.inputs import DatasetInputs
+from navreplay.pipeline.report.inputs import DatasetInputs, Run
 from navreplay.pipeline.report.tables import PAPER_PAIR, PAPER_REDUCTION_PCT
 
 Row = dict[str, Any]
@@ -98,6 +98,56 @@ def metrics(rows: Sequence[Row]) -> str:
     return h.table(rows, _METRIC_COLS, cls={"status": _status_cls("status")}) + h.para(
         "RMS and max over the whole run; NEES over position, velocity and attitude "
         "(its expected value is the dof). The full list is in tables/runs.csv.",
+        "note",
+    )
+
+
+def noise_rows(runs: Sequence[Run]) -> list[Row]:
+    """Per filter, the noise models its runs used (``metrics.json`` ``imu_noise`` and
+    ``fix_noise``; the first run of each filter, they are the same under every scenario that
+    keeps the log's fixes)."""
+    rows: list[Row] = []
+    seen: set[str] = set()
+    for r in runs:
+        imu, fix = r.metrics.get("imu_noise") or {}, r.metrics.get("fix_noise") or {}
+        if r.filter in seen or not (imu or fix):
+            continue
+        seen.add(r.filter)
+        rows.append({
+            "filter": r.filter,
+            "imu_source": imu.get("source"),
+            "gyro": imu.get("gyro_noise_radps_rthz"),
+            "accel": imu.get("accel_noise_mps2_rthz"),
+            "tau": fix.get("tau_s"),
+            "inflation": fix.get("inflation"),
+            "fix_source": fix.get("source"),
+            "sigma_source": fix.get("sigma_source"),
+            "sigma_h": fix.get("sigma_h_m"),
+            "reported_h": fix.get("reported_h_m"),
+            "why": fix.get("reason"),
+        })  # fmt: skip
+    return rows
+
+
+def noise(runs: Sequence[Run]) -> str:
+    """What noise each filter assumed, and where it came from (issue: say what was used and
+    why)."""
+    rows = noise_rows(runs)
+    if not rows:
+        return ""
+    cols = (("filter", "filter"), ("imu_source", "IMU noise from"), ("gyro", "gyro rad/s/√Hz"),
+            ("accel", "accel m/s²/√Hz"), ("fix_source", "fix errors"), ("tau", "corr. time s"),
+            ("inflation", "variance x"), ("sigma_source", "fix σ from"),
+            ("sigma_h", "learned σ_h m"), ("reported_h", "reported σ_h m"),
+            ("why", "why"))  # fmt: skip
+    return h.table(rows, cols) + h.para(
+        "IMU noise: the dataset's declared model, else params.yaml's fallback floored by the "
+        "noise the log's own samples show. Fix errors: their correlation time learned from the "
+        "fixes against the receiver velocity (a Gauss-Markov error's structure function), "
+        "else filters.<name>.gnss.pos_error_corr_time_s; a fix's variance is multiplied by "
+        "the inflation for it. The fix σ is the receiver's reported accuracy where it gives "
+        "one, else the learned one, else the default. Tight coupling fuses pseudoranges and "
+        "has no fix-error model.",
         "note",
     )
 

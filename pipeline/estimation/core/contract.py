@@ -51,12 +51,16 @@ class RunInputs:
         tables: canonical tables by name; only those that exist.
         sensors: the dataset's sensor metadata (IMU noise, lever arm, wheelbase).
         sources: the files read (the tables and ``meta.json``), recorded in the provenance.
+        log_tables: the log's own tables where ``tables`` are a scenario's changes of them
+            (None: ``tables`` are the log's): what a family learns its noise models from, so
+            every scenario of a log runs with the same ones.
     """
 
     dataset: str
     tables: dict[str, pa.Table]
     sensors: SensorMeta | None
     sources: tuple[Path, ...]
+    log_tables: dict[str, pa.Table] | None = None
 
     @classmethod
     def read(cls, tables_dir: Path, names: Sequence[TableName]) -> RunInputs:

@@ -187,6 +187,80 @@ def streams_to_reset(
 
 
 @njit(cache=True, error_model="numpy")
+def new_stream_clock(t0_ns: int) -> I64:
+    """Per stream (4, N_STREAMS): last seen (ns; the run's start ``t0_ns`` at first), its
+    consecutive rejected epochs, whether that run of rejections began soon after a gap
+    (``returning_to_reset``), and when the stream last came back from a gap (ns, -1: never).
+
+    A run restarted from a checkpoint (the outage Monte Carlo) thus sees the same gaps as the
+    full replay: every outage window starts after the checkpoint and outlasts ``gap_s``.
+    """
+    clock = np.zeros((4, N_STREAMS), np.int64)
+    clock[0, :] = t0_ns
+    clock[3, :] = -1
+    return clock
+
+
+@njit(cache=True, error_model="numpy")
+def _back_from_gap(t_ns: int, clock: I64, s: int, gap_s: float, window_s: float) -> bool:
+    """Stream ``s`` seen at ``t_ns`` is back from a gap of ``gap_s`` (counted from the run's
+    start before its first measurement), or came back less than ``window_s`` ago."""
+    if (t_ns - clock[0, s]) * 1e-9 >= gap_s:
+        return True
+    return bool(clock[3, s] >= 0 and (t_ns - clock[3, s]) * 1e-9 <= window_s)
+
+
+@njit(cache=True, error_model="numpy")
+def returning_to_reset(
+    t_ns: int, blocks: I64, nb_: int, accepted: I64, clock: I64, gap_s: float, epochs: int,
+    window_s: float, keep: int,
+) -> I64:  # fmt: skip
+    """Streams back from a gap of ``gap_s`` or longer (``new_stream_clock``) whose run
+    of rejections began within ``window_s`` of their return and has lasted ``epochs`` epochs,
+    this one included: after an outage the filter has drifted, not the returning
+    measurements, so waiting out the timeout only lets its error grow (bad-inputs F4). Single
+    outliers (F1, F7) away from an outage keep the timeout. Streams ``keep`` and after are
+    never reset.
+
+    Returns:
+        (N_STREAMS,) flags, 1 = reset that stream's states now.
+    """
+    seen, ok = stream_health(blocks, nb_, accepted)
+    out = np.zeros(N_STREAMS, np.int64)
+    for s in range(N_STREAMS):
+        if 0 <= keep <= s or not seen[s] or ok[s]:
+            continue
+        if clock[1, s] == 0:  # a new run: does it begin soon after a gap?
+            returning = _back_from_gap(t_ns, clock, s, gap_s, window_s)
+        else:
+            returning = clock[2, s] == 1
+        if returning and clock[1, s] + 1 >= epochs:
+            out[s] = 1
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def update_stream_clock(
+    t_ns: int, blocks: I64, nb_: int, accepted: I64, clock: I64, gap_s: float, window_s: float
+) -> None:
+    """Advance ``clock`` (``new_stream_clock``) after an epoch's final gating decisions."""
+    seen, ok = stream_health(blocks, nb_, accepted)
+    for s in range(N_STREAMS):
+        if not seen[s]:
+            continue
+        if (t_ns - clock[0, s]) * 1e-9 >= gap_s:
+            clock[3, s] = t_ns
+        if ok[s]:
+            clock[1, s] = 0
+            clock[2, s] = 0
+        else:
+            if clock[1, s] == 0:
+                clock[2, s] = 1 if _back_from_gap(t_ns, clock, s, gap_s, window_s) else 0
+            clock[1, s] += 1
+        clock[0, s] = t_ns
+
+
+@njit(cache=True, error_model="numpy")
 def update_reject_since(t_ns: int, blocks: I64, nb_: int, accepted: I64, reject_since: I64) -> None:
     """Advance the per-stream rejection clocks after an epoch's final gating decisions."""
     seen, ok = stream_health(blocks, nb_, accepted)

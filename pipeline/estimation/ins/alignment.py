@@ -64,6 +64,9 @@ _GPS_2000_NS = 630_720_013_000_000_000
 _REST_SPEED_MPS = 0.3
 #: floor on the yaw 1-sigma of a heading from motion (the attitude filter's own errors), rad
 _MIN_MOTION_YAW_SIGMA = math.radians(1.0)
+#: what a gyro bias measured at rest may still be off by in motion (g-sensitivity, vibration
+#: rectification of MEMS gyros: ~0.05 deg/s), rad/s
+_STATIC_BIAS_SHIFT_RADPS = 0.001
 
 
 @dataclass(frozen=True)
@@ -263,6 +266,19 @@ def _static_window(
     if (imu.t_ns[lo + end - 1] - imu.t_ns[lo + start]) * 1e-9 < init.static_window_s:
         return 0, 0
     return lo + start, lo + end
+
+
+def _gyro_bias_sigma(noise: ImuNoise, static_s: float) -> float:
+    """The gyro bias 1-sigma at the start: the prior, or where a rest of ``static_s`` measured
+    the bias, what averaging the gyro noise over it leaves plus the shift a bias measured at
+    rest may still see in motion (``_STATIC_BIAS_SHIFT_RADPS``), never over the prior. The
+    prior covers any consumer gyro's turn-on bias; left on a measured bias, it lets noisy
+    velocity innovations pull the bias, and the heading with it."""
+    prior = max(noise.gyro_bias_sigma_radps, 1e-7)
+    if not static_s:
+        return prior
+    averaged = noise.gyro_noise_radps_rthz**2 / static_s + _STATIC_BIAS_SHIFT_RADPS**2
+    return min(prior, max(math.sqrt(averaged), OMEGA_IE))
 
 
 def _static_gyro_bias(
@@ -689,7 +705,7 @@ def _finish(
     d = [sig_h, sig_h, sig_v] + [init.vel_sigma_mps] * 3
     d += [init.roll_pitch_sigma_rad] * 2 + [yaw_sigma]
     d += [max(noise.accel_bias_sigma_mps2, 1e-6)] * 3
-    d += [max(noise.gyro_bias_sigma_radps, OMEGA_IE if static_s else 1e-7)] * 3
+    d += [_gyro_bias_sigma(noise, static_s)] * 3
     d += [init.clock_bias_sigma_m, init.clock_drift_sigma_mps]
     P0 = np.diag(np.square(d[:n]))
     method += "+static_gyro_bias" if static_s else ""

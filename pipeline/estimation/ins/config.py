@@ -95,13 +95,19 @@ class GnssNoiseParams:
         pos_sigma_floor_m: floor on the receiver's h_acc / v_acc, m.
         pos_sigma_default_m: position 1-sigma when the receiver reports none, m.
         pos_error_corr_time_s: correlation time of the fixes' position errors (multipath,
-            atmosphere), s. A first-order Gauss-Markov error sampled every dt carries about
-            the information of one independent fix per 2 tau, so the fix variance is inflated
-            by ``1 + 2 tau / dt`` (0: white errors, no inflation). Reported accuracies are
-            per-fix sigmas and say nothing about correlation; without this a loosely coupled
-            filter averages correlated errors as if they were white and becomes overconfident.
-            The inflation applies to the update only: a fix is gated, and its NIS computed,
-            against the marginal variance (``measurement.gate_shift``).
+            atmosphere), s, where it cannot be learned from the log (``learn_fix_noise``). A
+            first-order Gauss-Markov error sampled every dt carries about the information of
+            one independent fix per 2 tau, so the fix variance is inflated by
+            ``(1 + phi) / (1 - phi)``, ``phi = exp(-dt/tau)`` (~``1 + 2 tau / dt``; 0: white
+            errors, no inflation). Reported accuracies are per-fix sigmas and say nothing about
+            correlation; without this a loosely coupled filter averages correlated errors as
+            if they were white and becomes overconfident. The inflation applies to the update
+            only: a fix is gated, and its NIS computed, against the marginal variance
+            (``measurement.gate_shift``).
+        learn_fix_noise: learn the fix errors' correlation time (and their size where the
+            receiver reports no accuracy) from the log's fixes against its receiver velocity
+            (``ins.fixnoise``); without a receiver velocity, or too few fixes, the configured
+            values are used. ``metrics.json`` ``fix_noise`` says which, and why.
         vel_sigma_floor_mps: floor on the receiver's speed accuracy, m/s.
         vel_sigma_default_mps: velocity 1-sigma when the receiver reports none, m/s.
         use_velocity: fuse the receiver velocity where present (loose coupling).
@@ -117,6 +123,7 @@ class GnssNoiseParams:
     pos_sigma_floor_m: float = 0.5
     pos_sigma_default_m: float = 3.0
     pos_error_corr_time_s: float = 0.0
+    learn_fix_noise: bool = True
     vel_sigma_floor_mps: float = 0.05
     vel_sigma_default_mps: float = 0.2
     use_velocity: bool = True
@@ -172,11 +179,17 @@ class GatingParams:
     for its dimension. When a stream has been rejected without interruption for longer than
     ``timeout_s``, the covariance of the states it observes is reset (inflated to at least the
     current innovation) and the epoch is processed again, so a persistent step is followed
-    instead of locking the filter out (bad-inputs F2).
+    instead of locking the filter out (bad-inputs F2). A stream that comes back after a gap
+    (an outage) and, within ``timeout_s`` of its return, is rejected at ``return_epochs``
+    consecutive epochs is reset at once:
+    after an outage the filter, not the returning measurements, is the one that drifted, and
+    waiting out the timeout only lets the error grow (bad-inputs F4).
 
     Attributes:
         probability: gate probability, e.g. 0.9999.
         timeout_s: continuous rejection time that triggers a reset, s.
+        return_gap_s: a stream silent this long (an outage) is returning when it comes back, s.
+        return_epochs: consecutive rejected epochs of a returning stream that reset it.
         reset_pos_sigma_m: minimum position 1-sigma after a reset, m.
         reset_vel_sigma_mps: minimum velocity 1-sigma after a reset, m/s.
         reset_clock_sigma_m: minimum clock-bias 1-sigma after a reset, m.
@@ -184,6 +197,8 @@ class GatingParams:
 
     probability: float = 0.9999
     timeout_s: float = 5.0
+    return_gap_s: float = 5.0
+    return_epochs: int = 2
     reset_pos_sigma_m: float = 10.0
     reset_vel_sigma_mps: float = 1.0
     reset_clock_sigma_m: float = 30.0
@@ -192,7 +207,7 @@ class GatingParams:
         if not 0.5 < self.probability < 1.0:
             raise FieldError("probability", "must be within (0.5, 1)")
         positive(self, "timeout_s", "reset_pos_sigma_m", "reset_vel_sigma_mps")
-        positive(self, "reset_clock_sigma_m")
+        positive(self, "reset_clock_sigma_m", "return_gap_s", "return_epochs")
 
 
 @dataclass(frozen=True)

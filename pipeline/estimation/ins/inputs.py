@@ -20,6 +20,7 @@ import pyarrow as pa
 from navreplay.ingest.schema import FixType
 from navreplay.pipeline.estimation.core.tables import B8, Event, _is_null, float_column
 from navreplay.pipeline.estimation.ins.config import GnssNoiseParams, StepParams
+from navreplay.pipeline.estimation.ins.fixnoise import FixNoise, learn
 from navreplay.pipeline.estimation.ins.models import measurement as me
 from navreplay.pipeline.nav.earth import F64, I64
 
@@ -46,6 +47,7 @@ class FixData:
     fix: F64
     usable: B8
     events: tuple[Event, ...] = ()
+    noise: FixNoise | None = None
 
 
 @dataclass(frozen=True)
@@ -149,10 +151,14 @@ def _reported(acc: F64) -> F64:
     return np.where(acc > 0.0, acc, math.nan)
 
 
-def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
+def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams, noise: FixNoise | None = None) -> FixData:
     """Receiver fixes -> ``fix`` rows with floored accuracies; NaN blocks skipped (F11).
 
-    Position sigmas are inflated for time-correlated errors (``pos_error_corr_time_s``).
+    Position sigmas are inflated for time-correlated errors, their correlation time learned
+    from the log where it has a receiver velocity (``fixnoise.learn``), else
+    ``pos_error_corr_time_s``; where the receiver reports no accuracy, the learned size
+    replaces ``pos_sigma_default_m``. ``noise``: a model learned before (from the whole log,
+    where ``table`` is a scenario's or a window's part of it) instead of learning one here.
     A fix is applied at its own epoch: with a ``latency_s`` column (arrival minus the
     receiver's epoch, as the comma2k19 reader writes it), at ``t_ns - latency_s``.
     Position needs a fix type of at least 2-D (a 2-D fix is fused horizontally); velocity
@@ -187,14 +193,6 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
         np.where(np.isfinite(v_acc), v_acc, 1.5 * gnss.pos_sigma_default_m),
         gnss.pos_sigma_floor_m,
     )
-    fix[:, me.FX_POS_INFL] = 1.0
-    tau = gnss.pos_error_corr_time_s
-    if tau > 0.0 and n > 1:  # time-correlated errors: fewer independent fixes than fixes
-        dt = float(np.median(np.diff(t))) * 1e-9
-        inflate = 1.0 + 2.0 * tau / dt
-        fix[:, me.FX_SIG_H] *= math.sqrt(inflate)
-        fix[:, me.FX_SIG_V] *= math.sqrt(inflate)
-        fix[:, me.FX_POS_INFL] = inflate  # gated against the marginal variance
     s_acc = _reported(float_column(table, "speed_acc_mps"))
     fix[:, me.FX_SIG_VEL] = np.maximum(
         np.where(np.isfinite(s_acc), s_acc, gnss.vel_sigma_default_mps), gnss.vel_sigma_floor_mps
@@ -219,9 +217,20 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams) -> FixData:
     fix[:, me.FX_VEL_DIM] = np.where(use & (~given_d | finite_d), vdim, 0)
     for k in np.flatnonzero(use & ((given_h & ~finite_h) | (given_d & ~finite_d))):
         events.append(Event(int(t[k]), "skip_invalid", "gnss_vel"))
+    noise = learn(t, fix, h_acc, gnss) if noise is None else noise
+    if math.isfinite(noise.sigma_h_m):  # the receiver's own accuracies win where given
+        learned_h = max(noise.sigma_h_m, gnss.pos_sigma_floor_m)
+        fix[:, me.FX_SIG_H] = np.where(np.isfinite(h_acc), fix[:, me.FX_SIG_H], learned_h)
+    if math.isfinite(noise.sigma_v_m):
+        learned_v = max(noise.sigma_v_m, gnss.pos_sigma_floor_m)
+        fix[:, me.FX_SIG_V] = np.where(np.isfinite(v_acc), fix[:, me.FX_SIG_V], learned_v)
+    # time-correlated errors: fewer independent fixes than fixes
+    fix[:, me.FX_SIG_H] *= math.sqrt(noise.inflation)
+    fix[:, me.FX_SIG_V] *= math.sqrt(noise.inflation)
+    fix[:, me.FX_POS_INFL] = noise.inflation  # gated against the marginal variance
     usable = (fix[:, me.FX_POS_DIM] > 0) | (fix[:, me.FX_VEL_DIM] > 0)
     fix[~np.isfinite(fix)] = 0.0  # unusable fields never reach a kernel as NaN
-    return FixData(t, fix, usable, tuple(events))
+    return FixData(t, fix, usable, tuple(events), noise)
 
 
 def corrected_observables(table: pa.Table) -> tuple[F64, F64]:

@@ -62,6 +62,7 @@ def compute_metrics(
             "compile_s": result.compile_s,
             "alignment": [a.summary() for a in result.alignments],
             "imu_noise": result.imu_noise,
+            "fix_noise": result.fix_noise,
         }
     )
     if windows:

@@ -63,7 +63,7 @@ class _Run:
         self.out = ins.span_work()
         self.L = np.empty((n, n))
         self.Phi, self.Qd = np.empty((n, n)), np.empty((n, n))
-        self.buf = cm.epoch_buffers(m_max, n)
+        self.buf = cm.epoch_buffers(m_max, n, int(self.sched.t0))
 
     def stops(self) -> Iterator[tuple[int, I64, int]]:
         """(index, row, time in ns) of every stop of the schedule, in order."""
@@ -274,11 +274,11 @@ def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb
         if attempt == 1:
             break
         P = np.ascontiguousarray(ukf.P)
-        reset = cm.reset_timed_out(t, P, g, buf.reject_since, sc, cfg, run.log)
+        reset = cm.reset_timed_out(t, P, g, buf, sc, cfg, run.log)
         ukf.P = P
         if not reset:
             break
-    a = buf.acc_rows[: cm.close_gating(t, g, cfg.gate, buf, run.log)].copy()
+    a = buf.acc_rows[: cm.close_gating(t, g, cfg, buf, run.log)].copy()
     if a.size == 0:
         return
     ukf.sigmas_f = sig

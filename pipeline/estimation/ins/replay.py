@@ -49,6 +49,7 @@ from navreplay.pipeline.estimation.ins.alignment import (
     why_not_aligned,
 )
 from navreplay.pipeline.estimation.ins.config import FILTER_KINDS, FilterKind, InsFilterParams
+from navreplay.pipeline.estimation.ins.fixnoise import FixNoise
 from navreplay.pipeline.estimation.ins.kernels.records import Fading, Schedule, Settings
 from navreplay.pipeline.estimation.ins.models import ins, ins_errors
 from navreplay.pipeline.estimation.ins.models import measurement as me
@@ -94,6 +95,7 @@ class RunResult:
         duration_s: span of IMU time replayed.
         extra: filter-specific series (fwekf: ``alpha``).
         imu_noise: the IMU noise densities used and their ``source`` (``resolve_imu_noise``).
+        fix_noise: the fix-error model a loosely coupled run used (``fixnoise.FixNoise``).
     """
 
     filter: str
@@ -113,6 +115,7 @@ class RunResult:
     duration_s: float = 0.0
     extra: dict[str, Any] = field(default_factory=dict)
     imu_noise: dict[str, Any] = field(default_factory=dict)
+    fix_noise: dict[str, Any] = field(default_factory=dict)
 
 
 def make_setup(
@@ -162,6 +165,8 @@ def make_setup(
         gap_s=float(st.imu_gap_s),
         nhc_on=bool(kind.nhc),
         timeout_s=float(g.timeout_s),
+        return_gap_s=float(g.return_gap_s),
+        return_epochs=int(g.return_epochs),
         reset_pos_sigma_m=float(g.reset_pos_sigma_m),
         reset_vel_sigma_mps=float(g.reset_vel_sigma_mps),
         reset_clock_sigma_m=float(g.reset_clock_sigma_m),
@@ -266,6 +271,7 @@ def run_filter(
     backend: Backend = "numba",
     imu: inp.ImuData | None = None,
     initial: Alignment | None = None,
+    fix_noise: FixNoise | None = None,
 ) -> RunResult:
     """Replay filter ``name`` over canonical tables (``imu`` + ``gnss`` or ``gnss_obs``).
 
@@ -279,6 +285,8 @@ def run_filter(
             default: the ``imu`` table.
         initial: start the first segment from this state and covariance instead of aligning
             (a known initial condition; Monte Carlo consistency tests draw it from ``P0``).
+        fix_noise: the fix-error model to use (``fixnoise.learn`` on the whole log, where
+            ``tables`` are a scenario's or a window's part of it); default: learned here.
 
     Raises:
         ReplayInputError: a table the filter needs is missing.
@@ -290,7 +298,7 @@ def run_filter(
     imu_data = imu if imu is not None else inp.prepare_imu(_table(tables, "imu", name), params.step)
     noise_model, noise_source = resolve_imu_noise(params, sensors, imu_data)
     setup = make_setup(name, params, sensors, noise_model)
-    fixes = inp.prepare_fixes(tables["gnss"], params.gnss) if "gnss" in tables else None
+    fixes = inp.prepare_fixes(tables["gnss"], params.gnss, fix_noise) if "gnss" in tables else None
     obs = inp.prepare_obs(tables["gnss_obs"], params.gnss) if "gnss_obs" in tables else None
     mag = inp.prepare_mag(tables["mag"]) if "mag" in tables else None
     _require(tables, name, kind, fixes, obs)
@@ -362,6 +370,11 @@ def run_filter(
             "accel_noise_mps2_rthz": noise_model.accel_noise_mps2_rthz,
             "gyro_noise_radps_rthz": noise_model.gyro_noise_radps_rthz,
         },
+        fix_noise=(
+            fixes.noise.as_dict()
+            if fixes is not None and fixes.noise is not None and kind.coupling == "loose"
+            else {}
+        ),
     )
 
 

@@ -32,7 +32,7 @@ def _weighted_step(P: np.ndarray, H: np.ndarray, r: float, nu: float, alpha: flo
     """The kernel's update of one scalar measurement: returns dx, updates P in place."""
     n = P.shape[0]
     S = np.array([[H @ P @ H + r]])  # the unweighted S the front end computes
-    buf = epoch_buffers(1, n)._replace(
+    buf = epoch_buffers(1, n, 0)._replace(
         H=H.reshape(1, n), S=S, r=np.array([r]), nu=np.array([nu]), acc_rows=np.zeros(1, np.int64)
     )
     dx, ok = weighted_update(P, n, buf, 1, alpha)

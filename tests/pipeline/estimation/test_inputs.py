@@ -159,7 +159,10 @@ def test_gating_uses_the_marginal_variance_of_an_inflated_fix() -> None:
         },
     )  # fmt: skip
     fixes = inp.prepare_fixes(table, GnssNoiseParams(pos_error_corr_time_s=30.0))
-    infl = 1.0 + 2.0 * 30.0 / 1.0
+    phi = math.exp(-1.0 / 30.0)  # Gauss-Markov over 30 s sampled at 1 Hz: ~1 + 2 tau / dt
+    infl = (1.0 + phi) / (1.0 - phi)
+    assert fixes.noise is not None
+    assert fixes.noise.source == "configured"
     assert fixes.fix[0, me.FX_SIG_H] == pytest.approx(1.5 * math.sqrt(infl))
     assert fixes.fix[0, me.FX_POS_INFL] == pytest.approx(infl)
     rows = np.array([[me.K_POS, 0], [me.K_POS + 2, 0], [me.K_VEL, 0]], dtype=np.int64)

@@ -16,7 +16,7 @@ from navreplay.ingest.meta import SensorMeta
 from navreplay.pipeline.cli import main
 from navreplay.pipeline.params import load_params, read_yaml
 from navreplay.pipeline.synth import car
-from tests.pipeline.scenarios.drives import REPO, short_window_scenarios, write_tables
+from tests.pipeline.scenarios.drives import REPO, drive, short_window_scenarios, write_tables
 
 
 @pytest.fixture(scope="module")
@@ -84,3 +84,21 @@ def test_fault_scenarios_are_refused_for_a_vehicle_filter_with_the_reason(
     assert "vehicle_imm" in err
     assert "fault scenarios (f1_position_jump)" in err
     assert not (tmp_path / "f1").exists()
+
+
+def test_every_scenario_of_a_log_runs_with_the_fix_errors_learned_from_the_whole_log(
+    params_file: Path, tmp_path: Path
+) -> None:
+    """The outage run's fixes have holes, but its fix-error model is the nominal run's: the
+    one the log's own fixes show (a model learned from a scenario's leftovers would make the
+    scenarios differ by more than the outage)."""
+    tables, sensors = drive(150.0)
+    tables_dir = write_tables(tmp_path / "tables", dict(tables), "seoul150", sensors)
+    out = tmp_path / "runs"
+    args = ["run", str(tables_dir), "--filter", "lc_ekf", "--params", str(params_file),
+            "--keep-going", "--scenario", "nominal", "--scenario", "outage_60s"]  # fmt: skip
+    assert main([*args, "--out", str(out)]) == 0
+    nominal = json.loads((out / "nominal" / "metrics.json").read_text())["fix_noise"]
+    outage = json.loads((out / "outage_60s" / "metrics.json").read_text())["fix_noise"]
+    assert nominal["source"] == "learned"
+    assert outage == nominal

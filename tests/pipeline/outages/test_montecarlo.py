@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from navreplay.pipeline.estimation.core.windows import NS
+from navreplay.pipeline.estimation.ins.inputs import prepare_fixes
 from navreplay.pipeline.estimation.ins.metrics import compute_metrics
 from navreplay.pipeline.estimation.ins.replay import run_filter
 from navreplay.pipeline.outages.montecarlo import (
@@ -24,14 +25,17 @@ DURATION_S, START_S, LENGTH_S = 150.0, 60.5, 30.0
 
 
 def full_replay(name: str, sats: int) -> dict[str, Any]:
-    """The window metrics of a full replay of a one-window scenario."""
+    """The window metrics of a full replay of a one-window scenario, with the fix-error model
+    learned from the whole log (as the scenario runs of the pipeline take it)."""
     tables, sensors = drive(DURATION_S)
     spec = ScenarioSpec(
         windows=WindowsSpec("explicit", LENGTH_S, starts_s=(START_S,)),
         satellites=SatellitesSpec(sats) if sats else None,
     )
     applied = apply_scenario(tables, "one", spec)
-    r = run_filter(applied.tables, sensors, name, params().filters.get(name))
+    section = params().filters.get(name)
+    noise = prepare_fixes(tables["gnss"], section.gnss).noise
+    r = run_filter(applied.tables, sensors, name, section, fix_noise=noise)
     m = compute_metrics(
         r,
         tables["truth"],

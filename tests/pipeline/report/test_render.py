@@ -27,9 +27,14 @@ def _render(root: Path, out: Path, **kw: object) -> Path:
 def test_report_has_every_section_its_runs_support(dataset_dir: Path, tmp_path: Path) -> None:
     out = _render(dataset_dir, tmp_path / "r")
     page = (out / "index.html").read_text()
-    for ident in ("overview", "audit", "track", "metrics", "errors", "outages", "nis", "biases",
-                  "cost", "provenance"):  # fmt: skip
+    for ident in ("overview", "audit", "track", "metrics", "noise", "errors", "outages", "nis",
+                  "biases", "cost", "provenance"):  # fmt: skip
         assert f'<section id="{ident}">' in page, ident
+    # the noise models and why: 70 s of fixes are too few to learn their correlation from
+    noise = page.split('<section id="noise">')[1].split("</section>")[0]
+    assert "configured" in noise
+    assert "too few to learn from" in noise
+    assert "dataset" in noise
     assert '<section id="experiments">' not in page  # no experiments: no section
     assert page.count("<svg") >= 5
     runs = json.loads((out / "tables" / "runs.json").read_text())

@@ -22,10 +22,13 @@ from navreplay.pipeline.estimation.core.gating import (
     STATUS_NONFINITE,
     STATUS_OK,
     accepted_rows,
+    new_stream_clock,
     record_event,
     record_innovations,
+    returning_to_reset,
     streams_to_reset,
     update_reject_since,
+    update_stream_clock,
 )
 from navreplay.pipeline.estimation.core.linalg import (
     _F1C,
@@ -50,8 +53,9 @@ from navreplay.pipeline.nav.earth import F64, I64
 
 
 @njit(cache=True, error_model="numpy")
-def epoch_buffers(m_max: int, n: int) -> EpochBuffers:
-    """The measurement scratch for epochs of up to ``m_max`` rows and ``n`` error states."""
+def epoch_buffers(m_max: int, n: int, t0_ns: int) -> EpochBuffers:
+    """The measurement scratch for epochs of up to ``m_max`` rows and ``n`` error states, of
+    a run starting at ``t0_ns``."""
     return EpochBuffers(
         np.empty((m_max, 2), np.int64),
         np.empty((m_max, 4), np.int64),
@@ -62,6 +66,7 @@ def epoch_buffers(m_max: int, n: int) -> EpochBuffers:
         np.empty((m_max, m_max)),
         np.empty(m_max, np.int64),
         -np.ones(N_STREAMS, np.int64),
+        new_stream_clock(t0_ns),
     )
 
 
@@ -163,24 +168,36 @@ def check_state(X: F64, P: F64, scale: F64, s: Settings) -> int:
 
 @njit(cache=True, error_model="numpy", inline="always")
 def reset_timed_out(
-    t_ns: int, P: F64, g: GatedBlocks, reject_since: I64, scale: F64, cfg: Settings, log: RunLog
+    t_ns: int, P: F64, g: GatedBlocks, buf: EpochBuffers, scale: F64, cfg: Settings, log: RunLog
 ) -> bool:
     """Reset the covariance of every stream rejected for the timeout or longer
-    (``streams_to_reset``, ``inflate_for_stream`` with ``scale``), each with a ``gate_reset``
-    event; True if any was."""
-    reset = streams_to_reset(t_ns, g.blocks, g.nb, g.accepted, reject_since, cfg.timeout_s, S_NHC)
+    (``streams_to_reset``), or back from an outage and rejected at ``cfg.return_epochs``
+    epochs in a row (``returning_to_reset``), with ``inflate_for_stream`` and ``scale``, each
+    with a ``gate_reset`` event; True if any was."""
+    reset = streams_to_reset(
+        t_ns, g.blocks, g.nb, g.accepted, buf.reject_since, cfg.timeout_s, S_NHC
+    )
+    back = returning_to_reset(
+        t_ns, g.blocks, g.nb, g.accepted, buf.stream_clock, cfg.return_gap_s, cfg.return_epochs,
+        cfg.timeout_s, S_NHC,
+    )  # fmt: skip
     for st in range(N_STREAMS):
-        if reset[st]:
+        if back[st]:
+            buf.stream_clock[2, st] = 0  # once: a run rejected after its reset keeps the timeout
+        if reset[st] or back[st]:
             big = inflate_for_stream(P, st, g.nu, g.blocks, g.nb, scale, cfg)
             record_event(log.ev_i, log.ev_f, log.counts, t_ns, EV_RESET, st, -1, big)
-    return bool(reset.sum() > 0)
+    return bool(reset.sum() + back.sum() > 0)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def close_gating(t_ns: int, g: GatedBlocks, gate: F64, buf: EpochBuffers, log: RunLog) -> int:
+def close_gating(t_ns: int, g: GatedBlocks, cfg: Settings, buf: EpochBuffers, log: RunLog) -> int:
     """An INS epoch's final gating decisions: record the innovations and rejections, advance
-    the rejection clocks (``buf.reject_since``) and write the accepted rows into
-    ``buf.acc_rows``; returns their number."""
-    record_innovations(t_ns, g, gate, log.inn_i, log.inn_f, log.counts, log.ev_i, log.ev_f)
+    the rejection clocks (``buf.reject_since``, ``buf.stream_clock``) and write the accepted
+    rows into ``buf.acc_rows``; returns their number."""
+    record_innovations(t_ns, g, cfg.gate, log.inn_i, log.inn_f, log.counts, log.ev_i, log.ev_f)
     update_reject_since(t_ns, g.blocks, g.nb, g.accepted, buf.reject_since)
+    update_stream_clock(
+        t_ns, g.blocks, g.nb, g.accepted, buf.stream_clock, cfg.return_gap_s, cfg.timeout_s
+    )
     return accepted_rows(g.blocks, g.nb, g.accepted, buf.acc_rows)

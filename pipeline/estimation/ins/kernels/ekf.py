@@ -114,9 +114,9 @@ def ekf_prepare(
         innovation_cov(H, P, r, m, n, PHt, S)
         g = GatedBlocks(nu, gating_cov(S, dr, m), blocks, nb_, nis, accepted)
         gate_blocks(nu, g.S, blocks, nb_, gate, nis, accepted, gwork)
-        if attempt == 1 or not reset_timed_out(t_ns, P, g, buf.reject_since, ones, cfg, log):
+        if attempt == 1 or not reset_timed_out(t_ns, P, g, buf, ones, cfg, log):
             break
-    return close_gating(t_ns, g, gate, buf, log)
+    return close_gating(t_ns, g, cfg, buf, log)
 
 
 @njit(cache=True, error_model="numpy")
@@ -146,7 +146,7 @@ def run_ekf(
     step = Stepping(cfg.substeps, cfg.max_step_s, cfg.gap_s)
     sw = span_work()
     u = sched.u0.copy()
-    buf = epoch_buffers(m_max, n)
+    buf = epoch_buffers(m_max, n, sched.t0)
     still = np.zeros(STILL_COLS)
     record_output(sched.t0, X, P, log)
     t_cur = sched.t0

@@ -170,7 +170,7 @@ def run_fwekf(
     step = Stepping(cfg.substeps, cfg.max_step_s, cfg.gap_s)
     sw = span_work()
     u = sched.u0.copy()
-    buf = epoch_buffers(sched.m_max, n)
+    buf = epoch_buffers(sched.m_max, n, sched.t0)
     still = np.zeros(STILL_COLS)
     ring = np.full((int(fz[FZ_WINDOW]), RING_COLS), math.nan)
     n_ring = 0

@@ -46,6 +46,8 @@ class Settings(NamedTuple):
         nhc_on: the non-holonomic constraint is applied; still_on: the zero-velocity and
             zero-angular-rate updates at rest are (``models.standstill``).
         timeout_s: a stream rejected this long is reset (F2).
+        return_gap_s, return_epochs: a stream back from a gap this long and rejected at this
+            many epochs in a row is reset (``core.gating.returning_to_reset``).
         reset_pos_sigma_m, reset_vel_sigma_mps, reset_clock_sigma_m: the least 1-sigma a
             reset leaves on position, velocity and receiver clock bias.
         max_pos_sigma_m, max_speed_mps: divergence limits.
@@ -66,6 +68,8 @@ class Settings(NamedTuple):
     nhc_on: bool
     still_on: bool
     timeout_s: float
+    return_gap_s: float
+    return_epochs: int
     reset_pos_sigma_m: float
     reset_vel_sigma_mps: float
     reset_clock_sigma_m: float
@@ -93,6 +97,10 @@ class EpochBuffers(NamedTuple):
         H: Jacobian (m_max, n); S: innovation covariance (m_max, m_max).
         acc_rows: indices of the accepted rows.
         reject_since: per stream, when its current run of rejections began, ns (-1: none).
+        stream_clock: per stream (4, N_STREAMS): when it was last seen (ns; the run's start
+            before its first measurement), its
+            consecutive rejected epochs, whether that run began soon after a gap (1/0), and
+            when it last came back from a gap (ns) (``core.gating.new_stream_clock``).
     """
 
     rows: I64
@@ -104,6 +112,7 @@ class EpochBuffers(NamedTuple):
     S: F64
     acc_rows: I64
     reject_since: I64
+    stream_clock: I64
 
 
 class SigmaWork(NamedTuple):

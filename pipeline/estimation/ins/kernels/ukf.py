@@ -209,10 +209,10 @@ def ukf_update(
             nu[k] = z[k] - zp[k]
         g = GatedBlocks(nu, gating_cov(S, dr, m), blocks, nb_, nis, accepted)
         gate_blocks(nu, g.S, blocks, nb_, gate, nis, accepted, gwork)
-        if attempt == 1 or not reset_timed_out(t_ns, P, g, buf.reject_since, sc, cfg, log):
+        if attempt == 1 or not reset_timed_out(t_ns, P, g, buf, sc, cfg, log):
             break
     cross_cov(sig, s, Z, zp, wc, n, m, Pxz)
-    ma = close_gating(t_ns, g, gate, buf, log)
+    ma = close_gating(t_ns, g, cfg, buf, log)
     if ma > 0:
         _apply_gain(s, P, n, Pxz, S, nu, buf.acc_rows, ma)
     return True
@@ -296,7 +296,7 @@ def run_ukf(
     u = sched.u0.copy()
     st = UkfState(s, P, q_ref)
     ws = sigma_work(n)
-    buf = epoch_buffers(sched.m_max, n)
+    buf = epoch_buffers(sched.m_max, n, sched.t0)
     still = np.zeros(STILL_COLS)
     ev_i, ev_f, counts = log.ev_i, log.ev_f, log.counts
     record_output(sched.t0, x0, P0, log)
