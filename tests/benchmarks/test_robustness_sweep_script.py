@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from benchmarks import _robustness as rb
+from benchmarks import _robustness_grid as gr
 from benchmarks import robustness_sweep as rs
-from benchmarks._drives import Tables
+from benchmarks._drives import REPO, Tables
 from navreplay.ingest.meta import SensorMeta
 from navreplay.pipeline.estimation.core.tables import Event
 from navreplay.pipeline.estimation.ins.models import measurement as me
@@ -24,24 +25,24 @@ NS = 1_000_000_000
 
 @functools.cache
 def _params() -> Params:
-    return load_params(rs.REPO / "params.yaml")
+    return load_params(REPO / "params.yaml")
 
 
 @functools.cache
 def _base() -> tuple[Tables, SensorMeta]:
-    return rs.simulate(_params(), rs.BASE, 1)
+    return gr.simulate(_params(), gr.BASE, 1)
 
 
 def test_the_grid_has_every_axis_and_the_subsets_select() -> None:
-    cells = rs.grid()
+    cells = gr.grid()
     assert len(cells) == len(set(cells)) == 4 * 3 * 2 + 4 + 4
-    assert {c.grade for c in cells} == set(rs.GRADES)
+    assert {c.grade for c in cells} == set(gr.GRADES)
     assert {c.fix_tau_s for c in cells} == {0.0, 10.0, 60.0}
     assert {c.gnss_hz for c in cells} == {1, 5, 10}
     assert {c.imu_hz for c in cells} == {25, 100, 400}
-    assert rs.select(cells, ["base"]) == [rs.BASE]
-    assert len(rs.select(cells, ["rates"])) == 4
-    phone = rs.select(cells, ["phone tau60"])
+    assert gr.select(cells, ["base"]) == [gr.BASE]
+    assert len(gr.select(cells, ["rates"])) == 4
+    phone = gr.select(cells, ["phone tau60"])
     assert {(c.covariance, c.declared) for c in phone} == {(True, False), (False, False)}
 
 
@@ -68,8 +69,8 @@ def test_a_white_cell_has_the_synthesized_noise_and_the_grades_bias() -> None:
 
 def test_the_outages_remove_the_gnss_rows_inside_the_windows_only() -> None:
     tables, _ = _base()
-    gapped = rs.with_outages(tables)
-    windows = rs.outage_windows(tables)
+    gapped = gr.with_outages(tables)
+    windows = gr.outage_windows(tables)
     assert [(b - a) / NS for a, b in windows] == [10.0, 30.0, 60.0]
     for name in ("gnss", "gnss_obs"):
         t = tables[name].column("t_ns").to_numpy()
@@ -85,13 +86,13 @@ def test_the_outages_remove_the_gnss_rows_inside_the_windows_only() -> None:
 
 def test_a_cell_without_covariance_or_with_a_declared_imu() -> None:
     tables, sensors = _base()
-    bare, sens = rs.prepare(tables, sensors, rs.Cell("consumer", 0.0, False))
-    for col in rs.COV_COLUMNS:
+    bare, sens = gr.prepare(tables, sensors, gr.Cell("consumer", 0.0, False))
+    for col in gr.COV_COLUMNS:
         assert bare["gnss"].column(col).null_count == bare["gnss"].num_rows
-    for col in rs.OBS_COV_COLUMNS:
+    for col in gr.OBS_COV_COLUMNS:
         assert bare["gnss_obs"].column(col).null_count == bare["gnss_obs"].num_rows
     assert sens.imu_noise is None
-    _, decl = rs.prepare(tables, sensors, rs.Cell("consumer", 0.0, True, declared=True))
+    _, decl = gr.prepare(tables, sensors, gr.Cell("consumer", 0.0, True, declared=True))
     assert decl.imu_noise is not None
     assert decl.imu_noise.gyro_bias_sigma_radps == pytest.approx(math.radians(1.0))
 
@@ -151,3 +152,25 @@ def test_the_script_writes_every_run_and_prints_the_tables(
     assert "consumer white cov 1/100Hz" in printed
     assert "recovery" in printed
     assert "2 runs" in printed
+
+
+def _outcome(cell: gr.Cell, name: str, status: str, ratio: float, sigma: float) -> rs.Outcome:
+    return rs.Outcome(cell, 1, name, "nominal", status, "", ratio, 1.0, 1.0, sigma)
+
+
+def test_the_acceptance_points_are_the_issues() -> None:
+    """Loose coupling: 0.8 x the raw fixes on white cells, 1.0 x on correlated ones; tight:
+    1.0 x SPP; ``ok`` with an error over 10x its 3 sigma fails, another status does not."""
+    white, tau10 = gr.BASE, gr.Cell("consumer", 10.0, True)
+    assert _outcome(white, "lc_ekf", "ok", 0.85, 1.0).accuracy_ok() is False
+    assert _outcome(tau10, "lc_ekf", "ok", 0.85, 1.0).accuracy_ok() is True
+    assert _outcome(tau10, "fwekf", "ok", 1.05, 1.0).accuracy_ok() is False
+    assert _outcome(white, "tc_ukf_nhc", "ok", 0.95, 1.0).accuracy_ok() is True
+    assert _outcome(white, "tc_ekf", "ok", 0.5, 12.0).integrity_ok() is False
+    assert _outcome(white, "tc_ekf", "inconsistent", 0.5, 12.0).integrity_ok() is True
+    assert _outcome(white, "tc_ekf", "ok", 0.5, 9.0).integrity_ok() is True
+    counts = rs.pass_counts(
+        [_outcome(white, "lc_ekf", "ok", 0.5, 1.0), _outcome(white, "lc_ekf", "ok", 0.9, 1.0)],
+        ["lc_ekf"],
+    )
+    assert counts[0] == ["accuracy", "1/2 (0/1)", "1/2 (0/1)"]
