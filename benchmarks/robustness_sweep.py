@@ -30,9 +30,10 @@ integrity monitor (``ins.run.decode``), twice per cell and seed:
   for tight coupling; both at the antenna against the truth's antenna: ``_robustness``), their
   ratio, the NEES of position, velocity and attitude per dof (``compute_metrics``), the status;
 - ``outages``: the ``gnss`` and ``gnss_obs`` rows inside ``OUTAGES`` removed
-  (``scenarios.apply.apply_scenario``); per window, the first returning epoch with an accepted
-  fix (loose) or pseudorange epoch (tight), whether the stream was reset, and the largest
-  horizontal error over its own 3 sigma inside the window.
+  (``scenarios.apply.apply_scenario``); per window, the first returning epoch (1: the first
+  one back) with an accepted fix position (loose) or satellite block (a pseudorange and its
+  rate; tight) in the run's innovation log, whether the stream was reset (``gate_reset``)
+  before it, and the largest horizontal error over its own 3 sigma inside the window.
 
 Acceptance (issue 22), per run: ``accuracy`` (nominal): loose ratio <= 0.8 on white cells,
 <= 1.0 on correlated ones, tight <= 1.0; ``integrity`` (both runs): not ``ok`` with a
