@@ -50,7 +50,7 @@ import argparse
 import itertools
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -81,6 +81,7 @@ from navreplay.pipeline.estimation.ins.run import decode
 from navreplay.pipeline.params import Params, load_params
 
 FILTERS = (*INS_FILTERS, "fwekf")
+SCENARIOS = ("nominal", "outages")
 #: acceptance bounds of issue 22
 LOOSE_WHITE_RATIO, LOOSE_CORRELATED_RATIO, TIGHT_RATIO = 0.8, 1.0, 1.0
 SIGMA_RATIO_MAX = 10.0
@@ -309,8 +310,8 @@ STATUS_LETTER = {"ok": "o", "inconsistent": "i", "diverged": "d", "not_aligned":
 
 def _cell_entry(runs: Sequence[Outcome]) -> str:
     """A filter's runs on one cell: worst ratio, NEES/dof furthest from 1, slowest recovery
-    (``x``: a window never recovered), the statuses (o k, i nconsistent, d iverged, n ot
-    aligned), ``!`` if any acceptance point fails."""
+    (``x``: a window never recovered), the statuses nominal / with outages (o k,
+    i nconsistent, d iverged, n ot aligned), ``!`` if any acceptance point fails."""
     nominal = [o for o in runs if o.scenario == "nominal"]
     ratio = max((o.ratio for o in nominal), default=math.nan, key=_nan_last)
     nees = max(
@@ -320,9 +321,13 @@ def _cell_entry(runs: Sequence[Outcome]) -> str:
     )
     recs = [w.recovery_epochs for o in runs for w in o.windows]
     rec = "x" if None in recs else str(max((r for r in recs if r is not None), default=0))
-    statuses = "".join(sorted({STATUS_LETTER.get(o.status, "?") for o in runs}, key="oidn".find))
+    statuses = "/".join(_letters(o for o in runs if o.scenario == s) for s in SCENARIOS)
     bad = any(_fails(o) for o in runs)
     return f"{ratio:.2f} {nees:.2g} r{rec} {statuses}{'!' if bad else ''}"
+
+
+def _letters(runs: Iterable[Outcome]) -> str:
+    return "".join(sorted({STATUS_LETTER.get(o.status, "?") for o in runs}, key="oidn?".find))
 
 
 def _nan_last(v: float) -> float:
@@ -347,9 +352,10 @@ def summarize(outcomes: Sequence[Outcome], filters: Sequence[str]) -> list[list[
     by: dict[Cell, dict[str, list[Outcome]]] = {}
     for o in outcomes:
         by.setdefault(o.cell, {}).setdefault(o.filter, []).append(o)
+    order = {c: k for k, c in enumerate(grid())}
     return [
         [cell.label(), *(_cell_entry(runs.get(f, [])) for f in filters)]
-        for cell, runs in by.items()
+        for cell, runs in sorted(by.items(), key=lambda kv: order.get(kv[0], len(order)))
     ]
 
 
@@ -394,8 +400,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     write_csv(args.csv, [o.row() for o in outcomes])
     print(
         "per filter: worst nominal RMS / reference, NEES/dof furthest from 1, slowest recovery "
-        "(first accepted epoch back; x never), statuses (o ok, i inconsistent, d diverged, "
-        "n not aligned), ! an acceptance point fails"
+        "(first accepted epoch back; x never), statuses nominal/outages (o ok, i inconsistent, "
+        "d diverged, n not aligned), ! an acceptance point fails"
     )
     print_table(("cell", *args.filters), summarize(outcomes, args.filters))
     print()
