@@ -36,12 +36,9 @@ is under 3 deg (5 deg on the 5 m cells without receiver velocity).
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import itertools
-import logging
 import math
-import multiprocessing
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -50,16 +47,20 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from benchmarks._drives import FILTERS as FILTERS
+from benchmarks._drives import REPO as REPO
+from benchmarks._drives import Tables as Tables
+from benchmarks._drives import add_imu_bias, bias_signs, pool_map, write_csv
+from benchmarks._drives import filter_params as filter_params
+from benchmarks._drives import without_velocity as without_velocity
 from benchmarks._table import print_table
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.estimation.ins.config import InsFilterParams
 from navreplay.pipeline.estimation.ins.models import ins
 from navreplay.pipeline.estimation.ins.replay import RunResult, run_filter
 from navreplay.pipeline.params import Params, load_params
 from navreplay.pipeline.synth import car_drives
 from navreplay.pipeline.synth.seoul_params import SeoulCampusParams
 
-REPO = Path(__file__).resolve().parents[1]
 KINDS = {
     "static": "car_stop_and_go",
     "rolling": "car_rolling_start",
@@ -67,7 +68,6 @@ KINDS = {
 }
 BIASES_DPS = (0.01, 0.1, 0.3, 1.0)
 NOISES_M = (0.5, 1.5, 5.0)
-FILTERS = ("lc_ekf", "lc_ekf_nhc", "tc_ekf", "tc_ekf_nhc", "tc_ukf", "tc_ukf_nhc")
 #: the first sustained motion: the truth's horizontal speed above this ...
 MOTION_SPEED_MPS = 0.5
 #: ... for this long, s
@@ -142,9 +142,6 @@ class Outcome:
         }
 
 
-Tables = dict[str, pa.Table]
-
-
 def grid(kinds: Iterable[str] = tuple(KINDS)) -> list[Cell]:
     """Every cell of the grid over ``kinds``."""
     return [
@@ -191,31 +188,11 @@ def with_bias(
 ) -> tuple[Tables, SensorMeta]:
     """The IMU with a constant gyro bias of ``+-bias_dps`` per axis (signs from ``seed``), the
     truth's bias columns with it, and the declared gyro bias 1-sigma ``bias_dps``."""
-    signs = np.random.default_rng(np.random.SeedSequence([seed, 21])).choice([-1.0, 1.0], 3)
-    b = math.radians(bias_dps) * signs
-    imu, truth = tables["imu"], tables["truth"]
-    for j, axis in enumerate("xyz"):
-        col = f"gyro_{axis}_radps"
-        imu = imu.set_column(
-            imu.column_names.index(col), col, pa.array(imu.column(col).to_numpy() + b[j])
-        )
-        col = f"gyro_bias_{axis}_radps"
-        truth = truth.set_column(
-            truth.column_names.index(col), col, pa.array(truth.column(col).to_numpy() + b[j])
-        )
+    b = math.radians(bias_dps) * bias_signs(seed, 21)
+    biased = add_imu_bias(tables, b, np.zeros(3))
     assert sensors.imu_noise is not None
     noise = dataclasses.replace(sensors.imu_noise, gyro_bias_sigma_radps=math.radians(bias_dps))
-    return dict(tables, imu=imu, truth=truth), dataclasses.replace(sensors, imu_noise=noise)
-
-
-def without_velocity(tables: Tables) -> Tables:
-    """The gnss table with its receiver velocity (and speed accuracy) null."""
-    g = tables["gnss"]
-    for col in ("vel_n_mps", "vel_e_mps", "vel_d_mps", "speed_acc_mps"):
-        g = g.set_column(
-            g.column_names.index(col), g.schema.field(col), pa.nulls(g.num_rows, pa.float64())
-        )
-    return dict(tables, gnss=g)
+    return biased, dataclasses.replace(sensors, imu_noise=noise)
 
 
 def first_motion_ns(truth: pa.Table, imu_t0_ns: int, kind: str) -> int:
@@ -290,14 +267,6 @@ def measure(cell: Cell, seed: int, r: RunResult, truth: pa.Table, t_motion: int)
     )
 
 
-def filter_params(params: Params, name: str) -> InsFilterParams:
-    """``filters.<name>`` of params.yaml, divergence flagged instead of raised."""
-    p = params.filters.get(name)
-    return dataclasses.replace(
-        p, divergence=dataclasses.replace(p.divergence, on_divergence="flag")
-    )
-
-
 def run_cells(
     params: Params,
     kind: str,
@@ -326,12 +295,6 @@ def run_cells(
     return out
 
 
-def _quiet() -> None:
-    """The filters' own warnings (a divergence, no alignment) are in the outcomes already: a
-    worker process leaves them out (the calling process's logging is left alone)."""
-    logging.getLogger("navreplay").setLevel(logging.ERROR)
-
-
 def _task(args: tuple[str, float, int, tuple[Cell, ...], tuple[str, ...], bool]) -> list[Outcome]:
     kind, noise, seed, cells, filters, white = args
     return run_cells(
@@ -353,10 +316,7 @@ def sweep(
         (k, n, s, tuple(cells), tuple(filters), white)
         for (k, n), s in itertools.product(groups, seeds)
     ]
-    if workers <= 1:
-        return [o for t in tasks for o in _task(t)]
-    with multiprocessing.get_context("spawn").Pool(min(workers, 2), initializer=_quiet) as pool:
-        return [o for part in pool.imap(_task, tasks) for o in part]
+    return pool_map(_task, tasks, workers)
 
 
 def summarize(outcomes: Sequence[Outcome]) -> list[list[object]]:
@@ -412,14 +372,6 @@ HEADERS = (
 )
 
 
-def write_csv(path: Path, outcomes: Sequence[Outcome]) -> None:
-    rows = [o.row() for o in outcomes]
-    with path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0] if __doc__ else "")
     parser.add_argument("--csv", type=Path, required=True, help="write every run here")
@@ -441,7 +393,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         workers=args.workers,
         white=args.white_fixes,
     )
-    write_csv(args.csv, outcomes)
+    write_csv(args.csv, [o.row() for o in outcomes])
     print_table(HEADERS, summarize(outcomes))
     failed = sum(not o.passed for o in outcomes)
     print(
