@@ -74,6 +74,7 @@ from benchmarks._robustness_grid import (
 from benchmarks._table import print_table
 from navreplay.ingest.meta import SensorMeta
 from navreplay.pipeline.estimation.ins.config import FILTER_KINDS
+from navreplay.pipeline.estimation.ins.inputs import prepare_fixes, prepare_obs
 from navreplay.pipeline.estimation.ins.metrics import compute_metrics
 from navreplay.pipeline.estimation.ins.models import measurement as me
 from navreplay.pipeline.estimation.ins.replay import run_filter
@@ -219,10 +220,15 @@ def run_one(
     sensors: SensorMeta,
     refs: References,
     windows: Sequence[tuple[int, int]] = (),
+    log: Tables | None = None,
 ) -> Outcome:
-    """Run filter ``name`` on ``tables`` (outages: ``windows`` were removed) and measure it."""
+    """Run filter ``name`` on ``tables`` (outages: ``windows`` were removed) and measure it;
+    its noise models learned from ``log`` (the whole log's tables, as the pipeline's scenario
+    runs learn them) where given."""
     section = filter_params(params, name)
-    result = run_filter(tables, sensors, name, section)
+    noise = None if log is None else prepare_fixes(log["gnss"], section.gnss).noise
+    obs_noise = None if log is None else prepare_obs(log["gnss_obs"], section.gnss).noise
+    result = run_filter(tables, sensors, name, section, fix_noise=noise, obs_noise=obs_noise)
     truth = tables["truth"]
     metrics = compute_metrics(result, truth)
     run = decode(result, metrics, (), section.integrity)
@@ -279,7 +285,7 @@ def run_group(
         gapped = with_outages(nominal)
         for name in filters:
             out.append(run_one(params, cell, seed, name, nominal, sens, refs))
-            out.append(run_one(params, cell, seed, name, gapped, sens, refs, windows))
+            out.append(run_one(params, cell, seed, name, gapped, sens, refs, windows, nominal))
     return out
 
 

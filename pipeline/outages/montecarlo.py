@@ -38,8 +38,8 @@ from navreplay.pipeline.estimation.core.windows import (
 )
 from navreplay.pipeline.estimation.ins.alignment import Alignment
 from navreplay.pipeline.estimation.ins.config import InsFilterParams
-from navreplay.pipeline.estimation.ins.fixnoise import FixNoise
-from navreplay.pipeline.estimation.ins.inputs import prepare_fixes
+from navreplay.pipeline.estimation.ins.fixnoise import FixNoise, ObsNoise
+from navreplay.pipeline.estimation.ins.inputs import prepare_fixes, prepare_obs
 from navreplay.pipeline.estimation.ins.replay import RunResult, run_filter
 from navreplay.pipeline.estimation.ins.tracks import (
     fixes_track,
@@ -90,6 +90,7 @@ class Job:
     mask_deg: float
     metrics: WindowMetricsParams
     fix_noise: FixNoise | None = None  # learned from the whole log, not a window's slice
+    obs_noise: ObsNoise | None = None
 
 
 def draw_starts(
@@ -174,7 +175,7 @@ def replay_start(job: Job, start: Start) -> list[dict[str, Any]]:
         t_wall = time.perf_counter()
         r = run_filter(
             applied.tables, job.sensors, job.name, job.params, backend=job.backend,
-            initial=initial, fix_noise=job.fix_noise,
+            initial=initial, fix_noise=job.fix_noise, obs_noise=job.obs_noise,
         )  # fmt: skip
         t_run = time.perf_counter() - t_wall
         if job.track.reference == "truth":
@@ -269,6 +270,7 @@ def run_montecarlo(
         mask_deg,
         metrics,
         prepare_fixes(tables["gnss"], flagged.gnss).noise if "gnss" in tables else None,
+        prepare_obs(tables["gnss_obs"], flagged.gnss).noise if "gnss_obs" in tables else None,
     )
     t_wall = time.perf_counter()
     rows: list[dict[str, Any]] = []

@@ -110,6 +110,7 @@ def noise_rows(runs: Sequence[Run]) -> list[Row]:
     seen: set[str] = set()
     for r in runs:
         imu, fix = r.metrics.get("imu_noise") or {}, r.metrics.get("fix_noise") or {}
+        obs = r.metrics.get("obs_noise") or {}
         if r.filter in seen or not (imu or fix):
             continue
         seen.add(r.filter)
@@ -125,6 +126,8 @@ def noise_rows(runs: Sequence[Run]) -> list[Row]:
             "sigma_h": fix.get("sigma_h_m"),
             "reported_h": fix.get("reported_h_m"),
             "why": fix.get("reason"),
+            "pr": obs.get("pseudorange_sigma_m"),
+            "pr_source": obs.get("source"),
         })  # fmt: skip
     return rows
 
@@ -139,7 +142,8 @@ def noise(runs: Sequence[Run]) -> str:
             ("accel", "accel m/s²/√Hz"), ("fix_source", "fix errors"), ("tau", "corr. time s"),
             ("inflation", "variance x"), ("sigma_source", "fix σ from"),
             ("sigma_h", "learned σ_h m"), ("reported_h", "reported σ_h m"),
-            ("why", "why"))  # fmt: skip
+            ("why", "why"), ("pr_source", "pseudorange σ from"),
+            ("pr", "learned pseudorange σ m"))  # fmt: skip
     return h.table(rows, cols) + h.para(
         "IMU noise: the dataset's declared model, else params.yaml's fallback floored by the "
         "noise the log's own samples show. Fix errors: their correlation time learned from the "
@@ -147,7 +151,8 @@ def noise(runs: Sequence[Run]) -> str:
         "else filters.<name>.gnss.pos_error_corr_time_s; a fix's variance is multiplied by "
         "the inflation for it. The fix σ is the receiver's reported accuracy where it gives "
         "one, else the learned one, else the default. Tight coupling fuses pseudoranges and "
-        "has no fix-error model.",
+        "has no fix-error model; their σ is the table's where given, else learned from the "
+        "log's single-point residuals.",
         "note",
     )
 

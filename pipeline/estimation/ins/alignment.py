@@ -268,6 +268,22 @@ def _static_window(
     return lo + start, lo + end
 
 
+def _tilt_absorbs_accel_bias(P0: F64, x0: F64, sigma_ba: float, g: float) -> None:
+    """Add to ``P0`` what levelling the measured specific force leaves: the accelerometer
+    bias ``b`` (body) is in it, so the tilt errors are ``att_n = (C_nb b)_e / g`` and
+    ``att_e = -(C_nb b)_n / g`` (error = truth ``[-]`` estimate, rotation vector in the nav
+    frame, as ``models.ins``), fully correlated with the bias errors. Without the correlation
+    the velocity updates, which see only the sum, shrink both sigmas while neither error is
+    observed: with a 0.5 m/s^2 bias the tilt sat 5 sigma off for a minute."""
+    c = Rotation.from_quat(x0[ins.X_Q : ins.X_Q + 4][[1, 2, 3, 0]]).as_matrix()
+    m = np.vstack([c[1], -c[0]]) / g  # (att_n, att_e) per unit body bias
+    var = sigma_ba * sigma_ba
+    a, b = ins.E_ATT, ins.E_BA
+    P0[a : a + 2, a : a + 2] += var * (m @ m.T)
+    P0[a : a + 2, b : b + 3] = var * m
+    P0[b : b + 3, a : a + 2] = var * m.T
+
+
 def _gyro_bias_sigma(noise: ImuNoise, static_s: float) -> float:
     """The gyro bias 1-sigma at the start: the prior, or where a rest of ``static_s`` measured
     the bias, what averaging the gyro noise over it leaves plus the shift a bias measured at
@@ -708,6 +724,7 @@ def _finish(
     d += [_gyro_bias_sigma(noise, static_s)] * 3
     d += [init.clock_bias_sigma_m, init.clock_drift_sigma_mps]
     P0 = np.diag(np.square(d[:n]))
+    _tilt_absorbs_accel_bias(P0, x0, noise.accel_bias_sigma_mps2, gravity(lat, h_ant))
     method += "+static_gyro_bias" if static_s else ""
     speed = math.hypot(x0[ins.X_VEL], x0[ins.X_VEL + 1])
     log.info("aligned at t=%d ns: %s, speed %.1f m/s, yaw sigma %.1f deg", t0, method, speed,

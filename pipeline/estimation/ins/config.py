@@ -70,7 +70,7 @@ class InitParams:
     align_sigmas: float = 5.0
     align_epochs: int = 3
     static_window_s: float = 2.0
-    static_accel_tol_mps2: float = 0.3
+    static_accel_tol_mps2: float = 0.6
     static_gyro_tol_radps: float = 0.05
     pos_sigma_m: float = 3.0
     vel_sigma_mps: float = 0.3

@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.optimize import nnls
 
+from navreplay.ingest.gnss import spp
 from navreplay.pipeline.estimation.ins.config import GnssNoiseParams
 from navreplay.pipeline.estimation.ins.models import measurement as me
 from navreplay.pipeline.nav import earth
@@ -268,3 +269,83 @@ def learn(t_ns: I64, fix: F64, reported_h: F64, gnss: GnssNoiseParams) -> FixNoi
         math.sqrt(two_s2 / 2.0), _vertical_sigma(t_ns, fix, pos, tau, dt, span), sig, rep,
         pairs,
     )  # fmt: skip
+
+
+#: epochs of pseudoranges used to learn their noise, at most (evenly spread over the log)
+MAX_OBS_EPOCHS = 600
+#: an epoch needs this many satellites (over the 4 unknowns) to say anything of the noise
+MIN_REDUNDANCY = 2
+
+
+@dataclass(frozen=True)
+class ObsNoise:
+    """The pseudorange and rate noise a tightly coupled run used, and where it came from.
+
+    Attributes:
+        pseudorange_sigma_m, rate_sigma_mps: the 1-sigmas learned (NaN if not learned).
+        source: ``reported`` (the table's per-observation sigmas), ``learned`` (single-point
+            residuals of the log's own epochs) or ``default``.
+        epochs: epochs the learned values come from.
+    """
+
+    pseudorange_sigma_m: float
+    rate_sigma_mps: float
+    source: str
+    epochs: int = 0
+
+    def as_dict(self) -> dict[str, object]:
+        """JSON-ready (NaN as None)."""
+        return {k: (None if isinstance(v, float) and math.isnan(v) else v)
+                for k, v in asdict(self).items()}  # fmt: skip
+
+
+def learn_obs(start: I64, obs: F64) -> ObsNoise:
+    """Pseudorange and rate 1-sigmas from the log's own epochs: the post-fit residuals of an
+    unweighted single-point solution (``ingest.gnss.spp``) over epochs with at least
+    ``MIN_REDUNDANCY`` satellites beyond the four unknowns, pooled as
+    ``sum(residual^2) / sum(m - 4)`` without the epochs more than 25x the median (a
+    multipath burst, a bad satellite). ``start``: first row of each epoch and the end;
+    ``obs``: the ``obs`` layout of ``models.measurement``."""
+    n_ep = start.size - 1
+    picks = np.unique(np.linspace(0, n_ep - 1, min(n_ep, MAX_OBS_EPOCHS)).astype(int))
+    pr_var, pr_dof, rate_var, rate_dof = [], [], [], []
+    x0 = np.zeros(spp.STATE_DIM)
+    for e in picks if n_ep > 0 else ():
+        rows = obs[start[e] : start[e + 1]]
+        ok = rows[:, me.OB_PR_OK] > 0
+        m = int(ok.sum())
+        if m < spp.STATE_DIM + MIN_REDUNDANCY:
+            continue
+        sat = rows[ok, me.OB_SAT : me.OB_SAT + 3]
+        x, _, _, conv = spp.solve_position(sat, rows[ok, me.OB_PR], np.ones(m), x0, 10, 1e-4)
+        if not conv:
+            continue
+        res = rows[ok, me.OB_PR] - (np.linalg.norm(sat - x[:3], axis=1) + x[3])
+        pr_var.append(float(res @ res))
+        pr_dof.append(m - spp.STATE_DIM)
+        okr = ok & (rows[:, me.OB_PRR_OK] > 0)
+        mr = int(okr.sum())
+        if mr < spp.STATE_DIM + MIN_REDUNDANCY:
+            continue
+        satr = rows[okr, me.OB_SAT : me.OB_SAT + 3]
+        vel = rows[okr, me.OB_SAT + 3 : me.OB_SAT + 6]
+        v, _ = spp.solve_velocity(satr, vel, rows[okr, me.OB_PRR], np.ones(mr), x[:3])
+        if np.all(np.isfinite(v)):
+            los = (satr - x[:3]) / np.linalg.norm(satr - x[:3], axis=1)[:, None]
+            pred = np.einsum("ij,ij->i", vel - v[:3], los) + v[3]
+            r = rows[okr, me.OB_PRR] - pred
+            rate_var.append(float(r @ r))
+            rate_dof.append(mr - spp.STATE_DIM)
+    sig_pr, n_pr = _pooled(pr_var, pr_dof)
+    sig_rate, _ = _pooled(rate_var, rate_dof)
+    return ObsNoise(sig_pr, sig_rate, "learned" if n_pr else "default", n_pr)
+
+
+def _pooled(ssr: list[float], dof: list[int]) -> tuple[float, int]:
+    """sqrt(sum ssr / sum dof) over the epochs within 25x the median ssr/dof, and their
+    number (NaN, 0 with fewer than 10)."""
+    if len(ssr) < 10:
+        return math.nan, 0
+    a, d = np.asarray(ssr), np.asarray(dof, float)
+    keep = a / d <= 25.0 * float(np.median(a / d))
+    return math.sqrt(float(a[keep].sum() / d[keep].sum())), int(keep.sum())

@@ -20,7 +20,7 @@ import pyarrow as pa
 from navreplay.ingest.schema import FixType
 from navreplay.pipeline.estimation.core.tables import B8, Event, _is_null, float_column
 from navreplay.pipeline.estimation.ins.config import GnssNoiseParams, StepParams
-from navreplay.pipeline.estimation.ins.fixnoise import FixNoise, learn
+from navreplay.pipeline.estimation.ins.fixnoise import FixNoise, ObsNoise, learn, learn_obs
 from navreplay.pipeline.estimation.ins.models import measurement as me
 from navreplay.pipeline.nav.earth import F64, I64
 
@@ -59,6 +59,7 @@ class ObsData:
     obs: F64
     events: tuple[Event, ...] = ()
     masked: int = 0
+    noise: ObsNoise | None = None
 
 
 @dataclass(frozen=True)
@@ -247,12 +248,16 @@ def corrected_observables(table: pa.Table) -> tuple[F64, F64]:
     return pr, rate + float_column(table, "sat_clock_drift_mps", 0.0)
 
 
-def prepare_obs(table: pa.Table, gnss: GnssNoiseParams) -> ObsData:
+def prepare_obs(table: pa.Table, gnss: GnssNoiseParams, noise: ObsNoise | None = None) -> ObsData:
     """Satellite observations -> corrected pseudoranges and rates grouped by epoch.
 
     ``pseudorange + sat_clock - iono - tropo`` and ``rate + sat_clock_drift`` (absent
     corrections count as zero, per the ``gnss_obs`` conventions); satellites below the
-    elevation mask are left out; NaN values skip that observable (F11).
+    elevation mask are left out; NaN values skip that observable (F11). Where the table has
+    no sigmas (a receiver or RINEX file that reports none) and ``gnss.learn_fix_noise``, they
+    are learned from the log's own single-point residuals (``fixnoise.learn_obs``) instead
+    of ``pseudorange_sigma_default_m``; ``noise``: values learned before (from the whole log,
+    where ``table`` is a scenario's or a window's part of it) instead.
     """
     t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)
     k = table.num_rows
@@ -291,10 +296,25 @@ def prepare_obs(table: pa.Table, gnss: GnssNoiseParams) -> ObsData:
     obs[~np.isfinite(obs)] = 0.0
     keep = (obs[:, me.OB_PR_OK] > 0) | (obs[:, me.OB_PRR_OK] > 0)
     t, obs = t[keep], obs[keep]
+    sig_pr, sig_prr = sig_pr[keep], sig_prr[keep]
     epoch_t, first = np.unique(t, return_index=True)
     start = np.append(first, t.size).astype(np.int64)
+    given = noise
+    noise = ObsNoise(math.nan, math.nan, "reported")
+    if not np.isfinite(sig_pr).all() and gnss.learn_fix_noise:  # none given: the log's own
+        noise = learn_obs(start, obs) if given is None else given
+        if math.isfinite(noise.pseudorange_sigma_m):
+            learned = max(noise.pseudorange_sigma_m, gnss.pseudorange_sigma_floor_m)
+            obs[:, me.OB_SIG_PR] = np.where(np.isfinite(sig_pr), obs[:, me.OB_SIG_PR], learned)
+        if math.isfinite(noise.rate_sigma_mps):
+            learned = max(noise.rate_sigma_mps, gnss.pseudorange_rate_sigma_floor_mps)
+            obs[:, me.OB_SIG_PRR] = np.where(np.isfinite(sig_prr), obs[:, me.OB_SIG_PRR], learned)
+    elif not np.isfinite(sig_pr).all():
+        noise = ObsNoise(math.nan, math.nan, "default")
     events.sort(key=lambda e: e.t_ns)
-    return ObsData(epoch_t, start, np.ascontiguousarray(obs), tuple(events), int(masked.sum()))
+    return ObsData(
+        epoch_t, start, np.ascontiguousarray(obs), tuple(events), int(masked.sum()), noise
+    )
 
 
 def build_schedule(

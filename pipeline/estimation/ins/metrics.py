@@ -63,6 +63,7 @@ def compute_metrics(
             "alignment": [a.summary() for a in result.alignments],
             "imu_noise": result.imu_noise,
             "fix_noise": result.fix_noise,
+            "obs_noise": result.obs_noise,
         }
     )
     if windows:

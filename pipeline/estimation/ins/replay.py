@@ -49,7 +49,7 @@ from navreplay.pipeline.estimation.ins.alignment import (
     why_not_aligned,
 )
 from navreplay.pipeline.estimation.ins.config import FILTER_KINDS, FilterKind, InsFilterParams
-from navreplay.pipeline.estimation.ins.fixnoise import FixNoise
+from navreplay.pipeline.estimation.ins.fixnoise import FixNoise, ObsNoise
 from navreplay.pipeline.estimation.ins.kernels.records import Fading, Schedule, Settings
 from navreplay.pipeline.estimation.ins.models import ins, ins_errors
 from navreplay.pipeline.estimation.ins.models import measurement as me
@@ -96,6 +96,7 @@ class RunResult:
         extra: filter-specific series (fwekf: ``alpha``).
         imu_noise: the IMU noise densities used and their ``source`` (``resolve_imu_noise``).
         fix_noise: the fix-error model a loosely coupled run used (``fixnoise.FixNoise``).
+        obs_noise: the pseudorange noise a tightly coupled run used (``fixnoise.ObsNoise``).
     """
 
     filter: str
@@ -116,6 +117,7 @@ class RunResult:
     extra: dict[str, Any] = field(default_factory=dict)
     imu_noise: dict[str, Any] = field(default_factory=dict)
     fix_noise: dict[str, Any] = field(default_factory=dict)
+    obs_noise: dict[str, Any] = field(default_factory=dict)
 
 
 def make_setup(
@@ -272,6 +274,7 @@ def run_filter(
     imu: inp.ImuData | None = None,
     initial: Alignment | None = None,
     fix_noise: FixNoise | None = None,
+    obs_noise: ObsNoise | None = None,
 ) -> RunResult:
     """Replay filter ``name`` over canonical tables (``imu`` + ``gnss`` or ``gnss_obs``).
 
@@ -287,6 +290,7 @@ def run_filter(
             (a known initial condition; Monte Carlo consistency tests draw it from ``P0``).
         fix_noise: the fix-error model to use (``fixnoise.learn`` on the whole log, where
             ``tables`` are a scenario's or a window's part of it); default: learned here.
+        obs_noise: the same for the pseudorange noise (``fixnoise.learn_obs``).
 
     Raises:
         ReplayInputError: a table the filter needs is missing.
@@ -299,7 +303,11 @@ def run_filter(
     noise_model, noise_source = resolve_imu_noise(params, sensors, imu_data)
     setup = make_setup(name, params, sensors, noise_model)
     fixes = inp.prepare_fixes(tables["gnss"], params.gnss, fix_noise) if "gnss" in tables else None
-    obs = inp.prepare_obs(tables["gnss_obs"], params.gnss) if "gnss_obs" in tables else None
+    obs = (
+        inp.prepare_obs(tables["gnss_obs"], params.gnss, obs_noise)
+        if "gnss_obs" in tables
+        else None
+    )
     mag = inp.prepare_mag(tables["mag"]) if "mag" in tables else None
     _require(tables, name, kind, fixes, obs)
     events = list(imu_data.events)
@@ -373,6 +381,11 @@ def run_filter(
         fix_noise=(
             fixes.noise.as_dict()
             if fixes is not None and fixes.noise is not None and kind.coupling == "loose"
+            else {}
+        ),
+        obs_noise=(
+            obs.noise.as_dict()
+            if obs is not None and obs.noise is not None and kind.coupling == "tight"
             else {}
         ),
     )

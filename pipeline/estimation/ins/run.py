@@ -20,7 +20,7 @@ from navreplay.pipeline.estimation.core.contract import (
 from navreplay.pipeline.estimation.core.integrity import IntegrityParams
 from navreplay.pipeline.estimation.core.windows import ErrorTrack
 from navreplay.pipeline.estimation.ins.config import FILTER_KINDS, InsFilterParams
-from navreplay.pipeline.estimation.ins.inputs import prepare_fixes
+from navreplay.pipeline.estimation.ins.inputs import prepare_fixes, prepare_obs
 from navreplay.pipeline.estimation.ins.metrics import compute_metrics
 from navreplay.pipeline.estimation.ins.outputs import estimate_table, innovations_table
 from navreplay.pipeline.estimation.ins.replay import RunResult, run_filter
@@ -51,11 +51,13 @@ class InsFamily:
     def run(
         self, inputs: RunInputs, name: str, section: InsFilterParams, backend: Backend
     ) -> RunOutput:
-        log_gnss = (inputs.log_tables or {}).get("gnss")
-        noise = None if log_gnss is None else prepare_fixes(log_gnss, section.gnss).noise
+        log = inputs.log_tables or {}
+        fixes, obs = log.get("gnss"), log.get("gnss_obs")
         result = run_filter(
-            inputs.tables, inputs.sensors, name, section, backend=backend, fix_noise=noise
-        )
+            inputs.tables, inputs.sensors, name, section, backend=backend,
+            fix_noise=None if fixes is None else prepare_fixes(fixes, section.gnss).noise,
+            obs_noise=None if obs is None else prepare_obs(obs, section.gnss).noise,
+        )  # fmt: skip
         metrics = compute_metrics(result, inputs.tables.get("truth"))
         metrics["dataset"] = inputs.dataset
         return decode(result, metrics, inputs.sources, section.integrity)

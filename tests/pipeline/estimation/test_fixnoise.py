@@ -13,6 +13,8 @@ from navreplay.pipeline.estimation.ins import fixnoise as fn
 from navreplay.pipeline.estimation.ins import inputs as inp
 from navreplay.pipeline.estimation.ins.config import GnssNoiseParams
 from navreplay.pipeline.estimation.ins.models import measurement as me
+from tests.pipeline.scenarios.drives import drive as scenario_drive
+from tests.pipeline.scenarios.drives import params
 
 LAT0, LON0, R = math.radians(37.5), math.radians(127.0), 6378137.0
 GNSS = GnssNoiseParams(pos_error_corr_time_s=30.0)
@@ -152,3 +154,25 @@ def test_learning_can_be_switched_off() -> None:
     assert noise is not None
     assert noise.source == "configured"
     assert noise.tau_s == 30.0
+
+
+def test_pseudorange_noise_is_learned_from_single_point_residuals_where_none_is_given() -> None:
+    tables, _ = scenario_drive(120.0)
+    gnss = params().filters.get("tc_ekf").gnss
+    obs = tables["gnss_obs"]
+    given = inp.prepare_obs(obs, gnss)
+    assert given.noise is not None
+    assert given.noise.source == "reported"
+    for c in ("pseudorange_std_m", "pseudorange_rate_std_mps"):
+        i = obs.column_names.index(c)
+        obs = obs.set_column(i, obs.schema.field(c), pa.nulls(obs.num_rows, pa.float64()))
+    learned = inp.prepare_obs(obs, gnss)
+    assert learned.noise is not None
+    assert learned.noise.source == "learned"
+    assert learned.noise.epochs > 100
+    # the synthesized receiver's own sigmas (elevation-dependent; their median)
+    pr = float(np.median(tables["gnss_obs"].column("pseudorange_std_m").to_numpy()))
+    rate = float(np.median(tables["gnss_obs"].column("pseudorange_rate_std_mps").to_numpy()))
+    assert learned.noise.pseudorange_sigma_m == pytest.approx(pr, rel=0.25)
+    assert learned.noise.rate_sigma_mps == pytest.approx(rate, rel=0.35)
+    np.testing.assert_allclose(learned.obs[:, me.OB_SIG_PR], learned.noise.pseudorange_sigma_m)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from navreplay.pipeline.estimation.core.windows import NS
-from navreplay.pipeline.estimation.ins.inputs import prepare_fixes
+from navreplay.pipeline.estimation.ins.inputs import prepare_fixes, prepare_obs
 from navreplay.pipeline.estimation.ins.metrics import compute_metrics
 from navreplay.pipeline.estimation.ins.replay import run_filter
 from navreplay.pipeline.outages.montecarlo import (
@@ -35,7 +35,8 @@ def full_replay(name: str, sats: int) -> dict[str, Any]:
     applied = apply_scenario(tables, "one", spec)
     section = params().filters.get(name)
     noise = prepare_fixes(tables["gnss"], section.gnss).noise
-    r = run_filter(applied.tables, sensors, name, section, fix_noise=noise)
+    obs_noise = prepare_obs(tables["gnss_obs"], section.gnss).noise
+    r = run_filter(applied.tables, sensors, name, section, fix_noise=noise, obs_noise=obs_noise)
     m = compute_metrics(
         r,
         tables["truth"],
