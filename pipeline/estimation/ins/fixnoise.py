@@ -255,14 +255,14 @@ def learn(t_ns: I64, fix: F64, reported_h: F64, gnss: GnssNoiseParams) -> FixNoi
         return configured(gnss, dt, "the fixes' differences resolved no error model", rep)
     tau, two_s2, _ = fit(lag_s, d_h, count)
     sig = "reported" if math.isfinite(rep) else "learned"
-    if tau > lag_s[-1]:  # not resolved: at least the longest lag, sigma unknown
+    if tau > lag_s[-1]:  # not resolved: at least the longest lag
         tau = max(float(lag_s[-1]), gnss.pos_error_corr_time_s)
-        return FixNoise(
-            tau, inflation(tau, dt), "learned",
-            f"fix errors correlated beyond the longest lag the log allows ({lag_s[-1]:.0f} s):"
-            f" {tau:.0f} s taken", sigma_source="reported" if sig == "reported" else "default",
-            reported_h_m=rep, pairs=pairs)  # fmt: skip
-    how = "white at the fix rate" if tau < dt else f"correlated over {tau:.1f} s"
+        # the variance the longest lag shows is 2 sigma^2 (1 - exp(-L / tau)) for the tau taken
+        two_s2 = float(d_h[-1]) / float(structure(tau, lag_s[-1:])[0])
+        how = (f"correlated beyond the longest lag the log allows ({lag_s[-1]:.0f} s): "
+               f"{tau:.0f} s taken")  # fmt: skip
+    else:
+        how = "white at the fix rate" if tau < dt else f"correlated over {tau:.1f} s"
     return FixNoise(
         tau, inflation(tau, dt), "learned",
         f"fix errors {how} (position against the integrated receiver velocity, {pairs} pairs)",

@@ -147,6 +147,19 @@ def test_a_log_too_short_for_its_correlation_takes_at_least_the_configured_time(
     assert "too few" in short.reason
 
 
+def test_a_correlation_beyond_the_longest_lag_still_gives_the_errors_size() -> None:
+    """tau 120 s over 6 minutes: the longest lag (120 s) shows 2 sigma^2 (1 - exp(-1)) of the
+    1.5 m errors; read with the tau taken it gives their size, not the 3 m default (which,
+    inflated x240, would leave a consumer IMU on its own for minutes). Three independent
+    samples of the error fit a shorter tau on some seeds: those take the other branch."""
+    beyond = [n for n in (learned(120.0, duration_s=360.0, seed=s) for s in range(3, 10))
+              if "beyond the longest lag" in n.reason]  # fmt: skip
+    assert len(beyond) >= 3
+    for noise in beyond:
+        assert noise.sigma_source == "learned"
+        assert 0.6 * 1.5 <= noise.sigma_h_m <= 1.6 * 1.5
+
+
 def test_learning_can_be_switched_off() -> None:
     t, cols = drive(0.0)
     off = GnssNoiseParams(pos_error_corr_time_s=30.0, learn_fix_noise=False)
