@@ -19,10 +19,11 @@ campus car's sensors changed per cell (``dataclasses.replace`` on ``SeoulCampusP
 - GNSS at 1 / 5 / 10 Hz and IMU at 25 / 100 / 400 Hz, one at a time around the base cell
   (consumer MEMS, white fixes, covariance given, 1 Hz GNSS, 100 Hz IMU).
 
-Every filter (``FILTERS``: the six INS filters and the fuzzy-adaptive ``fwekf``) runs through
-``estimation.ins.replay.run_filter`` with params.yaml's section (``on_divergence: flag``),
-measured with ``ins.metrics.compute_metrics`` and given its status by the run contract's
-integrity monitor (``ins.run.decode``), twice per cell and seed:
+Every filter (``FILTERS``: the six INS filters, the fuzzy-adaptive ``fwekf`` and the
+innovation-based adaptive ``iae_ekf``) runs through ``estimation.ins.replay.run_filter``
+with params.yaml's section (``on_divergence: flag``), measured with
+``ins.metrics.compute_metrics`` and given its status by the run contract's integrity monitor
+(``ins.run.decode``), twice per cell and seed:
 
 - ``nominal`` (all GNSS): horizontal RMS of the filter's IMU position against the truth at its
   output epochs (every ``step_s`` from the alignment), the reference's RMS over its epochs in
@@ -81,7 +82,7 @@ from navreplay.pipeline.estimation.ins.replay import run_filter
 from navreplay.pipeline.estimation.ins.run import decode
 from navreplay.pipeline.params import Params, load_params
 
-FILTERS = (*INS_FILTERS, "fwekf")
+FILTERS = (*INS_FILTERS, "fwekf", "iae_ekf")
 SCENARIOS = ("nominal", "outages")
 #: acceptance bounds of issue 22
 LOOSE_WHITE_RATIO, LOOSE_CORRELATED_RATIO, TIGHT_RATIO = 0.8, 1.0, 1.0

@@ -25,6 +25,7 @@ class FiltersParams:
     tc_ekf_nhc: InsFilterParams
     tc_ukf_nhc: InsFilterParams
     fwekf: InsFilterParams
+    iae_ekf: InsFilterParams
     vehicle_kinematic: VehicleFilterParams
     vehicle_dynamic: VehicleFilterParams
     vehicle_switched: VehicleFilterParams
@@ -47,6 +48,8 @@ class FiltersParams:
                 raise FieldError(f"{name}.ukf", "only UKF filters take a ukf section")
             if kind.fading != (section.fuzzy is not None):
                 raise FieldError(f"{name}.fuzzy", "fwekf needs a fuzzy section; no other filter")
+            if kind.iae != (section.iae is not None):
+                raise FieldError(f"{name}.iae", "iae_ekf needs an iae section; no other filter")
 
     def section(self, name: str) -> InsFilterParams | VehicleFilterParams | CascadedFilterParams:
         """The section of any filter ``name`` (its family's run takes it)."""

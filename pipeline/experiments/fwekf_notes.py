@@ -161,10 +161,25 @@ def _rms(r: Row) -> float:
 
 
 def _verdict(fw: float, base: float) -> str:
-    rel = fw / max(base, 1e-12) - 1.0
+    return _verdict_of("FWEKF", fw, base)
+
+
+def _verdict_of(who: str, value: float, base: float) -> str:
+    rel = value / max(base, 1e-12) - 1.0
     if abs(rel) < SAME_REL:
         return f"no material difference ({100 * rel:+.1f} %)"
-    return f"FWEKF {'hurts' if rel > 0 else 'helps'} ({100 * rel:+.1f} %)"
+    return f"{who} {'hurts' if rel > 0 else 'helps'} ({100 * rel:+.1f} %)"
+
+
+def _iae_sentence(iae: Row | None, same: Row) -> str:
+    """The innovation-based adaptive EKF on the same scenario, against alpha = 1."""
+    if iae is None:
+        return ""
+    verdict = _verdict_of("IAE", _rms(iae), _rms(same))
+    return (
+        f" The IAE (iae_ekf, R from the innovations) {_rms(iae):.2f} m, its horizontal fix "
+        f"variance x{_f(iae.get('r_scale_median'))} (median); against alpha = 1: {verdict}."
+    )
 
 
 def faults_note(rows: Sequence[Row], fz: Any) -> str:
@@ -197,6 +212,7 @@ def faults_note(rows: Sequence[Row], fz: Any) -> str:
             f"{fw['alpha_median']:.3f}, 95th percentile {fw['alpha_p95']:.3f}; gate rejections "
             f"/ resets {_gate(fw)} (alpha = 1: {_gate(same)}, lc_ekf: {_gate(lc)}), position "
             f"NIS mean {_f(fw['nis_pos_mean'])} (alpha = 1: {_f(same['nis_pos_mean'])})."
+            + _iae_sentence(by.get((scen, "iae_ekf")), same)
         )
     lines += [
         "",

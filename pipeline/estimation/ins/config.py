@@ -21,6 +21,7 @@ from navreplay.ingest.typed import FieldError
 from navreplay.pipeline.estimation.core.checks import positive
 from navreplay.pipeline.estimation.core.integrity import IntegrityParams
 from navreplay.pipeline.estimation.ins.fuzzy import FuzzyParams
+from navreplay.pipeline.estimation.ins.iae import IaeParams
 
 Estimator = Literal["ekf", "ukf"]
 Coupling = Literal["loose", "tight"]
@@ -378,6 +379,7 @@ class InsFilterParams:
         nhc: the non-holonomic constraint (required by and only by ``*_nhc`` filters).
         ukf: the unscented transform (required by and only by UKF filters).
         fuzzy: the fuzzy fading factor (required by and only by ``fwekf``, paper 004).
+        iae: the innovation-based adaptive R (required by and only by ``iae_ekf``).
         integrity: the integrity monitor's tests (``core.integrity``).
         standstill: standstill detection and the ZUPT / ZARU updates at rest.
     """
@@ -392,24 +394,32 @@ class InsFilterParams:
     nhc: NhcParams | None = None
     ukf: UkfParams | None = None
     fuzzy: FuzzyParams | None = None
+    iae: IaeParams | None = None
     integrity: IntegrityParams = field(default_factory=IntegrityParams)
     standstill: StandstillParams = field(default_factory=StandstillParams)
 
 
 @dataclass(frozen=True)
 class FilterKind:
-    """What a filter name means: estimator, coupling, NHC and fuzzy fading (paper 004)."""
+    """What a filter name means: estimator, coupling, NHC, and an adaptive weighting: the
+    fuzzy fading of paper 004 (``fading``) or the innovation-based adaptive R (``iae``)."""
 
     estimator: Estimator
     coupling: Coupling
     nhc: bool
     fading: bool = False
+    iae: bool = False
+
+    @property
+    def adaptive(self) -> bool:
+        """Run by the adaptive kernel (``kernels.fwekf``)."""
+        return self.fading or self.iae
 
     @property
     def numba_kernel(self) -> str:
         """``module:qualname`` of the numba kernel that runs this kind."""
         module, fn = (
-            ("fwekf", "run_fwekf") if self.fading else (self.estimator, f"run_{self.estimator}")
+            ("fwekf", "run_fwekf") if self.adaptive else (self.estimator, f"run_{self.estimator}")
         )
         return f"navreplay.pipeline.estimation.ins.kernels.{module}:{fn}"
 
@@ -422,4 +432,5 @@ FILTER_KINDS: dict[str, FilterKind] = {
     "tc_ekf_nhc": FilterKind("ekf", "tight", nhc=True),
     "tc_ukf_nhc": FilterKind("ukf", "tight", nhc=True),
     "fwekf": FilterKind("ekf", "loose", nhc=False, fading=True),
+    "iae_ekf": FilterKind("ekf", "loose", nhc=False, iae=True),
 }

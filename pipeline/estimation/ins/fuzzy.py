@@ -67,7 +67,11 @@ RULES = np.array([[Z, S, S], [S, L, S], [Z, NS, NS]], dtype=np.int64)
 
 FZ_MEAN_C, FZ_MEAN_S, FZ_COV_C, FZ_COV_S, FZ_OUT = 0, 3, 6, 9, 12
 FZ_SLOPE, FZ_AMIN, FZ_AMAX, FZ_WINDOW = 16, 17, 18, 19
-FZ_DIM = 20
+#: the adaptive kernel's mode (fuzzy fading, or ``iae``'s adaptive R: its bounds in
+#: FZ_AMIN / FZ_AMAX, the epochs before it adapts in FZ_START)
+FZ_MODE, FZ_START = 20, 21
+FZ_DIM = 22
+MODE_FUZZY, MODE_IAE = 0, 1
 
 
 @dataclass(frozen=True)

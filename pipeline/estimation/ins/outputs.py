@@ -112,6 +112,8 @@ def estimate_columns(result: RunResult) -> dict[str, np.ndarray]:
         cols[f"{name}_sigma_rad"] = np.sqrt(cov_e[:, j, j])
     if "alpha" in result.extra:
         cols["fading_alpha"] = result.extra["alpha"]  # fwekf: the fuzzy fading factor
+    if "r_scale" in result.extra:
+        cols["iae_r_scale"] = result.extra["r_scale"]  # iae_ekf: horizontal fix variance x
     extra = BIAS_COLUMNS + (CLOCK_COLUMNS if n > ins.N_LOOSE else ())
     for col, xi, ei, sig in extra:
         cols[col] = x[:, xi]

@@ -58,6 +58,7 @@ class _Run:
         self.t_cur = int(self.sched.t0)
         self.i = int(self.sched.i0)
         self.still = np.zeros(me.STILL_COLS)
+        self.r_scale = np.ones(me.K_PR)  # the fix rows' variance multipliers (iae_ekf)
         self.u = self.sched.u0.copy()
         self.step = ins.Stepping(self.cfg.substeps, self.cfg.max_step_s, self.cfg.gap_s)
         self.out = ins.span_work()
@@ -97,7 +98,7 @@ class _Run:
 
     def epoch(self, t: int, m: int, nb_: int) -> Epoch:
         """The epoch at ``t`` of ``m`` rows in ``nb_`` blocks (after ``advance`` to ``t``)."""
-        return Epoch(t, m, nb_, self.u[3:6].copy(), self.still.copy())
+        return Epoch(t, m, nb_, self.u[3:6].copy(), self.still.copy(), self.r_scale.copy())
 
     def predict_nominal(self, X: F64, t: int) -> None:
         """Propagate the nominal state ``X`` to ``t`` (the cursor moves with it), and the

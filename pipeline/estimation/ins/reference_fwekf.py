@@ -8,7 +8,9 @@ estimator arithmetic of paper 004 eq. 24-27 (see ``kernels.fwekf``): its predict
 state is zero before the predict, so ``F x`` is unaffected; filterpy's own fading ``alpha``
 refuses the values below 1 that Table 1's NS rule produces), and its update (Joseph form) is
 given ``R / alpha^2``, the measurement covariance of the weighted gain of eq. 24. Both use
-the fuzzy alpha at the stops that carry a fix and 1 elsewhere.
+the fuzzy alpha at the stops that carry a fix and 1 elsewhere. With ``iae.IaeParams`` the
+same driver runs ``iae_ekf``: alpha 1, the fix rows' variances multiplied in the front end
+by the innovation-based estimate (``kernels.fwekf``).
 """
 
 from __future__ import annotations
@@ -19,7 +21,14 @@ from filterpy.kalman import KalmanFilter
 from navreplay.pipeline.estimation.core import gating as gt
 from navreplay.pipeline.estimation.core import runlog as rl
 from navreplay.pipeline.estimation.core.runlog import RunLog
-from navreplay.pipeline.estimation.ins.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
+from navreplay.pipeline.estimation.ins.fuzzy import (
+    FZ_MODE,
+    FZ_WINDOW,
+    MODE_IAE,
+    infer_alpha,
+    residual_inputs,
+)
+from navreplay.pipeline.estimation.ins.iae import N_KINDS, iae_scales, push_innovations
 from navreplay.pipeline.estimation.ins.kernels.fwekf import RING_COLS, push_residuals
 from navreplay.pipeline.estimation.ins.kernels.records import Fading, Schedule, Settings
 from navreplay.pipeline.estimation.ins.models import measurement as me
@@ -43,13 +52,14 @@ def run_fwekf_filterpy(
     fz, out_alpha = fading.fz, fading.out_alpha
     kf = run.error_filter(KalmanFilter, P0)
     X = x0.copy()
-    ring = np.full((int(fz[FZ_WINDOW]), RING_COLS), np.nan)
+    iae = fz[FZ_MODE] == MODE_IAE
+    ring = np.full((int(fz[FZ_WINDOW]), 3 * N_KINDS if iae else RING_COLS), np.nan)
     n_ring, alpha = 0, 1.0
     out_alpha[0] = alpha
     gt.record_output(sched.t0, X, kf.P, log)
     for k, stop, t in run.stops():
         run.predict_nominal(X, t)
-        a_k = alpha if stop[me.ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
+        a_k = alpha if stop[me.ST_FIX] >= 0 and not iae else 1.0  # once per GNSS cycle
         kf.F, kf.Q = a_k * run.Phi, run.Qd.copy()  # eq. 26: (a Phi) P (a Phi)^T + Q
         kf.x = np.zeros(n)
         kf.predict()
@@ -60,7 +70,13 @@ def run_fwekf_filterpy(
             R_w = np.diag(buf.r[a]) / (a_k * a_k)  # eq. 24: R / alpha^2 in gain and Joseph
             kf.update(buf.nu[a].copy(), R=R_w, H=buf.H[a, :n].copy())
             run.inject(kf, X)
-        if m > 0 and stop[me.ST_FIX] >= 0:
+        if m > 0 and stop[me.ST_FIX] >= 0 and iae:
+            n_ring = int(
+                push_innovations(ring, n_ring, buf.rows, buf.nu, buf.S, buf.r, run.r_scale, m)
+            )
+            iae_scales(ring, n_ring, fz, run.r_scale)
+            alpha = float(run.r_scale[me.K_POS])
+        elif m > 0 and stop[me.ST_FIX] >= 0:
             n_ring = int(push_residuals(ring, n_ring, buf.rows, buf.nu, buf.S, m))
             rules = fuzzy_rules(fading.rules)
             alpha = float(infer_alpha(*residual_inputs(ring, n_ring), fz, rules))

@@ -50,6 +50,7 @@ from navreplay.pipeline.estimation.ins.alignment import (
 )
 from navreplay.pipeline.estimation.ins.config import FILTER_KINDS, FilterKind, InsFilterParams
 from navreplay.pipeline.estimation.ins.fixnoise import FixNoise, ObsNoise
+from navreplay.pipeline.estimation.ins.fuzzy import FZ_MODE, MODE_IAE
 from navreplay.pipeline.estimation.ins.kernels.records import Fading, Schedule, Settings
 from navreplay.pipeline.estimation.ins.models import ins, ins_errors
 from navreplay.pipeline.estimation.ins.models import measurement as me
@@ -65,7 +66,7 @@ class FilterSetup:
     name: str
     estimator: str
     settings: Settings
-    fuzzy: F64 | None = None
+    adaptive: F64 | None = None  # fwekf's fuzzy system or iae_ekf's window (``fuzzy.FZ_*``)
 
     @property
     def n(self) -> int:
@@ -159,7 +160,11 @@ def make_setup(
         [nhc.sigma_lateral_mps, nhc.sigma_vertical_mps] if nhc is not None else [1.0, 1.0]
     )
     gate = np.array([math.inf] + [float(chi2.ppf(g.probability, d)) for d in (1, 2, 3)])
-    fz = params.fuzzy.vector() if kind.fading and params.fuzzy is not None else None
+    fz = (
+        params.fuzzy.vector() if kind.fading and params.fuzzy is not None
+        else params.iae.vector() if kind.iae and params.iae is not None
+        else None
+    )  # fmt: skip
     settings = Settings(
         n=n,
         substeps=int(st.substeps),
@@ -248,6 +253,15 @@ def _table(tables: Mapping[str, pa.Table], name: str, filt: str) -> pa.Table:
 KernelFn = Callable[..., int]
 
 
+def _adaptive_series(setup: FilterSetup, parts: list[F64]) -> dict[str, Any]:
+    """The adaptive filters' series per output row: fwekf's fading factor ``alpha``, or
+    iae_ekf's multiplier of the horizontal fix variance ``r_scale``."""
+    if setup.adaptive is None or not parts:
+        return {}
+    key = "r_scale" if setup.adaptive[FZ_MODE] == MODE_IAE else "alpha"
+    return {key: np.concatenate(parts)}
+
+
 def kernel_for(kind: FilterKind, backend: Backend) -> KernelFn:
     """The function that runs a filter of ``kind`` on ``backend`` (a numba dispatcher for
     ``numba``)."""
@@ -255,7 +269,7 @@ def kernel_for(kind: FilterKind, backend: Backend) -> KernelFn:
         module, _, function = kind.numba_kernel.partition(":")
         kernel: KernelFn = getattr(importlib.import_module(module), function)
         return kernel
-    if kind.fading:
+    if kind.adaptive:
         from navreplay.pipeline.estimation.ins.reference_fwekf import run_fwekf_filterpy
 
         return run_fwekf_filterpy
@@ -372,7 +386,7 @@ def run_filter(
         runtime_s=time.perf_counter() - t_wall - compile_s,
         compile_s=compile_s,
         duration_s=duration,
-        extra={"alpha": np.concatenate(alphas)} if setup.fuzzy is not None and alphas else {},
+        extra=_adaptive_series(setup, alphas),
         imu_noise={
             "source": noise_source,
             "accel_noise_mps2_rthz": noise_model.accel_noise_mps2_rthz,
@@ -492,10 +506,10 @@ def _run_segment(
         """The kernel's arguments writing into ``log_``, and fwekf's alpha per output row."""
         out_alpha = np.ones(log_.capacity()[0])
         args: tuple[object, ...] = (al.x0, al.P0, sched, fix_arr, obs_arr, setup.settings)
-        if setup.fuzzy is not None:
+        if setup.adaptive is not None:
             from navreplay.pipeline.estimation.ins.fuzzy import RULES
 
-            args = (*args, Fading(setup.fuzzy, RULES, out_alpha))
+            args = (*args, Fading(setup.adaptive, RULES, out_alpha))
         return (*args, log_), out_alpha
 
     def run(log_: RunLog) -> tuple[int, F64]:

@@ -22,7 +22,7 @@ from navreplay.pipeline.synth.seoul_campus import simulate
 
 REPO = Path(__file__).resolve().parents[3]
 # The six filters of paper 001 (issue 5); fwekf (paper 004) has its own tests.
-ALL_FILTERS = tuple(name for name, kind in FILTER_KINDS.items() if not kind.fading)
+ALL_FILTERS = tuple(name for name, kind in FILTER_KINDS.items() if not kind.adaptive)
 
 
 @pytest.fixture(scope="session")

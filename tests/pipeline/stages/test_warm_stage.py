@@ -49,7 +49,7 @@ def test_groups_put_filters_that_share_a_kernel_together() -> None:
     every = groups()
     assert ("lc_ekf", "tc_ekf", "lc_ekf_nhc", "tc_ekf_nhc") in every  # one kernel
     assert ("tc_ukf", "tc_ukf_nhc") in every
-    assert ("fwekf",) in every
+    assert ("fwekf", "iae_ekf") in every  # one adaptive kernel
     assert sorted(n for g in every for n in g) == sorted(filter_names())  # each once
     assert groups(["tc_ukf", "lc_ekf"]) == [("lc_ekf",), ("tc_ukf",)]
     with pytest.raises(KeyError, match="unknown filter 'nope'"):

@@ -58,6 +58,7 @@ from navreplay.pipeline.estimation.ins.models.ins import (
 )
 from navreplay.pipeline.estimation.ins.models.ins_errors import transition
 from navreplay.pipeline.estimation.ins.models.measurement import (
+    K_PR,
     ST_OUT,
     ST_STILL,
     ST_T,
@@ -67,6 +68,7 @@ from navreplay.pipeline.estimation.ins.models.measurement import (
     epoch_layout,
     epoch_z,
     gate_shift,
+    scale_fix_rows,
 )
 from navreplay.pipeline.nav.earth import F64
 
@@ -93,11 +95,12 @@ def ekf_prepare(
     Returns:
         the number of accepted rows.
     """
-    t_ns, m, nb_, w_ib_b, _ = ep
+    t_ns, m, nb_, w_ib_b = ep.t_ns, ep.m, ep.nb, ep.w_ib_b
     n, lever_b, gate = cfg.n, cfg.lever_b, cfg.gate
     rows, blocks, z, r, nu, H, S = buf.rows, buf.blocks, buf.z, buf.r, buf.nu, buf.H, buf.S
     ref = X[:3].copy()
     epoch_z(rows, m, fix, obs, ref, cfg.nhc_sigma, ep.still, z, r)
+    scale_fix_rows(rows, m, ep.r_scale, r)
     dr = np.empty(m)
     gate_shift(rows, m, fix, r, dr)
     hx = np.empty(m)
@@ -148,6 +151,7 @@ def run_ekf(
     u = sched.u0.copy()
     buf = epoch_buffers(m_max, n, sched.t0)
     still = np.zeros(STILL_COLS)
+    unit = np.ones(K_PR)
     record_output(sched.t0, X, P, log)
     t_cur = sched.t0
     i = sched.i0
@@ -169,7 +173,8 @@ def run_ekf(
             stop, fix, obs, sched.obs_start, cfg.nhc_on, at_rest, buf.rows, buf.blocks
         )
         if m > 0:
-            ma = ekf_prepare(Epoch(t, m, nb_, u[3:6], still), X, P, fix, obs, cfg, buf, log)
+            ep = Epoch(t, m, nb_, u[3:6], still, unit)
+            ma = ekf_prepare(ep, X, P, fix, obs, cfg, buf, log)
             if ma > 0:
                 dx, ok = joseph_update(P, n, buf.H, buf.S, buf.r, buf.nu, buf.acc_rows, ma)
                 if ok:

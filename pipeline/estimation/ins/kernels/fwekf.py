@@ -36,6 +36,11 @@ not (the paper's fuzzy system is what judges the residuals; a gate that hid the 
 ones would blind it to exactly the faults it is meant to detect), enter a ring of the last
 ``window`` epochs; the fuzzy system (``estimation.fuzzy``: eq. 29-32, Table 1) turns the
 ring's mean and covariance into the alpha of the next cycle.
+
+The same kernel runs ``iae_ekf`` (``fz[FZ_MODE] == MODE_IAE``, ``ins.iae``): no fading
+(alpha = 1 throughout), and the fix rows' variances multiplied by the innovation-based
+estimate of R (``Epoch.r_scale``, in the gate as in the update), re-estimated after each fix;
+the multiplier of the horizontal position variance is recorded where fwekf records alpha.
 """
 
 from __future__ import annotations
@@ -54,7 +59,14 @@ from navreplay.pipeline.estimation.core.gating import (
 )
 from navreplay.pipeline.estimation.core.linalg import joseph_update
 from navreplay.pipeline.estimation.core.runlog import CNT_OUT, CNT_STOP, RunLog
-from navreplay.pipeline.estimation.ins.fuzzy import FZ_WINDOW, infer_alpha, residual_inputs
+from navreplay.pipeline.estimation.ins.fuzzy import (
+    FZ_MODE,
+    FZ_WINDOW,
+    MODE_IAE,
+    infer_alpha,
+    residual_inputs,
+)
+from navreplay.pipeline.estimation.ins.iae import N_KINDS, iae_scales, push_innovations
 from navreplay.pipeline.estimation.ins.kernels.common import (
     check_state,
     epoch_buffers,
@@ -79,6 +91,7 @@ from navreplay.pipeline.estimation.ins.models.ins import (
 )
 from navreplay.pipeline.estimation.ins.models.ins_errors import transition
 from navreplay.pipeline.estimation.ins.models.measurement import (
+    K_POS,
     K_PR,
     ST_FIX,
     ST_OUT,
@@ -153,7 +166,8 @@ def run_fwekf(
     log: RunLog,
 ) -> int:
     """Replay the FWEKF: ``kernels.ekf.run_ekf``'s arguments plus the fuzzy system
-    (``records.Fading``: its parameters, rules, and the alpha in force at each output row).
+    (``records.Fading``: its parameters, rules, and the alpha in force at each output row),
+    or with ``fading.fz`` of ``iae.IaeParams`` the IAE (module docstring).
 
     Returns:
         a ``common.STATUS_*`` code.
@@ -172,9 +186,11 @@ def run_fwekf(
     u = sched.u0.copy()
     buf = epoch_buffers(sched.m_max, n, sched.t0)
     still = np.zeros(STILL_COLS)
-    ring = np.full((int(fz[FZ_WINDOW]), RING_COLS), math.nan)
+    iae = fz[FZ_MODE] == MODE_IAE
+    ring = np.full((int(fz[FZ_WINDOW]), 3 * N_KINDS if iae else RING_COLS), math.nan)
     n_ring = 0
     alpha = 1.0
+    r_scale = np.ones(K_PR)
     out_alpha[0] = alpha
     record_output(sched.t0, X, P, log)
     t_cur = sched.t0
@@ -190,19 +206,24 @@ def run_fwekf(
             fill_still(still, sched.imu, i_prev, i, u[3:6], (t - t_cur) * 1e-9, cfg)
         t_cur = t
         transition(X, sw.acc, cfg.noise, n, Phi, Qd)
-        a_k = alpha if stop[ST_FIX] >= 0 else 1.0  # once per GNSS measurement cycle
+        a_k = alpha if stop[ST_FIX] >= 0 and not iae else 1.0  # once per GNSS cycle
         fade_prior(P, Phi, Qd, a_k)
         at_rest = rest_plausible(stop, X[X_VEL : X_VEL + 3], P, cfg)
         m, nb_ = epoch_layout(
             stop, fix, obs, sched.obs_start, cfg.nhc_on, at_rest, buf.rows, buf.blocks
         )
         if m > 0:
-            ma = ekf_prepare(Epoch(t, m, nb_, u[3:6], still), X, P, fix, obs, cfg, buf, log)
+            ep = Epoch(t, m, nb_, u[3:6], still, r_scale)
+            ma = ekf_prepare(ep, X, P, fix, obs, cfg, buf, log)
             if ma > 0:
                 dx, ok = weighted_update(P, n, buf, ma, a_k)
                 if ok:
                     inject(X, dx, n)
-            if stop[ST_FIX] >= 0:
+            if stop[ST_FIX] >= 0 and iae:
+                n_ring = push_innovations(ring, n_ring, buf.rows, buf.nu, buf.S, buf.r, r_scale, m)
+                iae_scales(ring, n_ring, fz, r_scale)
+                alpha = r_scale[K_POS]
+            elif stop[ST_FIX] >= 0:
                 n_ring = push_residuals(ring, n_ring, buf.rows, buf.nu, buf.S, m)
                 mean_in, cov_in = residual_inputs(ring, n_ring)
                 alpha = infer_alpha(mean_in, cov_in, fz, rules)

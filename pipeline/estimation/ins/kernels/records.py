@@ -159,6 +159,8 @@ class Epoch(NamedTuple):
         m, nb: rows and blocks it uses (``measurement.epoch_layout``).
         w_ib_b: the angular rate at the epoch, body, rad/s (3,) (antenna lever-arm velocity).
         still: the standstill rows' values (``measurement.STILL_COLS``).
+        r_scale: multipliers of the fix rows' variances per kind (``measurement.K_PR``,):
+            ones but in ``iae_ekf``, whose adaptive R they carry (``ins.iae``).
     """
 
     t_ns: int
@@ -166,6 +168,7 @@ class Epoch(NamedTuple):
     nb: int
     w_ib_b: F64
     still: F64
+    r_scale: F64
 
 
 class UkfState(NamedTuple):

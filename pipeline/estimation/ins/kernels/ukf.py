@@ -88,6 +88,7 @@ from navreplay.pipeline.estimation.ins.models.ins import (
 )
 from navreplay.pipeline.estimation.ins.models.ins_errors import transition
 from navreplay.pipeline.estimation.ins.models.measurement import (
+    K_PR,
     ST_OUT,
     ST_STILL,
     ST_T,
@@ -96,6 +97,7 @@ from navreplay.pipeline.estimation.ins.models.measurement import (
     epoch_layout,
     epoch_z,
     gate_shift,
+    scale_fix_rows,
 )
 from navreplay.pipeline.nav.earth import F64, I64
 from navreplay.pipeline.nav.mechanization import LANES, LN_DIM
@@ -170,7 +172,7 @@ def ukf_update(
     """Step 4 of the module docstring at epoch ``ep``, ``st`` updated in place; False if
     ``P`` was not positive definite."""
     n, wm, wc, gamma, gate = cfg.n, cfg.wm, cfg.wc, cfg.ukf_gamma, cfg.gate
-    t_ns, m, nb_, w_ib_b, still = ep
+    t_ns, m, nb_, w_ib_b, still, r_scale = ep
     s, P, q_ref = st
     lever_b, rows, blocks, sig, L = cfg.lever_b, buf.rows, buf.blocks, ws.sig, ws.L
     ns = 2 * n + 1
@@ -182,6 +184,7 @@ def ukf_update(
     z = np.empty(m)
     r = np.empty(m)
     epoch_z(rows, m, fix, obs, ref, cfg.nhc_sigma, still, z, r)
+    scale_fix_rows(rows, m, r_scale, r)
     dr = np.empty(m)
     gate_shift(rows, m, fix, r, dr)
     # predictions relative to the mean's: pseudoranges are ~2e7 m and their unscented average
@@ -298,6 +301,7 @@ def run_ukf(
     ws = sigma_work(n)
     buf = epoch_buffers(sched.m_max, n, sched.t0)
     still = np.zeros(STILL_COLS)
+    unit = np.ones(K_PR)
     ev_i, ev_f, counts = log.ev_i, log.ev_f, log.counts
     record_output(sched.t0, x0, P0, log)
     t_cur = sched.t0
@@ -321,7 +325,7 @@ def run_ukf(
             stop, fix, obs, sched.obs_start, cfg.nhc_on, at_rest, buf.rows, buf.blocks
         )
         if ok and m > 0:
-            ep = Epoch(t, m, nb_, u[3:6], still)
+            ep = Epoch(t, m, nb_, u[3:6], still, unit)
             ok = ukf_update(ep, st, fix, obs, cfg, buf, ws, log) and keep_pd(
                 P, n, ws.L, t, ev_i, ev_f, counts
             )

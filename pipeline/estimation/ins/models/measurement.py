@@ -192,6 +192,16 @@ def epoch_z(
 
 
 @njit(cache=True, error_model="numpy")
+def scale_fix_rows(rows: I64, m: int, r_scale: F64, r: F64) -> None:
+    """Multiply the fix rows' variances ``r`` by ``r_scale[kind]`` (``records.Epoch``: ones
+    but in the adaptive ``iae_ekf``), before the gate and the update see them."""
+    for k in range(m):
+        kind = rows[k, 0]
+        if kind < K_PR:
+            r[k] *= r_scale[kind]
+
+
+@njit(cache=True, error_model="numpy")
 def gate_shift(rows: I64, m: int, fix: F64 | None, r: F64, dr: F64) -> None:
     """Per row, the gating variance minus the update variance ``r`` (``dr[:m]``, <= 0).
 
