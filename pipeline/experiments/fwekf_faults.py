@@ -3,8 +3,9 @@
 GNSS faults of ``docs/bad-inputs.md`` as data transformations of the ``gnss`` table (seeded),
 then four filters on the same tables:
 
-- ``lc_ekf``: the project's loosely coupled EKF as configured (its GNSS model takes the fix
-  errors as correlated over 30 s and inflates each fix's variance by ``1 + 2 tau / dt``);
+- ``lc_ekf``: the project's loosely coupled EKF as configured (its GNSS model learns the fix
+  errors' correlation time from the log and inflates each fix's variance to match,
+  ``estimation.ins.fixnoise``);
 - ``lc_ekf_white``: the same EKF with ``fwekf``'s GNSS model (white fix errors), i.e. the
   FWEKF with alpha fixed at 1: the difference to ``fwekf`` is the fuzzy weighting alone;
 - ``fwekf``: the fuzzy-adaptive weighted EKF;

@@ -189,9 +189,11 @@ def faults_note(rows: Sequence[Row], fz: Any) -> str:
         "**Where the fuzzy weighting helps and where it does not** (`faults.csv`, "
         "seoul_campus_cw). `lc_ekf_white` is the FWEKF with alpha fixed at 1 (the same EKF, "
         "the same white-fix GNSS model), so `fwekf` against it isolates the weighting; "
-        "`lc_ekf` is the project's EKF, whose GNSS model takes fix errors as correlated over "
-        "30 s and inflates every fix variance about 61x at 1 Hz. Horizontal RMS over the "
-        "drive (inside the fault or outage windows where there are some):",
+        "`lc_ekf` is the project's EKF, whose GNSS model learns the fix errors' correlation "
+        "time from the log (its `fix_noise`) and inflates every fix variance by "
+        "(1 + phi) / (1 - phi); `iae_ekf` is the white-model EKF with its fix variances "
+        "estimated from its own innovations (the standard adaptive alternative). Horizontal "
+        "RMS over the drive (inside the fault or outage windows where there are some):",
         "",
     ]
     for scen in dict.fromkeys(r["scenario"] for r in rows):
@@ -236,10 +238,10 @@ def faults_note(rows: Sequence[Row], fz: Any) -> str:
         "Had the mean input stayed Zero (a reading that normalizes the mean by the windowed "
         'spread), the rule "mean Zero, covariance Large -> S" would have set alpha > 1, '
         "inflating P and dividing R by alpha^2, i.e. trusting the optimistic fixes *more*, "
-        "the wrong direction for F8. The larger F8 error of both white-model filters against "
-        "lc_ekf is the GNSS model, not the weighting: lc_ekf's correlated-fix inflation "
-        "(sigma about 3.9 m for the 0.5 m reported) comes closer to the 5 m errors, so it "
-        "rejects fewer fixes and resets less (rejections and resets above). (4) Outages: no "
+        "the wrong direction for F8. The IAE, which estimates the fix variance from the "
+        "innovations themselves, can supply that factor (its multiplier above); where its "
+        "multiplier is under 1 on the correlated nominal fixes, it has taken their slowly "
+        "wandering error for a small variance and follows it. (4) Outages: no "
         "fixes arrive, so there is no fading and no R scaling (alpha = 1 at the stops "
         "without a fix); the difference is the state each outage starts from, shaped by "
         "the weighting before it. One seeded "

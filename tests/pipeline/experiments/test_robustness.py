@@ -1,5 +1,6 @@
-"""`python -m benchmarks.robustness_sweep`: the cells are what they say, the outages remove the
-GNSS, the recovery is read from the run's records, and the CSV has every run."""
+"""The robustness sweep (``experiments.robustness``, ``navreplay experiment robustness``,
+``python -m benchmarks.robustness_sweep``): the cells are what they say, the outages remove
+the GNSS, the recovery is read from the run's records, and the files have every run."""
 
 from __future__ import annotations
 
@@ -11,21 +12,25 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks import _robustness as rb
-from benchmarks import _robustness_grid as gr
-from benchmarks import robustness_sweep as rs
-from benchmarks._drives import REPO, Tables
+from benchmarks import robustness_sweep as script
 from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.cli import main
 from navreplay.pipeline.estimation.core.tables import Event
 from navreplay.pipeline.estimation.ins.models import measurement as me
-from navreplay.pipeline.params import Params, load_params
+from navreplay.pipeline.experiments.drives import Tables
+from navreplay.pipeline.experiments.robustness import grid as gr
+from navreplay.pipeline.experiments.robustness import measure as rb
+from navreplay.pipeline.experiments.robustness import sweep as rs
+from navreplay.pipeline.params import load_params
 
 NS = 1_000_000_000
+REPO = Path(__file__).resolve().parents[3]
 
 
 @functools.cache
-def _params() -> Params:
-    return load_params(REPO / "params.yaml")
+def _params() -> gr.SweepParams:
+    p = load_params(REPO / "params.yaml")
+    return gr.SweepParams.of(p.synth.seoul_campus, p.synth.car_drives, p.filters)
 
 
 @functools.cache
@@ -132,7 +137,7 @@ def test_the_script_writes_every_run_and_prints_the_tables(
     out = tmp_path / "sweep.csv"
     argv = ["--csv", str(out), "--seeds", "1", "--workers", "1", "--cells", "base",
             "--filters", "lc_ekf"]  # fmt: skip
-    assert rs.main(argv) == 0
+    assert script.main(argv) == 0
     rows = list(csv.DictReader(out.open()))
     assert [(r["filter"], r["scenario"]) for r in rows] == [
         ("lc_ekf", "nominal"),
@@ -152,6 +157,29 @@ def test_the_script_writes_every_run_and_prints_the_tables(
     assert "consumer white cov 1/100Hz" in printed
     assert "recovery" in printed
     assert "2 runs" in printed
+
+
+def test_the_experiment_stage_writes_the_runs_the_tables_and_a_note(tmp_path: Path) -> None:
+    out = tmp_path / "robustness"
+    argv = ["experiment", "robustness", "--seeds", "1", "--workers", "1", "--cells", "base",
+            "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    runs = list(csv.DictReader((out / "runs.csv").open()))
+    assert {r["filter"] for r in runs} == set(rs.FILTERS)
+    assert len(runs) == 2 * len(rs.FILTERS)
+    cells = list(csv.DictReader((out / "cells.csv").open()))
+    assert [c["cell"] for c in cells] == [gr.BASE.label()]
+    points = {r["acceptance"]: r for r in csv.DictReader((out / "acceptance.csv").open())}
+    assert set(points) == {"accuracy", "integrity", "nees", "recovery"}
+    n = len(rs.FILTERS)
+    assert points["integrity"]["all"].split(" ")[0].endswith(f"/{2 * n}")  # both runs
+    assert points["recovery"]["all"].split(" ")[0].endswith(f"/{n}")  # the outage runs
+    note = (out / "note.md").read_text()
+    assert "| acceptance |" in note
+    assert gr.BASE.label() in note
+    bad = ["experiment", "robustness", "--cells", "no such cell", "--out", str(tmp_path / "x")]
+    assert main(bad) == 2
+    assert not (tmp_path / "x").exists()
 
 
 def _outcome(cell: gr.Cell, name: str, status: str, ratio: float, sigma: float) -> rs.Outcome:

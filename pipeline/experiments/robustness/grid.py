@@ -1,4 +1,4 @@
-"""The cells of the robustness sweep (``robustness_sweep``, whose docstring describes the
+"""The cells of the robustness sweep (``robustness.sweep``, whose docstring describes the
 grid): the IMU grades, a cell and the grid, the drive of a cell as tables, and the outage
 windows removed from it.
 """
@@ -8,17 +8,18 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
-from benchmarks._drives import Tables, add_imu_bias, bias_signs, with_nulls
 from navreplay.ingest.config import ImuNoise
 from navreplay.ingest.meta import SensorMeta
-from navreplay.pipeline.params import Params
+from navreplay.pipeline.estimation.config import FiltersParams
+from navreplay.pipeline.experiments.drives import Tables, add_imu_bias, bias_signs, with_nulls
 from navreplay.pipeline.scenarios.apply import apply_scenario
 from navreplay.pipeline.scenarios.config import ScenarioSpec
 from navreplay.pipeline.synth import car_drives
-from navreplay.pipeline.synth.seoul_params import ImuErrors
+from navreplay.pipeline.synth.car_drives import CarDriveParams
+from navreplay.pipeline.synth.seoul_params import ImuErrors, SeoulCampusParams
 
 DRIVE = "car_stop_and_go"
 DURATION_S = 360.0
@@ -154,10 +155,27 @@ def grid() -> list[Cell]:
     return cells
 
 
-def simulate(params: Params, cell: Cell, seed: int) -> tuple[Tables, SensorMeta]:
+@dataclass(frozen=True)
+class SweepParams:
+    """What the sweep reads of params.yaml: the campus car's sensors
+    (``synth.seoul_campus``), its stop-and-go drive (``synth.car_drives``) and the filters."""
+
+    campus: SeoulCampusParams
+    drive: CarDriveParams
+    filters: FiltersParams
+
+    @classmethod
+    def of(
+        cls, campus: SeoulCampusParams, drives: Mapping[str, CarDriveParams], filters: FiltersParams
+    ) -> SweepParams:
+        """From ``synth.seoul_campus``, ``synth.car_drives`` (its ``DRIVE``) and ``filters``."""
+        return cls(campus, drives[DRIVE], filters)
+
+
+def simulate(params: SweepParams, cell: Cell, seed: int) -> tuple[Tables, SensorMeta]:
     """The drive with the cell's IMU grade (its turn-on bias added), fix correlation and
     rates; covariance and declaration are ``prepare``'s."""
-    campus = params.synth.seoul_campus
+    campus = params.campus
     grade = GRADES[cell.grade]
     gnss = dataclasses.replace(campus.gnss, fix_tau_s=cell.fix_tau_s or WHITE_TAU_S)
     campus = dataclasses.replace(
@@ -167,7 +185,7 @@ def simulate(params: Params, cell: Cell, seed: int) -> tuple[Tables, SensorMeta]
         imu_rate_hz=cell.imu_hz,
         gnss_rate_hz=cell.gnss_hz,
     )
-    drive = dataclasses.replace(params.synth.car_drives[DRIVE], duration_s=DURATION_S)
+    drive = dataclasses.replace(params.drive, duration_s=DURATION_S)
     r = car_drives.simulate(DRIVE, campus, drive, seed=seed)
     tables = add_imu_bias(
         r.tables,
