@@ -16,6 +16,7 @@ from navreplay.pipeline.estimation.config import FiltersParams
 from navreplay.pipeline.estimation.ins.alignment import Alignment
 from navreplay.pipeline.estimation.ins.config import FILTER_KINDS, InsFilterParams
 from navreplay.pipeline.estimation.ins.models import ins
+from navreplay.pipeline.estimation.ins.replay import RunResult
 from navreplay.pipeline.nav.rotations import euler_to_quat
 from navreplay.pipeline.params import load_params
 from navreplay.pipeline.synth.seoul_campus import simulate
@@ -105,3 +106,15 @@ def drawn_start(
     x0[ins.X_BA : ins.X_BG + 3] = 0.0
     t0 = int(truth.column("t_ns")[k].as_py())
     return Alignment(t0, x0, np.diag(sigmas[:n] ** 2), "drawn", 0.0, 0.0)
+
+
+def assert_backends_agree(fast: RunResult, ref: RunResult) -> None:
+    """The numba and filterpy runs of one filter: the same output times, states within 1e-6
+    of their sigma, sigmas, innovation rows (times, streams, satellites, gating) and NIS."""
+    np.testing.assert_array_equal(fast.t_ns, ref.t_ns)
+    sigma = np.sqrt(np.diagonal(fast.P, axis1=1, axis2=2))
+    dx = np.array([ins.difference(ref.x[k], fast.x[k], fast.n) for k in range(fast.t_ns.size)])
+    assert np.max(np.abs(dx) / sigma) < 1e-6
+    np.testing.assert_allclose(np.sqrt(np.diagonal(ref.P, axis1=1, axis2=2)), sigma, rtol=1e-6)
+    np.testing.assert_array_equal(fast.inn_i, ref.inn_i)
+    np.testing.assert_allclose(fast.inn_f[:, 0], ref.inn_f[:, 0], rtol=1e-6, atol=1e-9)
