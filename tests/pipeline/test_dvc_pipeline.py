@@ -77,6 +77,15 @@ def test_changing_one_filter_reruns_only_its_runs_and_then_the_reports(tmp_path:
     expected |= {
         f"montecarlo@{d}-{f}" for d in prm.run.datasets for f in ukfs if f in prm.outages.filters
     }
+    # and the experiments that run them (the robustness sweep runs every INS filter)
+    stages = yaml.safe_load((REPO / "dvc.yaml").read_text())["stages"]
+    expected |= {
+        name
+        for name, stage in stages.items()
+        if "foreach" not in stage
+        and any(p in {f"filters.{f}" for f in ukfs} | {"filters"} for p in stage.get("params", []))
+    }
+    assert "experiment_robustness" in expected
     assert set(status) == expected
     # downstream of them (stages whose deps hold their outputs): the outage tables, the
     # reports of those datasets, the summary
