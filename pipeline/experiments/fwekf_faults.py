@@ -4,8 +4,8 @@ GNSS faults of ``docs/bad-inputs.md`` as data transformations of the ``gnss`` ta
 then four filters on the same tables:
 
 - ``lc_ekf``: the project's loosely coupled EKF as configured (its GNSS model learns the fix
-  errors' correlation time from the log and inflates each fix's variance to match,
-  ``estimation.ins.fixnoise``);
+  errors' correlation time from the log, ``estimation.ins.fixnoise``, and carries them as
+  Gauss-Markov states);
 - ``lc_ekf_white``: the same EKF with ``fwekf``'s GNSS model (white fix errors), i.e. the
   FWEKF with alpha fixed at 1: the difference to ``fwekf`` is the fuzzy weighting alone;
 - ``fwekf``: the fuzzy-adaptive weighted EKF;

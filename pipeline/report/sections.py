@@ -121,6 +121,7 @@ def noise_rows(runs: Sequence[Run]) -> list[Row]:
             "accel": imu.get("accel_noise_mps2_rthz"),
             "tau": fix.get("tau_s"),
             "inflation": fix.get("inflation"),
+            "states": fix.get("states_sigma_m") if fix.get("states") else None,
             "fix_source": fix.get("source"),
             "sigma_source": fix.get("sigma_source"),
             "sigma_h": fix.get("sigma_h_m"),
@@ -140,7 +141,8 @@ def noise(runs: Sequence[Run]) -> str:
         return ""
     cols = (("filter", "filter"), ("imu_source", "IMU noise from"), ("gyro", "gyro rad/s/√Hz"),
             ("accel", "accel m/s²/√Hz"), ("fix_source", "fix errors"), ("tau", "corr. time s"),
-            ("inflation", "variance x"), ("sigma_source", "fix σ from"),
+            ("inflation", "variance x"), ("states", "error states σ m"),
+            ("sigma_source", "fix σ from"),
             ("sigma_h", "learned σ_h m"), ("reported_h", "reported σ_h m"),
             ("why", "why"), ("pr_source", "pseudorange σ from"),
             ("pr", "learned pseudorange σ m"))  # fmt: skip
@@ -148,8 +150,11 @@ def noise(runs: Sequence[Run]) -> str:
         "IMU noise: the dataset's declared model, else params.yaml's fallback floored by the "
         "noise the log's own samples show. Fix errors: their correlation time learned from the "
         "fixes against the receiver velocity (a Gauss-Markov error's structure function), "
-        "else filters.<name>.gnss.pos_error_corr_time_s; a fix's variance is multiplied by "
-        "the inflation for it. The fix σ is the receiver's reported accuracy where it gives "
+        "else filters.<name>.gnss.pos_error_corr_time_s. A loosely coupled filter with "
+        "gnss.fix_error_states carries the horizontal ones as two Gauss-Markov states (error "
+        "states σ: their 1-sigma) where the correlation spans three fix intervals or more; "
+        "otherwise a fix's variance is multiplied by the inflation for it. The fix σ is the "
+        "receiver's reported accuracy where it gives "
         "one, else the learned one, else the default. Tight coupling fuses pseudoranges and "
         "has no fix-error model; their σ is the table's where given, else learned from the "
         "log's single-point residuals.",

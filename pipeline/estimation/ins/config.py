@@ -109,6 +109,11 @@ class GnssNoiseParams:
             receiver reports no accuracy) from the log's fixes against its receiver velocity
             (``ins.fixnoise``); without a receiver velocity, or too few fixes, the configured
             values are used. ``metrics.json`` ``fix_noise`` says which, and why.
+        fix_error_states: where the learned errors are correlated (tau of three fix intervals
+            or more), carry the north and east fix errors as first-order Gauss-Markov states
+            of the learned tau and size instead of inflating the fix variances (loose
+            coupling; the vertical keeps the inflation): the filter then tells the slowly
+            wandering fix error from the motion the IMU and the receiver velocity show.
         vel_sigma_floor_mps: floor on the receiver's speed accuracy, m/s.
         vel_sigma_default_mps: velocity 1-sigma when the receiver reports none, m/s.
         use_velocity: fuse the receiver velocity where present (loose coupling).
@@ -125,6 +130,7 @@ class GnssNoiseParams:
     pos_sigma_default_m: float = 3.0
     pos_error_corr_time_s: float = 0.0
     learn_fix_noise: bool = True
+    fix_error_states: bool = False
     vel_sigma_floor_mps: float = 0.05
     vel_sigma_default_mps: float = 0.2
     use_velocity: bool = True

@@ -73,6 +73,9 @@ class FixNoise:
         sigma_source: ``reported`` (the receiver's accuracies), ``learned`` or ``default``.
         reported_h_m: median reported horizontal accuracy, m (NaN if none).
         pairs: fix pairs the fit used.
+        states: the north and east errors are Gauss-Markov states of the filter
+            (``GnssNoiseParams.fix_error_states``) rather than an inflation.
+        states_sigma_m: their 1-sigma, m (the fixes' median horizontal sigma; NaN if none).
     """
 
     tau_s: float
@@ -84,6 +87,8 @@ class FixNoise:
     sigma_source: str = "default"
     reported_h_m: float = math.nan
     pairs: int = 0
+    states: bool = False
+    states_sigma_m: float = math.nan
 
     def as_dict(self) -> dict[str, object]:
         """JSON-ready (NaN as None)."""

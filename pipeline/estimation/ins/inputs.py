@@ -12,7 +12,7 @@ Arrays follow the layouts of ``models.measurement``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pyarrow as pa
@@ -152,6 +152,52 @@ def _reported(acc: F64) -> F64:
     return np.where(acc > 0.0, acc, math.nan)
 
 
+#: with Gauss-Markov fix-error states, the white part of a fix's horizontal variance (the
+#: receiver's noise beside the slowly wandering multipath and atmosphere), as a share of it
+GM_WHITE_SHARE = 0.09
+#: ... used where the learned correlation time is at least this many fix intervals
+GM_MIN_INTERVALS = 3.0
+
+
+def _with_error_states(noise: FixNoise, t_ns: I64, fix: F64, gnss: GnssNoiseParams) -> FixNoise:
+    """``noise`` with the Gauss-Markov states decided (``GnssNoiseParams.fix_error_states``):
+    a correlation learned from the log over ``GM_MIN_INTERVALS`` fix intervals or more; their
+    1-sigma is the fixes' median horizontal 1-sigma (reported, learned or default)."""
+    if noise.states or t_ns.size < 2:
+        return noise
+    dt = float(np.median(np.diff(t_ns))) * 1e-9
+    pos = fix[:, me.FX_POS_DIM] >= 2
+    if not (gnss.fix_error_states and noise.source == "learned" and pos.any()
+            and noise.tau_s >= GM_MIN_INTERVALS * dt):  # fmt: skip
+        return noise
+    sigma = float(np.median(fix[pos, me.FX_SIG_H]))
+    return replace(noise, states=True, states_sigma_m=sigma)
+
+
+def _apply_noise(
+    t_ns: I64, fix: F64, noise: FixNoise, reported: tuple[F64, F64], gnss: GnssNoiseParams
+) -> FixNoise:
+    """The fix-error model into the ``fix`` rows (in place): the learned size where the
+    receiver ``reported`` (horizontal, vertical accuracy) none, then the correlation as
+    Gauss-Markov states or as an inflation; returns the model with its states decided."""
+    h_acc, v_acc = reported
+    if math.isfinite(noise.sigma_h_m):  # the receiver's own accuracies win where given
+        learned_h = max(noise.sigma_h_m, gnss.pos_sigma_floor_m)
+        fix[:, me.FX_SIG_H] = np.where(np.isfinite(h_acc), fix[:, me.FX_SIG_H], learned_h)
+    if math.isfinite(noise.sigma_v_m):
+        learned_v = max(noise.sigma_v_m, gnss.pos_sigma_floor_m)
+        fix[:, me.FX_SIG_V] = np.where(np.isfinite(v_acc), fix[:, me.FX_SIG_V], learned_v)
+    noise = _with_error_states(noise, t_ns, fix, gnss)
+    # time-correlated errors: fewer independent fixes than fixes (the variances inflated, as
+    # alignment and the standstill detector read them), the horizontal ones Gauss-Markov states
+    # where the filter carries them (its update takes the white share alone)
+    fix[:, me.FX_SIG_H] *= math.sqrt(noise.inflation)
+    fix[:, me.FX_SIG_V] *= math.sqrt(noise.inflation)
+    fix[:, me.FX_GM] = GM_WHITE_SHARE if noise.states else 0.0
+    fix[:, me.FX_POS_INFL] = noise.inflation  # gated against the marginal variance
+    return noise
+
+
 def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams, noise: FixNoise | None = None) -> FixData:
     """Receiver fixes -> ``fix`` rows with floored accuracies; NaN blocks skipped (F11).
 
@@ -219,16 +265,7 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams, noise: FixNoise | None
     for k in np.flatnonzero(use & ((given_h & ~finite_h) | (given_d & ~finite_d))):
         events.append(Event(int(t[k]), "skip_invalid", "gnss_vel"))
     noise = learn(t, fix, h_acc, gnss) if noise is None else noise
-    if math.isfinite(noise.sigma_h_m):  # the receiver's own accuracies win where given
-        learned_h = max(noise.sigma_h_m, gnss.pos_sigma_floor_m)
-        fix[:, me.FX_SIG_H] = np.where(np.isfinite(h_acc), fix[:, me.FX_SIG_H], learned_h)
-    if math.isfinite(noise.sigma_v_m):
-        learned_v = max(noise.sigma_v_m, gnss.pos_sigma_floor_m)
-        fix[:, me.FX_SIG_V] = np.where(np.isfinite(v_acc), fix[:, me.FX_SIG_V], learned_v)
-    # time-correlated errors: fewer independent fixes than fixes
-    fix[:, me.FX_SIG_H] *= math.sqrt(noise.inflation)
-    fix[:, me.FX_SIG_V] *= math.sqrt(noise.inflation)
-    fix[:, me.FX_POS_INFL] = noise.inflation  # gated against the marginal variance
+    noise = _apply_noise(t, fix, noise, (h_acc, v_acc), gnss)
     usable = (fix[:, me.FX_POS_DIM] > 0) | (fix[:, me.FX_VEL_DIM] > 0)
     fix[~np.isfinite(fix)] = 0.0  # unusable fields never reach a kernel as NaN
     return FixData(t, fix, usable, tuple(events), noise)

@@ -51,6 +51,19 @@ CLOCK_COLUMNS = (
     ("clock_bias_m", ins.X_CB, ins.E_CB, "clock_bias_sigma_m"),
     ("clock_drift_mps", ins.X_CD, ins.E_CD, "clock_drift_sigma_mps"),
 )
+#: a loosely coupled run's Gauss-Markov fix errors, in the clock's states
+FIX_ERROR_COLUMNS = (
+    ("fix_error_n_m", ins.X_CB, ins.E_CB, "fix_error_n_sigma_m"),
+    ("fix_error_e_m", ins.X_CD, ins.E_CD, "fix_error_e_sigma_m"),
+)
+
+
+def extra_state_columns(result: RunResult) -> tuple[tuple[str, int, int, str], ...]:
+    """The columns of states 15 and 16: the clock's (tight coupling), the fix errors' (loose
+    coupling with ``FixNoise.states``), or none."""
+    if result.n <= ins.N_LOOSE:
+        return ()
+    return FIX_ERROR_COLUMNS if result.fix_noise.get("states") else CLOCK_COLUMNS
 
 
 def quat_to_euler_batch(q: F64) -> F64:
@@ -114,7 +127,7 @@ def estimate_columns(result: RunResult) -> dict[str, np.ndarray]:
         cols["fading_alpha"] = result.extra["alpha"]  # fwekf: the fuzzy fading factor
     if "r_scale" in result.extra:
         cols["iae_r_scale"] = result.extra["r_scale"]  # iae_ekf: horizontal fix variance x
-    extra = BIAS_COLUMNS + (CLOCK_COLUMNS if n > ins.N_LOOSE else ())
+    extra = BIAS_COLUMNS + extra_state_columns(result)
     for col, xi, ei, sig in extra:
         cols[col] = x[:, xi]
         cols[sig] = np.sqrt(var[:, ei])

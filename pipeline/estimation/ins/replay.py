@@ -126,14 +126,18 @@ def make_setup(
     params: InsFilterParams,
     sensors: SensorMeta | None,
     noise_model: ImuNoise | None = None,
+    fix_error: tuple[float, float] = (0.0, 0.0),
 ) -> FilterSetup:
     """Pack the settings of filter ``name`` for the kernels (sensor metadata first).
 
     ``noise_model``: the IMU noise to use (``resolve_imu_noise``); default: the dataset's,
-    else the params' fallback.
+    else the params' fallback. ``fix_error``: (tau s, sigma m) of the Gauss-Markov fix-error
+    states of a loosely coupled filter (``FixNoise.states``; tau 0: none), which take the
+    tightly coupled clock's two states.
     """
     kind = FILTER_KINDS[name]
-    n = ins.N_TIGHT if kind.coupling == "tight" else ins.N_LOOSE
+    gm = kind.coupling == "loose" and fix_error[0] > 0.0
+    n = ins.N_TIGHT if kind.coupling == "tight" or gm else ins.N_LOOSE
     if noise_model is None:
         noise_model = (
             sensors.imu_noise if sensors is not None and sensors.imu_noise else params.imu_noise
@@ -154,6 +158,7 @@ def make_setup(
         params.clock.drift_psd_m2ps3,
         st.gap_accel_psd_m2ps3,
         st.gap_gyro_psd_rad2ps,
+        fix_error if gm else (0.0, 0.0),
     )
     nhc = params.nhc
     nhc_sigma = np.array(
@@ -253,6 +258,41 @@ def _table(tables: Mapping[str, pa.Table], name: str, filt: str) -> pa.Table:
 KernelFn = Callable[..., int]
 
 
+def _fix_error_states(kind: FilterKind, fixes: inp.FixData | None) -> tuple[float, float]:
+    """(tau s, sigma m) of a loosely coupled run's Gauss-Markov fix-error states, (0, 0) if
+    it inflates the fix variances instead (``inputs.prepare_fixes``)."""
+    noise = fixes.noise if fixes is not None else None
+    if kind.coupling != "loose" or noise is None or not noise.states:
+        return 0.0, 0.0
+    return noise.tau_s, noise.states_sigma_m
+
+
+def with_fix_error_states(al: Alignment, fix_error: tuple[float, float]) -> Alignment:
+    """A loosely coupled start (15 states) with the north and east fix errors (tau, 1-sigma:
+    ``fix_error``; none for tau 0) appended as states 15 and 16: each of that 1-sigma, and
+    exactly opposite to the position error the start took from a fix (``p0 = fix = p + e``,
+    so ``dp = e = -dg``). The nominal slots they share with the tightly coupled clock start
+    at zero either way: a fix's predicted north and east add them (``measurement.epoch_h``).
+    A start that is not loosely coupled is returned as it is."""
+    tau, sigma_m = fix_error
+    if al.P0.shape[0] != ins.N_LOOSE:
+        return al
+    x0 = al.x0.copy()
+    x0[ins.X_CB] = x0[ins.X_CD] = 0.0
+    if tau <= 0.0:
+        return replace(al, x0=x0)
+    n = ins.N_TIGHT
+    P0 = np.zeros((n, n))
+    P0[: ins.N_LOOSE, : ins.N_LOOSE] = al.P0
+    var = sigma_m * sigma_m
+    for axis in range(2):
+        g, p = ins.E_CB + axis, ins.E_POS + axis
+        P0[g, g] = var
+        P0[p, p] += var
+        P0[p, g] = P0[g, p] = -var
+    return replace(al, x0=x0, P0=P0)
+
+
 def _adaptive_series(setup: FilterSetup, parts: list[F64]) -> dict[str, Any]:
     """The adaptive filters' series per output row: fwekf's fading factor ``alpha``, or
     iae_ekf's multiplier of the horizontal fix variance ``r_scale``."""
@@ -315,8 +355,9 @@ def run_filter(
     kernel = kernel_for(kind, backend)
     imu_data = imu if imu is not None else inp.prepare_imu(_table(tables, "imu", name), params.step)
     noise_model, noise_source = resolve_imu_noise(params, sensors, imu_data)
-    setup = make_setup(name, params, sensors, noise_model)
     fixes = inp.prepare_fixes(tables["gnss"], params.gnss, fix_noise) if "gnss" in tables else None
+    gm = _fix_error_states(kind, fixes)
+    setup = make_setup(name, params, sensors, noise_model, gm)
     obs = (
         inp.prepare_obs(tables["gnss_obs"], params.gnss, obs_noise)
         if "gnss_obs" in tables
@@ -340,10 +381,12 @@ def run_filter(
         al: Alignment | None = initial
         if initial is None or k_seg > 0:
             al = align(imu_data, seg, fixes, obs, params.init, noise_model, setup.lever_b,
-                       setup.n, course_is_heading=course_is_heading, mag=mag)  # fmt: skip
+                       ins.N_LOOSE if gm[0] > 0.0 else setup.n,  # the fix errors: below
+                       course_is_heading=course_is_heading, mag=mag)  # fmt: skip
         if al is None:
             events.append(tb.Event(int(imu_data.t_ns[seg[0]]), "no_alignment", "imu"))
             continue
+        al = with_fix_error_states(al, gm)
         alignments.append(al)
         out, code, t_fail, seg_events, seg_compile_s, alpha = _run_segment(
             kernel, setup, params, kind, imu_data, seg, meas, al, still

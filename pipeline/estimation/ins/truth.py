@@ -15,7 +15,11 @@ from scipy.spatial.transform import Rotation
 
 from navreplay.pipeline.estimation.core.tables import _ANGLES, truth_at
 from navreplay.pipeline.estimation.ins.models import ins
-from navreplay.pipeline.estimation.ins.outputs import BIAS_COLUMNS, CLOCK_COLUMNS
+from navreplay.pipeline.estimation.ins.outputs import (
+    BIAS_COLUMNS,
+    CLOCK_COLUMNS,
+    extra_state_columns,
+)
 from navreplay.pipeline.estimation.ins.replay import RunResult
 from navreplay.pipeline.nav.earth import E2, F64, A
 
@@ -57,7 +61,8 @@ def error_states(result: RunResult, truth: pa.Table) -> tuple[np.ndarray, F64, l
     else:
         cols += [missing, missing, missing]
     names += ["att_n", "att_e", "att_d"]
-    extra = BIAS_COLUMNS + (CLOCK_COLUMNS if result.n > ins.N_LOOSE else ())
+    # the truth has a receiver clock, but no fix errors to compare the loose states with
+    extra = BIAS_COLUMNS + (CLOCK_COLUMNS if extra_state_columns(result) == CLOCK_COLUMNS else ())
     if all(c[0] in tr for c in extra):
         for col, xi, _, _ in extra:
             cols.append(tr[col] - x[:, xi])

@@ -35,6 +35,7 @@ from navreplay.pipeline.estimation.ins.models.ins import (
     E_CD,
     E_POS,
     E_VEL,
+    N_LOOSE,
     X_BG,
     X_CB,
     X_CD,
@@ -174,10 +175,14 @@ def _los_ned(ant: F64, ex: float, ey: float, ez: float) -> tuple[float, float, f
 
 @njit(cache=True, error_model="numpy")
 def position_jac(ant: F64, axis: int, n: int, H_row: F64) -> None:
-    """Jacobian row of the antenna position (NED ``axis``): ``[I, 0, -[(C l) x], 0, 0]``."""
+    """Jacobian row of the antenna position (NED ``axis``): ``[I, 0, -[(C l) x], 0, 0]``,
+    plus the fix's own Gauss-Markov error (states 15, 16: north, east) where a loosely coupled
+    filter carries it (``n > N_LOOSE``: only loose coupling has position rows)."""
     for c in range(n):
         H_row[c] = 0.0
     H_row[E_POS + axis] = 1.0
+    if n > N_LOOSE and axis < 2:
+        H_row[E_CB + axis] = 1.0
     cl0, cl1, cl2 = ant[AN_CL], ant[AN_CL + 1], ant[AN_CL + 2]
     for c in range(3):
         H_row[E_ATT + c] = -sk(cl0, cl1, cl2, axis, c)

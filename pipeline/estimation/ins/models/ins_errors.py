@@ -28,6 +28,8 @@ from navreplay.pipeline.estimation.ins.models.ins import (
     E_POS,
     E_VEL,
     N_LOOSE,
+    X_CB,
+    X_CD,
     X_H,
     X_LAT,
     X_Q,
@@ -37,8 +39,8 @@ from navreplay.pipeline.estimation.ins.models.ins import (
 from navreplay.pipeline.nav.earth import E2, F64, OMEGA_IE, A, gravity
 
 # Indices of the noise vector handed to ``transition`` (see ``noise_vector``).
-NZ_ACC, NZ_GYR, NZ_BA, NZ_BG, NZ_CB, NZ_CD, NZ_GAP_ACC, NZ_GAP_GYR = range(8)
-NOISE_DIM = 8
+NZ_ACC, NZ_GYR, NZ_BA, NZ_BG, NZ_CB, NZ_CD, NZ_GAP_ACC, NZ_GAP_GYR, NZ_GM_RATE = range(9)
+NOISE_DIM = 9
 
 
 def noise_vector(
@@ -50,12 +52,19 @@ def noise_vector(
     clock_drift_psd_m2ps3: float,
     gap_accel_psd_m2ps3: float,
     gap_gyro_psd_rad2ps: float,
+    fix_error: tuple[float, float] = (0.0, 0.0),
 ) -> F64:
     """Pack the continuous noise model into the vector ``transition`` reads.
 
     White-noise densities (per root hertz) are squared into power spectral densities; the
-    clock and gap entries are already densities.
+    clock and gap entries are already densities. ``fix_error`` (tau s, sigma m; tau 0: none)
+    turns a loosely coupled filter's states 15 and 16 (the tightly coupled clock's) into
+    first-order Gauss-Markov fix errors, north and east (``inputs.fix_error_states``): rate
+    ``1 / tau`` and driving density ``2 sigma^2 / tau`` in place of the clock's.
     """
+    tau, sigma = fix_error
+    if tau > 0.0:
+        clock_bias_psd_m2ps = clock_drift_psd_m2ps3 = 2.0 * sigma * sigma / tau
     return np.array(
         [
             accel_noise_mps2_rthz**2,
@@ -66,6 +75,7 @@ def noise_vector(
             clock_drift_psd_m2ps3,
             gap_accel_psd_m2ps3,
             gap_gyro_psd_rad2ps,
+            1.0 / tau if tau > 0.0 else 0.0,
         ]
     )
 
@@ -181,7 +191,9 @@ def _cross_entry(a: tuple[float, float, float], r: int, c: int) -> float:
 
 @njit(cache=True, error_model="numpy")
 def transition(X: F64, acc: F64, noise: F64, n: int, Phi: F64, Qd: F64) -> None:
-    """Error-state transition and process noise over one span (the EKF's predict model).
+    """Error-state transition and process noise over one span (the EKF's predict model); with
+    Gauss-Markov fix-error states (``noise_vector``'s ``fix_error``) also their estimate in
+    ``X``, which decays over the span (``exp(-T / tau)``).
 
     ``Phi = I + F T + (F T)^2 / 2`` with ``F = error_jacobian`` at the end-of-span state with
     the span means of the nav-frame specific force and of ``C_b^n`` (so the first-order term
@@ -215,6 +227,14 @@ def transition(X: F64, acc: F64, noise: F64, n: int, Phi: F64, Qd: F64) -> None:
         dcm_into(X[X_Q : X_Q + 4], C)
     F = np.empty((n, n))
     error_jacobian(X, f_n, C, n, F)
+    if n > N_LOOSE and noise[NZ_GM_RATE] > 0.0:  # Gauss-Markov fix errors, not a clock
+        F[E_CB, E_CD] = 0.0
+        F[E_CB, E_CB] = F[E_CD, E_CD] = -noise[NZ_GM_RATE]
+        # their estimate decays to the mean (propagate_span integrated it as a clock's)
+        X[X_CB] -= X[X_CD] * T
+        decay = math.exp(-T * noise[NZ_GM_RATE])
+        X[X_CB] *= decay
+        X[X_CD] *= decay
     for r in range(n):  # Phi = I + F T + (F T)^2 / 2
         for c in range(n):
             a = 0.0

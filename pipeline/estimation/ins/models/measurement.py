@@ -50,14 +50,19 @@ from navreplay.pipeline.estimation.ins.models.gnss import (
     pseudorange_rate_jac,
     velocity_jac,
 )
-from navreplay.pipeline.estimation.ins.models.ins import X_VEL
+from navreplay.pipeline.estimation.ins.models.ins import X_CB, X_VEL
 from navreplay.pipeline.estimation.ins.models.nhc import body_velocity, nhc_jac
 from navreplay.pipeline.estimation.ins.models.standstill import zaru_h, zaru_jac, zupt_jac
 from navreplay.pipeline.nav.earth import F64, I64
 
 FX_LAT, FX_LON, FX_ALT, FX_VN, FX_VE, FX_VD = 0, 1, 2, 3, 4, 5
 FX_SIG_H, FX_SIG_V, FX_SIG_VEL, FX_POS_DIM, FX_VEL_DIM, FX_POS_INFL = 6, 7, 8, 9, 10, 11
-FIX_COLS = 12
+#: > 0: the fix's north and east errors are the filter's Gauss-Markov states; its horizontal
+#: rows then carry this share of the fix's own variance (``FX_SIG_H`` without the
+#: ``FX_POS_INFL`` inflation), the white noise beside them, gated and updated as is (the
+#: vertical keeps the inflation). 0: no states, the inflated variance
+FX_GM = 12
+FIX_COLS = 13
 
 OB_SAT = 0  # 0..5: ECEF x, y, z (m), vx, vy, vz (m/s)
 OB_PR, OB_PRR, OB_SIG_PR, OB_SIG_PRR, OB_SV, OB_PR_OK, OB_PRR_OK = 6, 7, 8, 9, 10, 11, 12
@@ -148,6 +153,18 @@ def epoch_layout(
 
 
 @njit(cache=True, error_model="numpy")
+def fix_position_variance(fix: F64, src: int, axis: int) -> float:
+    """Noise variance of fix ``src``'s NED position ``axis``: the inflated variance, or for
+    the north and east of a fix whose errors are states (``FX_GM``) the white share of its
+    own."""
+    if axis == 2:
+        return float(fix[src, FX_SIG_V] ** 2)
+    if fix[src, FX_GM] > 0.0:
+        return float(fix[src, FX_SIG_H] ** 2 / fix[src, FX_POS_INFL] * fix[src, FX_GM])
+    return float(fix[src, FX_SIG_H] ** 2)
+
+
+@njit(cache=True, error_model="numpy")
 def epoch_z(
     rows: I64,
     m: int,
@@ -169,8 +186,7 @@ def epoch_z(
                 if kind < K_VEL:
                     off = ned_offset(fix[src, FX_LAT], fix[src, FX_LON], fix[src, FX_ALT], ref)
                     z[k] = off[0] if kind == K_POS else off[1] if kind == K_POS + 1 else off[2]
-                    sig = fix[src, FX_SIG_V] if kind == K_POS + 2 else fix[src, FX_SIG_H]
-                    r[k] = sig * sig
+                    r[k] = fix_position_variance(fix, src, kind - K_POS)
                 else:
                     z[k] = fix[src, FX_VN + kind - K_VEL]
                     r[k] = fix[src, FX_SIG_VEL] ** 2
@@ -218,7 +234,7 @@ def gate_shift(rows: I64, m: int, fix: F64 | None, r: F64, dr: F64) -> None:
         dr[k] = 0.0
         if fix is None:
             continue
-        if kind < K_VEL:
+        if kind < K_VEL and not (fix[src, FX_GM] > 0.0 and kind < K_POS + 2):
             infl = fix[src, FX_POS_INFL]
             if infl > 1.0:
                 dr[k] = r[k] * (1.0 / infl - 1.0)
@@ -228,14 +244,17 @@ def gate_shift(rows: I64, m: int, fix: F64 | None, r: F64, dr: F64) -> None:
 def epoch_h(
     X: F64, rows: I64, m: int, obs: F64 | None, ref: F64, w_ib_b: F64, lever_b: F64, out: F64
 ) -> None:
-    """Predicted values of the rows for the full state ``X`` (``out[:m]``)."""
+    """Predicted values of the rows for the full state ``X`` (``out[:m]``); a fix's north and
+    east include its Gauss-Markov error (``X[X_CB]``, ``X[X_CD]``) where a loosely coupled
+    filter carries it, zero otherwise."""
     ant = np.empty(AN_DIM)
     antenna(X, lever_b, w_ib_b, np.empty((3, 3)), ant)
     pos = ned_offset(ant[AN_LLH], ant[AN_LLH + 1], ant[AN_LLH + 2], ref)
     for k in range(m):
         kind, src = rows[k, 0], rows[k, 1]
         if kind < K_VEL:
-            out[k] = pos[0] if kind == K_POS else pos[1] if kind == K_POS + 1 else pos[2]
+            axis = kind - K_POS
+            out[k] = pos[axis] + (X[X_CB + axis] if axis < 2 else 0.0)
         elif kind < K_PR:
             out[k] = ant[AN_VN + kind - K_VEL]
         elif kind < K_NHC:
