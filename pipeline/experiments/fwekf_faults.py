@@ -9,7 +9,7 @@ then four filters on the same tables:
 - ``lc_ekf_white``: the same EKF with ``fwekf``'s GNSS model (white fix errors), i.e. the
   FWEKF with alpha fixed at 1: the difference to ``fwekf`` is the fuzzy weighting alone;
 - ``fwekf``: the fuzzy-adaptive weighted EKF;
-- ``iae_ekf``: the standard adaptive alternative, the same white-model EKF with the fix
+- ``iae_ekf``: the standard adaptive alternative, ``lc_ekf`` with the white part of its fix
   variances re-estimated from its innovations (``estimation.ins.iae``, Mohamed and Schwarz).
 
 Scenarios:

@@ -192,9 +192,9 @@ def faults_note(rows: Sequence[Row], fz: Any) -> str:
         "`lc_ekf` is the project's EKF, whose GNSS model learns the fix errors' correlation "
         "time from the log (its `fix_noise`) and carries the fixes' north and east errors as "
         "Gauss-Markov states of that correlation (else, for a correlation under three fix "
-        "intervals, inflates every fix variance by (1 + phi) / (1 - phi)); `iae_ekf` is the "
-        "white-model EKF with its fix variances "
-        "estimated from its own innovations (the standard adaptive alternative). Horizontal "
+        "intervals, inflates every fix variance by (1 + phi) / (1 - phi)); `iae_ekf` is "
+        "`lc_ekf` with the white part of its fix variances estimated from its own innovations "
+        "(the standard adaptive alternative). Horizontal "
         "RMS over the drive (inside the fault or outage windows where there are some):",
         "",
     ]

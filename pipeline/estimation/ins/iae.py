@@ -22,6 +22,10 @@ are in the window the declared variances are used. The bounds keep the estimate 
 away: an estimate below zero (innovations smaller than the filter's own prior spread) means
 the prior is conservative, not that the receiver is perfect.
 
+With ``lc_ekf``'s GNSS model (params.yaml) the fix errors' correlated part is carried as
+Gauss-Markov states (``inputs.prepare_fixes``), so the innovations hold the white rest whose
+variance the IAE estimates; where the fixes are white, it is the whole fix variance.
+
 The IAE adapts R only; its process noise stays that of ``lc_ekf`` (Mohamed and Schwarz's
 Q-adaptation is known to destabilise a 15-state INS filter and is left out).
 """

@@ -62,11 +62,15 @@ def test_numba_and_filterpy_iae_agree_while_r_adapts(
     filters: FiltersParams, drive60: tuple[dict[str, pa.Table], SensorMeta]
 ) -> None:
     """Under F8 (5 m errors, 0.5 m reported) the multiplier leaves 1 and both backends still
-    give the same states, covariances, gating decisions and multipliers."""
+    give the same states, covariances, gating decisions and multipliers. The fixes are taken
+    as white (a minute is too short to learn their correlation, and the configured 30 s
+    would inflate the declared variances 61-fold, leaving the IAE little to find)."""
     tables, sensors = drive60
     tables = optimistic_accuracy(tables, np.random.default_rng(5))
-    fast = run_filter(tables, sensors, "iae_ekf", filters.get("iae_ekf"), backend="numba")
-    ref = run_filter(tables, sensors, "iae_ekf", filters.get("iae_ekf"), backend="filterpy")
+    section = filters.get("iae_ekf")
+    section = replace(section, gnss=replace(section.gnss, pos_error_corr_time_s=0.0))
+    fast = run_filter(tables, sensors, "iae_ekf", section, backend="numba")
+    ref = run_filter(tables, sensors, "iae_ekf", section, backend="filterpy")
     assert fast.status == ref.status == "ok"
     scale = fast.extra["r_scale"]
     assert scale.max() > 10.0
