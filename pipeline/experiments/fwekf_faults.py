@@ -6,9 +6,11 @@ then four filters on the same tables:
 - ``lc_ekf``: the project's loosely coupled EKF as configured (its GNSS model learns the fix
   errors' correlation time from the log, ``estimation.ins.fixnoise``, and carries them as
   Gauss-Markov states);
-- ``lc_ekf_white``: the same EKF with ``fwekf``'s GNSS model (white fix errors), i.e. the
-  FWEKF with alpha fixed at 1: the difference to ``fwekf`` is the fuzzy weighting alone;
-- ``fwekf``: the fuzzy-adaptive weighted EKF;
+- ``lc_ekf_white``: the same EKF with paper 004's GNSS model (white fix errors,
+  ``GnssNoiseParams.white``), i.e. the FWEKF with alpha fixed at 1: the difference to
+  ``fwekf`` is the fuzzy weighting alone;
+- ``fwekf``: the fuzzy-adaptive weighted EKF on the paper's white model (params.yaml gives
+  the user's ``fwekf`` lc_ekf's model);
 - ``iae_ekf``: the standard adaptive alternative, ``lc_ekf`` with the white part of its fix
   variances re-estimated from its innovations (``estimation.ins.iae``, Mohamed and Schwarz).
 
@@ -117,7 +119,9 @@ def scenarios(
 def _filter(filters: FiltersParams, name: str) -> tuple[str, InsFilterParams]:
     """(filter kind name, its section) of one of ``FILTERS``."""
     if name == "lc_ekf_white":
-        return "lc_ekf", replace(filters.get("lc_ekf"), gnss=filters.get("fwekf").gnss)
+        return "lc_ekf", replace(filters.get("lc_ekf"), gnss=filters.get("fwekf").gnss.white())
+    if name == "fwekf":  # the paper's: its fuzzy weighting judges white fix errors
+        return name, replace(filters.fwekf, gnss=filters.fwekf.gnss.white())
     return name, filters.get(name)
 
 

@@ -187,8 +187,10 @@ def faults_note(rows: Sequence[Row], fz: Any) -> str:
     by = {(r["scenario"], r["filter"]): r for r in rows}
     lines = [
         "**Where the fuzzy weighting helps and where it does not** (`faults.csv`, "
-        "seoul_campus_cw). `lc_ekf_white` is the FWEKF with alpha fixed at 1 (the same EKF, "
-        "the same white-fix GNSS model), so `fwekf` against it isolates the weighting; "
+        "seoul_campus_cw). `fwekf` here is paper 004's, on the paper's white-fix GNSS model "
+        "(params.yaml's `fwekf`, for users' logs, takes lc_ekf's model); `lc_ekf_white` is "
+        "that FWEKF with alpha fixed at 1 (the same EKF, the same white-fix GNSS model), so "
+        "`fwekf` against it isolates the weighting; "
         "`lc_ekf` is the project's EKF, whose GNSS model learns the fix errors' correlation "
         "time from the log (its `fix_noise`) and carries the fixes' north and east errors as "
         "Gauss-Markov states of that correlation (else, for a correlation under three fix "

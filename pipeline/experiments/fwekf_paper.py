@@ -170,9 +170,9 @@ def run_case(
     if paper_r:
         tables = with_paper_r(tables)
     for name in FILTERS:
-        # The paper's EKF differs from the FWEKF only by the fading: both take the FWEKF's
-        # GNSS model (white fix errors), not lc_ekf's correlated-fix default for real receivers.
-        section = replace(filters.get(name), gnss=filters.get("fwekf").gnss)
+        # The paper's EKF differs from the FWEKF only by the fading: both take the paper's
+        # GNSS model (white fix errors), not the correlated-fix default for real receivers.
+        section = replace(filters.get(name), gnss=filters.get("fwekf").gnss.white())
         if paper_r:
             gnss = replace(section.gnss, pos_sigma_floor_m=0.01, vel_sigma_floor_mps=0.01)
             section = replace(section, gnss=gnss)

@@ -13,7 +13,7 @@ lever arm; a dataset without one has the antenna at the IMU).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Literal
 
 from navreplay.ingest.config import ImuNoise
@@ -156,6 +156,13 @@ class GnssNoiseParams:
         )
         if not -90.0 <= self.elevation_mask_deg < 90.0:
             raise FieldError("elevation_mask_deg", "must be within [-90, 90)")
+
+    def white(self) -> GnssNoiseParams:
+        """This model with the fix errors taken as white, as paper 004 takes them: no
+        correlation configured or learned, no error states (the accuracies as they are)."""
+        return replace(
+            self, pos_error_corr_time_s=0.0, learn_fix_noise=False, fix_error_states=False
+        )
 
 
 @dataclass(frozen=True)
