@@ -132,12 +132,11 @@ def make_setup(
 
     ``noise_model``: the IMU noise to use (``resolve_imu_noise``); default: the dataset's,
     else the params' fallback. ``fix_error``: (tau s, sigma m) of the Gauss-Markov fix-error
-    states of a loosely coupled filter (``FixNoise.states``; tau 0: none), which take the
+    states of a loosely coupled filter (``_fix_error_states``; tau 0: none), which take the
     tightly coupled clock's two states.
     """
     kind = FILTER_KINDS[name]
-    gm = kind.coupling == "loose" and fix_error[0] > 0.0
-    n = ins.N_TIGHT if kind.coupling == "tight" or gm else ins.N_LOOSE
+    n = ins.N_TIGHT if kind.coupling == "tight" or fix_error[0] > 0.0 else ins.N_LOOSE
     if noise_model is None:
         noise_model = (
             sensors.imu_noise if sensors is not None and sensors.imu_noise else params.imu_noise
@@ -158,7 +157,7 @@ def make_setup(
         params.clock.drift_psd_m2ps3,
         st.gap_accel_psd_m2ps3,
         st.gap_gyro_psd_rad2ps,
-        fix_error if gm else (0.0, 0.0),
+        fix_error,
     )
     nhc = params.nhc
     nhc_sigma = np.array(
