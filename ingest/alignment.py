@@ -14,6 +14,12 @@ across a gap longer than ``GAP_FACTOR`` median periods), de-meaned, and cross-co
 FFT; the lag of the peak is refined by a parabola through its neighbours. ``lag_s > 0`` means
 the second stream's stamps are late: ``b(t) = a(t - lag_s)``. A lag beyond ``WARN_LAG_S`` with
 a clear peak (correlation at least ``MIN_CORRELATION``) is a warning in the ingest report.
+
+The onboard estimator runs on the vehicle's clock, the IMU's, and fuses its GNSS with the
+receiver's delay compensated: where its speed and the fixes' correlate clearly, the fixes'
+lag behind it is the latency the replayed filters must allow for (``fix_latency``; ArduPilot
+assumes 220 ms for a u-blox, PX4 110 ms), which a log's clock pairing keeps when it maps the
+vehicle clock onto the fixes' arrivals.
 """
 
 from __future__ import annotations
@@ -34,6 +40,9 @@ MAX_LAG_S = 30.0
 WARN_LAG_S = 0.3
 MIN_CORRELATION = 0.7
 MIN_SPEED_STD_MPS = 0.3
+LATENCY_MIN_CORRELATION = 0.9  # a fix latency is taken from a clear peak only ...
+LATENCY_MIN_OVERLAP_S = 30.0  # ... over this much common signal ...
+LATENCY_RANGE_S = (0.02, 1.0)  # ... within a receiver's delays (beyond: a clock problem)
 GAP_FACTOR = 5.0
 _GRID_S = 0.01
 _MAX_GRID = 1 << 20
@@ -202,6 +211,23 @@ def check_tables(directory: Path, tables: list[str]) -> list[Alignment]:
             lag, corr, overlap = est
             out.append(Alignment(a, b, lag, corr, overlap, _ratio(ta, va, tb, vb, lag), (sa, sb)))
     return out
+
+
+def fix_latency(aligned: list[Alignment]) -> tuple[float, str] | None:
+    """(latency s, how it was measured) of the GNSS fixes against the onboard estimator, or
+    None where the log has no clear, plausible lag between them (see the module docstring)."""
+    for a in aligned:
+        if (a.a, a.b) != ("gnss", "estimator"):
+            continue
+        latency = -a.lag_s  # b(t) = a(t - lag): the fixes are late by -lag
+        lo, hi = LATENCY_RANGE_S
+        clear = a.correlation >= LATENCY_MIN_CORRELATION and a.overlap_s >= LATENCY_MIN_OVERLAP_S
+        if clear and lo <= latency <= hi:
+            return latency, (
+                f"the fixes lag the onboard estimator by {latency:.3f} s (speed correlation "
+                f"{a.correlation:.3f} over {a.overlap_s:.0f} s)"
+            )
+    return None
 
 
 def _ratio(t_a: I64, v_a: F64, t_b: I64, v_b: F64, lag_s: float) -> float | None:

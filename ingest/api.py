@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from navreplay.ingest.alignment import check_tables
+from navreplay.ingest.alignment import Alignment, check_tables, fix_latency
 from navreplay.ingest.atomic import atomic_directory, atomic_write_json
 from navreplay.ingest.config import DatasetConfig
 from navreplay.ingest.damage import Completeness, DamageLog, Defect
@@ -290,7 +290,9 @@ def _ingest(
                 for src, o in zip(sources, opened, strict=True)
             ),
             tables=rows,
-            sensors=_sensors(config, sinks, inventories),
+            sensors=_sensors(
+                config, sinks, inventories, _fix_latency(config, aligned, rows, checks)
+            ),
             frame_conversions=tuple(c for s in sinks.values() for c in s.conversions)
             + _mounting_note(sinks),
             audit=report,
@@ -531,7 +533,10 @@ def _dataset_id(out_dir: Path) -> str:
 
 
 def _sensors(
-    config: DatasetConfig, sinks: dict[TableName, TableSink], inventories: list[Inventory]
+    config: DatasetConfig,
+    sinks: dict[TableName, TableSink],
+    inventories: list[Inventory],
+    latency: tuple[float, str] | None,
 ) -> SensorMeta:
     imu = sinks.get(TableName.IMU)
     mounting = imu.mounting_rpy_deg if imu is not None else None
@@ -541,7 +546,29 @@ def _sensors(
         imu_mounting_rpy_deg=mounting or (0.0, 0.0, 0.0),
         wheelbase_m=config.vehicle.wheelbase_m,
         platform=resolve_platform(config.platform, (inv.platform for inv in inventories)),
+        gnss_latency_s=None if latency is None else latency[0],
+        gnss_latency_source="" if latency is None else latency[1],
     )
+
+
+def _fix_latency(
+    config: DatasetConfig, aligned: list[Alignment], rows: dict[str, int], checks: list[str]
+) -> tuple[float, str] | None:
+    """The fixes' latency against the IMU: declared (``gnss.latency_s``), else measured
+    against an onboard estimator on the IMU's clock (``alignment.fix_latency``); the
+    decision is one of the time-base checks of the report."""
+    if config.gnss.latency_s is not None:
+        latency: tuple[float, str] | None = (config.gnss.latency_s, "dataset.yaml gnss.latency_s")
+    elif rows.get(TableName.IMU.value, 0) > 0:
+        latency = fix_latency(aligned)
+    else:
+        latency = None
+    if latency is not None:
+        checks.append(
+            f"gnss latency {latency[0]:.3f} s ({latency[1]}): the filters apply each fix at "
+            "its stamp minus this (dataset.yaml gnss.latency_s overrides it)"
+        )
+    return latency
 
 
 def _mounting_note(sinks: dict[TableName, TableSink]) -> tuple[str, ...]:

@@ -112,6 +112,10 @@ class GnssConfig:
             accepts degrees as they are; ``auto`` refuses values that look like radians.
         velocity_topic: stream with the receiver's velocity, joined to the fixes by time
             (default: automatic, e.g. a TwistWithCovarianceStamped on ``/gps/vel``).
+        latency_s: how late the fixes' stamps are against the IMU's, s: the filters apply a
+            fix at ``t_ns - latency_s`` (a receiver's output delay the log's clock pairing
+            kept). Default: measured at ingest against the onboard estimator where the log
+            has one (``ingest.latency``), else none.
     """
 
     topic: str | None = None
@@ -119,6 +123,11 @@ class GnssConfig:
     lever_arm_m: Vec3 = (0.0, 0.0, 0.0)
     velocity_topic: str | None = None
     latlon_units: Literal["auto", "deg", "rad"] = "auto"
+    latency_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.latency_s is not None and not 0.0 <= self.latency_s <= 2.0:
+            raise FieldError("latency_s", f"{self.latency_s} is not within [0, 2] s")
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,9 @@ class SensorMeta:
         imu_mounting_rpy_deg: the mounting rotation applied at ingest (for the record).
         wheelbase_m: vehicle wheelbase, m, if known.
         platform: the vehicle kind and its source (``ingest.platform``).
+        gnss_latency_s: how late the fixes' stamps are against the IMU's (``dataset.yaml``
+            ``gnss.latency_s``, or measured at ingest: ``ingest.latency``); None: not known.
+        gnss_latency_source: where ``gnss_latency_s`` comes from, in words.
     """
 
     imu_noise: ImuNoise | None = None
@@ -43,6 +46,8 @@ class SensorMeta:
     imu_mounting_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
     wheelbase_m: float | None = None
     platform: Platform = UNKNOWN
+    gnss_latency_s: float | None = None
+    gnss_latency_source: str = ""
 
 
 @dataclass(frozen=True)

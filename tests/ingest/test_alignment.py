@@ -11,9 +11,16 @@ import numpy as np
 import pymap3d
 import pytest
 
-from navreplay.ingest.alignment import WARN_LAG_S, estimate_lag, speed_signal
+from navreplay.ingest.alignment import (
+    WARN_LAG_S,
+    Alignment,
+    estimate_lag,
+    fix_latency,
+    speed_signal,
+)
 from navreplay.ingest.api import ingest
 from navreplay.ingest.config import parse_dataset_config
+from navreplay.ingest.meta import read_meta
 
 
 def _speed(t_s: np.ndarray) -> np.ndarray:
@@ -102,3 +109,72 @@ def test_an_18_s_offset_between_files_is_a_warning(tmp_path: Path) -> None:
     assert align["lag_s"] == pytest.approx(18.0, abs=0.02)
     assert abs(align["lag_s"]) > WARN_LAG_S
     assert any("time bases disagree" in w and "+18.0" in w for w in result.report["warnings"])
+
+
+def _latency_logs(tmp_path: Path, latency: float | None) -> dict[str, object]:
+    """CSV logs of a drive: fixes whose speed lags the onboard estimator's by 0.2 s, an IMU,
+    and (``latency``) a declared ``gnss.latency_s``."""
+    t = np.arange(0.0, 120.0, 0.1)
+    course = math.radians(30.0)
+    files = {
+        "est.csv": (t, _speed(t)),  # the estimator on the IMU's clock ...
+        "fix.csv": (t, _speed(t - 0.2)),  # ... the fixes describe 0.2 s before their stamps
+    }
+    for name, (ts, v) in files.items():
+        (tmp_path / name).write_text(
+            "t,lat,lon,alt,vn,ve\n"
+            + "".join(
+                f"{a:.3f},{37.0 + 1e-5 * a:.8f},-122.0,10.0,{b * math.cos(course):.4f},"
+                f"{b * math.sin(course):.4f}\n"
+                for a, b in zip(ts, v, strict=True)
+            )
+        )
+    (tmp_path / "imu.csv").write_text(
+        "t,ax,ay,az,gx,gy,gz\n" + "".join(f"{a:.3f},0,0,-9.8,0,0,0\n" for a in t)
+    )
+    common = {"time_column": "t", "time_unit": "s", "time_base": "gps"}
+    fix3 = {"constants": {"fix_type": 3}}
+    nav = {"lat_deg": "lat", "lon_deg": "lon", "alt_m": "alt", "vel_n_mps": "vn"}
+    nav["vel_e_mps"] = "ve"
+    imu = {f"acc_{a}_mps2": f"a{a}" for a in "xyz"} | {f"gyro_{a}_radps": f"g{a}" for a in "xyz"}
+    return {
+        "id": "late",
+        "gnss": {} if latency is None else {"latency_s": latency},
+        "csv": [
+            {"path": "fix.csv", "table": "gnss", "columns": nav, **common, **fix3},
+            {"path": "est.csv", "table": "estimator", "columns": nav, **common},
+            {"path": "imu.csv", "table": "imu", "columns": imu, **common},
+        ],
+    }
+
+
+@pytest.mark.parametrize("declared", [None, 0.05])
+def test_the_fixes_latency_is_measured_against_the_onboard_estimator(
+    tmp_path: Path, declared: float | None
+) -> None:
+    cfg = parse_dataset_config(_latency_logs(tmp_path, declared))
+    logs = [tmp_path / n for n in ("fix.csv", "est.csv", "imu.csv")]
+    result = ingest(logs, tmp_path / "out", config=cfg, config_dir=tmp_path)
+    sensors = read_meta(tmp_path / "out").sensors
+    assert sensors is not None
+    checks = result.report["time_base"]["checks"]
+    if declared is None:
+        assert sensors.gnss_latency_s == pytest.approx(0.2, abs=0.02)
+        assert "onboard estimator" in sensors.gnss_latency_source
+    else:  # the dataset's word wins over the measurement
+        assert sensors.gnss_latency_s == declared
+        assert sensors.gnss_latency_source == "dataset.yaml gnss.latency_s"
+    assert any(c.startswith("gnss latency") for c in checks)
+
+
+def test_no_latency_without_a_clear_plausible_lag() -> None:
+    def pair(lag: float, corr: float) -> Alignment:
+        return Alignment("gnss", "estimator", lag, corr, 100.0, 1.0, ("velocity", "velocity"))
+
+    got = fix_latency([pair(-0.2, 0.99)])
+    assert got is not None
+    assert got[0] == pytest.approx(0.2)
+    assert fix_latency([pair(-0.2, 0.8)]) is None  # no clear peak
+    assert fix_latency([pair(+0.2, 0.99)]) is None  # fixes ahead of the vehicle: a clock fault
+    assert fix_latency([pair(-18.0, 0.99)]) is None  # leap seconds, not a receiver's delay
+    assert fix_latency([pair(-0.005, 0.99)]) is None  # nothing to correct

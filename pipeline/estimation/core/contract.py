@@ -34,6 +34,7 @@ from navreplay.ingest.schema import TableName
 from navreplay.ingest.tables import Provenance, read_table, write_table
 from navreplay.ingest.typed import to_plain
 from navreplay.pipeline.estimation.core.integrity import IntegrityParams, assess
+from navreplay.pipeline.estimation.core.tables import with_fix_latency
 from navreplay.pipeline.estimation.core.windows import ErrorTrack
 
 log = logging.getLogger(__name__)
@@ -73,6 +74,8 @@ class RunInputs:
             if path.is_file():
                 tables[name.value] = read_table(path, name).table
                 sources.append(path)
+        latency = meta.sensors.gnss_latency_s if meta.sensors is not None else None
+        with_fix_latency(tables, latency)
         return cls(meta.dataset, tables, meta.sensors, (*sources, tables_dir / META_NAME))
 
     @property

@@ -12,7 +12,7 @@ import numpy.typing as npt
 import pyarrow as pa
 
 from navreplay.pipeline.errors import PipelineError
-from navreplay.pipeline.nav.earth import F64
+from navreplay.pipeline.nav.earth import F64, I64
 
 B8 = npt.NDArray[np.bool_]
 
@@ -78,3 +78,23 @@ def truth_at(truth: pa.Table, t_ns: np.ndarray) -> tuple[np.ndarray, dict[str, F
 
 class ReplayInputError(PipelineError):
     """The tables cannot drive this filter (a required table or column is missing)."""
+
+
+def fix_epochs(table: pa.Table) -> I64:
+    """The epochs a ``gnss`` table's fixes describe: ``t_ns - latency_s`` where the table has
+    a finite ``latency_s`` (the reader's, or the dataset's latency: ``with_fix_latency``),
+    else ``t_ns``."""
+    t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)
+    latency = float_column(table, "latency_s", 0.0)
+    shift = np.where(np.isfinite(latency), np.round(latency * 1e9), 0.0).astype(np.int64)
+    return np.asarray(t - shift, dtype=np.int64)
+
+
+def with_fix_latency(tables: dict[str, pa.Table], latency_s: float | None) -> None:
+    """Give the ``gnss`` table (in place in ``tables``) the dataset's fix latency
+    (``SensorMeta.gnss_latency_s``) as its ``latency_s`` column, unless it has its own."""
+    gnss = tables.get("gnss")
+    if latency_s is None or gnss is None or "latency_s" in gnss.column_names:
+        return
+    column = pa.array(np.full(gnss.num_rows, float(latency_s)), pa.float64())
+    tables["gnss"] = gnss.append_column("latency_s", column)

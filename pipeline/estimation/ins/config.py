@@ -235,7 +235,10 @@ class StepParams:
     ``imu_gap_s`` are gaps: bridged by interpolating the samples on both sides, with white
     process noise of densities ``gap_*_psd`` added for the unknown manoeuvres (a 2 s gap adds
     sqrt(2 q) to the velocity sigma); longer than ``imu_gap_max_s`` they end a segment and
-    the filter re-aligns after them.
+    the filter re-aligns after them. A tumble ends a segment too: samples turning faster than
+    ``tumble_rate_radps`` and more than ``tumble_rotation_rad`` from one sample to the next
+    (a crash or a flip logged at tens of Hz, which no integration of the samples follows);
+    the next segment starts ``tumble_settle_s`` after the last of them.
 
     Attributes:
         step_s: covariance propagation, sigma-point redraw and output interval, s.
@@ -245,6 +248,7 @@ class StepParams:
         imu_gap_max_s: a gap longer than this splits the run into segments, s.
         gap_accel_psd_m2ps3: white acceleration noise density during a gap, m^2/s^3.
         gap_gyro_psd_rad2ps: white angular-rate noise density during a gap, rad^2/s.
+        tumble_rate_radps, tumble_rotation_rad, tumble_settle_s: a tumble, see above.
     """
 
     step_s: float = 0.1
@@ -254,9 +258,13 @@ class StepParams:
     imu_gap_max_s: float = 5.0
     gap_accel_psd_m2ps3: float = 4.0
     gap_gyro_psd_rad2ps: float = 0.05
+    tumble_rate_radps: float = 10.0
+    tumble_rotation_rad: float = 0.2
+    tumble_settle_s: float = 1.0
 
     def __post_init__(self) -> None:
         positive(self, "step_s", "max_rk4_step_s", "imu_gap_s", "imu_gap_max_s")
+        positive(self, "tumble_rate_radps", "tumble_rotation_rad", "tumble_settle_s")
         positive(self, "gap_accel_psd_m2ps3", "gap_gyro_psd_rad2ps", allow_zero=True)
         if not 1 <= self.substeps <= 100:
             raise FieldError("substeps", "must be within 1..100")

@@ -18,7 +18,13 @@ import numpy as np
 import pyarrow as pa
 
 from navreplay.ingest.schema import FixType
-from navreplay.pipeline.estimation.core.tables import B8, Event, _is_null, float_column
+from navreplay.pipeline.estimation.core.tables import (
+    B8,
+    Event,
+    _is_null,
+    fix_epochs,
+    float_column,
+)
 from navreplay.pipeline.estimation.ins.config import GnssNoiseParams, StepParams
 from navreplay.pipeline.estimation.ins.fixnoise import FixNoise, ObsNoise, learn, learn_obs
 from navreplay.pipeline.estimation.ins.models import measurement as me
@@ -95,7 +101,9 @@ def clean_imu(t: I64, data: F64, step: StepParams) -> ImuData:
     Keeps the first of samples with equal timestamps (``imu_duplicate``), drops samples older
     than the last kept one (``imu_backwards``) and samples with a non-finite value
     (``imu_invalid``); reports intervals longer than ``imu_gap_s`` (``imu_gap``, value = the
-    interval in s) and splits at intervals longer than ``imu_gap_max_s`` (``segment_break``).
+    interval in s) and splits at intervals longer than ``imu_gap_max_s`` (``segment_break``)
+    and at tumbles (``imu_tumble``, value = the peak rate in rad/s; the samples until they
+    settle belong to no segment).
     """
     events: list[Event] = []
     finite = np.isfinite(data).all(axis=1)
@@ -113,17 +121,46 @@ def clean_imu(t: I64, data: F64, step: StepParams) -> ImuData:
         last = tk
     t_ok, d_ok = t[keep], np.ascontiguousarray(data[keep])
     dt = np.diff(t_ok) * 1e-9
-    segments: list[tuple[int, int]] = []
-    start = 0
+    # [start, stop) spans no segment may cross: long gaps, and tumbles with their settling
+    cuts: list[tuple[int, int]] = []
     for k in np.flatnonzero(dt > step.imu_gap_s):
         events.append(Event(int(t_ok[k]), "imu_gap", "imu", value=float(dt[k])))
         if dt[k] > step.imu_gap_max_s:
             events.append(Event(int(t_ok[k + 1]), "segment_break", "imu", value=float(dt[k])))
-            segments.append((start, int(k) + 1))
-            start = int(k) + 1
+            cuts.append((int(k) + 1, int(k) + 1))
+    for lo, hi, rate in _tumbles(t_ok, d_ok, step):
+        events.append(Event(int(t_ok[lo]), "imu_tumble", "imu", value=rate))
+        cuts.append((lo, hi))
+    segments: list[tuple[int, int]] = []
+    start = 0
+    for lo, hi in sorted(cuts):
+        segments.append((start, lo))
+        start = max(start, hi)
     segments.append((start, int(t_ok.size)))
     events.sort(key=lambda e: e.t_ns)
     return ImuData(t_ok, d_ok, tuple(s for s in segments if s[1] - s[0] >= 2), tuple(events))
+
+
+def _tumbles(t: I64, data: F64, step: StepParams) -> list[tuple[int, int, float]]:
+    """(first sample, first sample after settling, peak rate rad/s) of each tumble: samples
+    turning faster than ``tumble_rate_radps`` and by more than ``tumble_rotation_rad`` to the
+    next sample (see ``StepParams``), grouped where they are less than the settling time
+    apart."""
+    if t.size < 2:
+        return []
+    rate = np.linalg.norm(data[:, 3:], axis=1)
+    dt = np.append(np.diff(t), 0) * 1e-9
+    hit = np.flatnonzero((rate > step.tumble_rate_radps) & (rate * dt > step.tumble_rotation_rad))
+    settle_ns = int(step.tumble_settle_s * 1e9)
+    out: list[tuple[int, int, float]] = []
+    for k in (int(j) for j in hit):
+        if out and t[k] - t[out[-1][1] - 1] < settle_ns:
+            lo, _, peak = out[-1]
+            out[-1] = (lo, k + 1, max(peak, float(rate[k])))
+        else:
+            out.append((k, k + 1, float(rate[k])))
+    ends = np.searchsorted(t, np.array([t[hi - 1] for _, hi, _ in out], np.int64) + settle_ns)
+    return [(lo, int(end), peak) for (lo, _, peak), end in zip(out, ends, strict=True)]
 
 
 def imu_white_noise(imu: ImuData) -> tuple[float, float]:
@@ -207,17 +244,18 @@ def prepare_fixes(table: pa.Table, gnss: GnssNoiseParams, noise: FixNoise | None
     replaces ``pos_sigma_default_m``. ``noise``: a model learned before (from the whole log,
     where ``table`` is a scenario's or a window's part of it) instead of learning one here.
     A fix is applied at its own epoch: with a ``latency_s`` column (arrival minus the
-    receiver's epoch, as the comma2k19 reader writes it), at ``t_ns - latency_s``.
+    receiver's epoch, as the comma2k19 reader writes it, or the dataset's latency against the
+    IMU: ``with_fix_latency``), at ``t_ns - latency_s`` (``fix_epochs``).
     Position needs a fix type of at least 2-D (a 2-D fix is fused horizontally); velocity
     needs north and east, and includes down where the receiver provides it (null = not
     provided, a 2-D velocity block; NaN = invalid, the block is skipped).
     """
     n = table.num_rows
     t = np.asarray(table.column("t_ns").to_numpy(), dtype=np.int64)
-    latency = float_column(table, "latency_s", 0.0)
-    if gnss.use_fix_latency and np.isfinite(latency).all() and np.any(latency != 0.0):
+    epochs = fix_epochs(table)
+    if gnss.use_fix_latency and np.any(epochs != t):
         # the fix describes its own epoch, not its arrival (bad-inputs F10)
-        t = t - np.round(latency * 1e9).astype(np.int64)
+        t = epochs
         order = np.argsort(t, kind="stable")
         if np.any(order != np.arange(n)):
             table, t = table.take(pa.array(order)), t[order]

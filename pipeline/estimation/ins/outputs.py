@@ -24,7 +24,8 @@ velocity, one satellite's pseudorange and rate, the NHC pair): ``t_ns``, ``strea
 
 ``events.parquet`` lists what the run skipped, rejected, reset or repaired: ``t_ns``,
 ``kind`` (``gate_reject``, ``gate_reset``, ``cov_repair``, ``divergence``, ``imu_gap``,
-``imu_duplicate``, ``imu_backwards``, ``imu_invalid``, ``segment_break``, ``skip_invalid``,
+``imu_duplicate``, ``imu_backwards``, ``imu_invalid``, ``segment_break``, ``imu_tumble``,
+``skip_invalid``,
 ``skip_no_fix``, ``no_alignment``), ``stream``, ``sv`` and ``value`` (NIS, gap length ...).
 """
 

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from navreplay.pipeline.estimation.core.tables import truth_at
+from navreplay.pipeline.estimation.core.tables import fix_epochs, truth_at
 from navreplay.pipeline.estimation.core.windows import (
     ErrorTrack,
     Origin,
@@ -43,12 +43,13 @@ def truth_track(result: RunResult, truth: pa.Table, origin: Origin | None = None
 def fixes_track(
     result: RunResult, fixes: pa.Table, lever_b: Sequence[float], origin: Origin | None = None
 ) -> ErrorTrack:
-    """Errors against GNSS fixes (antenna positions) at the fix times inside the run.
+    """Errors against GNSS fixes (antenna positions) at the fix epochs inside the run
+    (``inputs.fix_epochs``: their stamps less a latency the table gives).
 
     The estimate is interpolated linearly to each fix time and moved to the antenna by the
     lever arm (body FRD, rotated by the estimated attitude).
     """
-    t_fix = np.asarray(fixes.column("t_ns").to_numpy(), dtype=np.int64)
+    t_fix = fix_epochs(fixes)
     cols = {}
     for name in ("lat_deg", "lon_deg", "alt_m"):
         c = fixes.column(name)
