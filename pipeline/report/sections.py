@@ -127,6 +127,7 @@ def noise_rows(runs: Sequence[Run]) -> list[Row]:
             "sigma_h": fix.get("sigma_h_m"),
             "reported_h": fix.get("reported_h_m"),
             "why": fix.get("reason"),
+            "latency": fix.get("latency_s"),
             "pr": obs.get("pseudorange_sigma_m"),
             "pr_source": obs.get("source"),
         })  # fmt: skip
@@ -144,7 +145,7 @@ def noise(runs: Sequence[Run]) -> str:
             ("inflation", "variance x"), ("states", "error states σ m"),
             ("sigma_source", "fix σ from"),
             ("sigma_h", "learned σ_h m"), ("reported_h", "reported σ_h m"),
-            ("why", "why"), ("pr_source", "pseudorange σ from"),
+            ("why", "why"), ("latency", "fix latency s"), ("pr_source", "pseudorange σ from"),
             ("pr", "learned pseudorange σ m"))  # fmt: skip
     return h.table(rows, cols) + h.para(
         "IMU noise: the dataset's declared model, else params.yaml's fallback floored by the "

@@ -48,7 +48,12 @@ from navreplay.pipeline.estimation.ins.alignment import (
     align,
     why_not_aligned,
 )
-from navreplay.pipeline.estimation.ins.config import FILTER_KINDS, FilterKind, InsFilterParams
+from navreplay.pipeline.estimation.ins.config import (
+    FILTER_KINDS,
+    FilterKind,
+    GnssNoiseParams,
+    InsFilterParams,
+)
 from navreplay.pipeline.estimation.ins.fixnoise import FixNoise, ObsNoise
 from navreplay.pipeline.estimation.ins.fuzzy import FZ_MODE, MODE_IAE
 from navreplay.pipeline.estimation.ins.kernels.records import Fading, Schedule, Settings
@@ -435,7 +440,7 @@ def run_filter(
             "gyro_noise_radps_rthz": noise_model.gyro_noise_radps_rthz,
         },
         fix_noise=(
-            fixes.noise.as_dict()
+            {**fixes.noise.as_dict(), **_latency(tables["gnss"], params.gnss, sensors)}
             if fixes is not None and fixes.noise is not None and kind.coupling == "loose"
             else {}
         ),
@@ -445,6 +450,20 @@ def run_filter(
             else {}
         ),
     )
+
+
+def _latency(table: pa.Table, gnss: GnssNoiseParams, sensors: SensorMeta | None) -> dict[str, Any]:
+    """What ``metrics.json`` ``fix_noise`` says of the fixes' latency: the median applied and
+    where it came from (nothing where none was applied)."""
+    if not gnss.use_fix_latency or "latency_s" not in table.column_names:
+        return {}
+    latency = tb.float_column(table, "latency_s")
+    if not np.isfinite(latency).any():
+        return {}
+    source = "the log's own per-fix latency"
+    if sensors is not None and sensors.gnss_latency_s is not None:
+        source = sensors.gnss_latency_source
+    return {"latency_s": float(np.nanmedian(latency)), "latency_source": source}
 
 
 def _typeof(value: object) -> Any:

@@ -57,6 +57,7 @@ def test_late_fixes_cost_accuracy_and_their_latency_wins_it_back(filters: Filter
     with_fix_latency(late, LATE_S)
     result = run_filter(late, sensors, "lc_ekf", section)
     applied = _h_rms(result, tables)
+    assert result.fix_noise["latency_s"] == pytest.approx(LATE_S)
     # at 5-10 m/s a quarter second is 1-2.5 m along the track
     assert ignored > 1.3 * on_time
     assert applied == pytest.approx(on_time, rel=0.05)
