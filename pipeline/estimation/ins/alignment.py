@@ -12,7 +12,9 @@ would without them:
 
 - heading: ``atan2(v_e, v_n)`` of the GNSS velocity (a reversing vehicle would be 180 deg
   off; the yaw 1-sigma of ``init`` must cover sideslip), its 1-sigma at least the angle the
-  speed's noise subtends;
+  speed's noise subtends; a vehicle never fast enough for that, whose heading neither motion
+  nor a compass gives, starts from the course of fixes differenced over a longer baseline
+  (``_slow_course``: a robot at 1 m/s with 1 m fixes needs 9-20 s);
 - roll and pitch: from the specific force averaged over +-0.25 s, corrected by the
   acceleration seen in the GNSS velocity: ``f^b = C_n^b (a^n - g^n)`` solved for pitch and
   roll at the known heading (static levelling when the vehicle is at rest);
@@ -62,6 +64,8 @@ _COMPASS_HALF_NS = 1_000_000_000
 _GPS_2000_NS = 630_720_013_000_000_000
 #: GNSS speeds above this (and 3 sigma of their noise) are not at rest, m/s
 _REST_SPEED_MPS = 0.3
+#: the longest baseline of fixes differenced for a slow vehicle's course (``_slow_course``), s
+_SLOW_BASELINE_MAX_S = 20.0
 #: floor on the yaw 1-sigma of a heading from motion (the attitude filter's own errors), rad
 _MIN_MOTION_YAW_SIGMA = math.radians(1.0)
 #: what a gyro bias measured at rest may still be off by in motion (g-sensitivity, vibration
@@ -318,10 +322,14 @@ def _initial_navigation(
     lever_b: F64,
     yaw: float | None = None,
     vel: F64 | None = None,
+    *,
+    steady: bool = False,
 ) -> tuple[F64, F64]:
     """Full state (biases and clock zero) at track epoch ``k``, and its C_b^n: heading from
-    the GNSS velocity (or ``yaw``), roll and pitch from the specific force, IMU position from
-    the antenna's (lever arm removed), velocity the track's (or ``vel``)."""
+    the GNSS velocity (or ``yaw``), roll and pitch from the specific force (less the track's
+    acceleration, unless the vehicle is ``steady``: a slow one whose differenced fixes would
+    make only noise of it), IMU position from the antenna's (lever arm removed), velocity the
+    track's (or ``vel``)."""
     t_imu = imu.t_ns[lo:hi]
     t0 = int(track.t_ns[k])
     v = track.vel[k] if vel is None else vel
@@ -330,7 +338,8 @@ def _initial_navigation(
     a_n = np.zeros(3)
     lo_k, hi_k = max(k - 1, 0), min(k + 1, track.t_ns.size - 1)
     dt = (track.t_ns[hi_k] - track.t_ns[lo_k]) * 1e-9
-    if hi_k > lo_k and 0 < dt <= 2.5 and np.isfinite(track.vel[[lo_k, hi_k]]).all():
+    finite = np.isfinite(track.vel[[lo_k, hi_k]]).all()
+    if not steady and hi_k > lo_k and 0 < dt <= 2.5 and finite:
         a_n = (track.vel[hi_k] - track.vel[lo_k]) / dt
     lat, lon, h_ant = track.llh[k]
     win = (t_imu >= t0 - _HALF_NS) & (t_imu <= t0 + _HALF_NS)
@@ -466,7 +475,8 @@ def align(
     elif trusted.size:
         j = int(trusted[0])
     else:
-        return None
+        return _slow_start(imu, segment, track, inside, init, mh, noise, lever_b, obs, n) \
+            if course_is_heading else None  # fmt: skip
     k = int(rows[j])
     vel = track.vel[k].copy()
     if mh is not None and (track.differenced[k] or not np.isfinite(vel).all()):
@@ -483,6 +493,110 @@ def align(
     x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b, yaw, vel)
     return _finish(imu, segment, track, k, x0, c_bn, yaw_sigma, method, obs, init,
                    noise, lever_b, n)  # fmt: skip
+
+
+def _slow_start(
+    imu: ImuData,
+    segment: tuple[int, int],
+    track: _Track,
+    inside: np.ndarray,
+    init: InitParams,
+    mh: heading.MotionHeading | None,
+    noise: ImuNoise,
+    lever_b: F64,
+    obs: ObsData | None,
+    n: int,
+) -> Alignment | None:
+    """A start from the course of a vehicle too slow for ``align_speed_mps`` (the last
+    resort of ``align``): the fixes differenced over a baseline long enough for the course to
+    be within ``motion_yaw_sigma_max_rad`` (``_slow_course``), checked against the heading
+    from motion as a course start is."""
+    found = _slow_course(imu, segment, track, inside, init)
+    if found is None:
+        return None
+    k, vel, sigma = found
+    lo, hi = segment
+    yaw, sigma, method = _course_heading(track, inside, k, init, mh, sigma, vel)
+    method = "slow_course" if method == "gnss_velocity" else method
+    x0, c_bn = _initial_navigation(imu, lo, hi, track, k, lever_b, yaw, vel, steady=True)
+    return _finish(imu, segment, track, k, x0, c_bn, sigma, method, obs, init, noise, lever_b, n)
+
+
+def _slow_course(
+    imu: ImuData, segment: tuple[int, int], track: _Track, inside: np.ndarray, init: InitParams
+) -> tuple[int, F64, float] | None:
+    """(track epoch, NED velocity, course 1-sigma) of the first epoch from which a slow
+    vehicle's course gives its heading, or None.
+
+    At each epoch the fixes are differenced over the shortest centred baseline (up to
+    ``_SLOW_BASELINE_MAX_S``, no gap over 2.5 s) over which the displacement is
+    ``align_sigmas`` times its noise and its direction within ``motion_yaw_sigma_max_rad``
+    1-sigma (white fix errors: correlated ones difference to less); the chord of a steady
+    turn is the course at its middle, so the gyro's turn over the baseline must stay within
+    twice that sigma. The next ``align_epochs - 1`` epochs must give a course too.
+    """
+    ts = track.t_ns * 1e-9
+    ned = _local_ned(track.llh)
+    breaks = np.concatenate([[0], np.cumsum(np.diff(ts) > 2.5)])
+    tan_max = math.tan(init.motion_yaw_sigma_max_rad)
+    ok = np.zeros(ts.size, dtype=bool)
+    vel = np.full((ts.size, 3), math.nan)
+    sig = np.full(ts.size, math.nan)
+    for k in (int(j) for j in np.flatnonzero(inside)):
+        for m in range(1, ts.size):
+            a, b = k - m, k + m
+            if (
+                a < 0
+                or b >= ts.size
+                or ts[b] - ts[a] > _SLOW_BASELINE_MAX_S
+                or breaks[b] != breaks[a]
+            ):
+                break
+            v = (ned[b] - ned[a]) / (ts[b] - ts[a])
+            speed = math.hypot(v[0], v[1])
+            s = math.hypot(track.raw_sig_h[a], track.raw_sig_h[b]) / (ts[b] - ts[a])
+            if speed < max(_REST_SPEED_MPS, init.align_sigmas * s) or s > speed * tan_max:
+                continue
+            sigma = math.atan2(s, speed)
+            if abs(_turn(imu, segment, int(track.t_ns[a]), int(track.t_ns[b]))) <= 2.0 * sigma:
+                ok[k], vel[k], sig[k] = True, v, max(init.yaw_sigma_rad, sigma)
+            break
+    start = np.flatnonzero(_confirmed(ok, track.t_ns, init.align_epochs) & inside)
+    if start.size == 0:
+        return None
+    k = int(start[0])
+    v = vel[k].copy()
+    v[2] = 0.0  # a slow ground vehicle: level
+    return k, v, float(sig[k])
+
+
+def _turn(imu: ImuData, segment: tuple[int, int], t0: int, t1: int) -> float:
+    """The IMU's turn about the vertical (the mean specific force's axis) from ``t0`` to
+    ``t1``, rad (the gyro bias not removed: a few degrees over the baseline at most)."""
+    lo, hi = segment
+    i0 = lo + int(np.searchsorted(imu.t_ns[lo:hi], t0))
+    i1 = lo + int(np.searchsorted(imu.t_ns[lo:hi], t1))
+    if i1 - i0 < 2:
+        return math.inf
+    d = imu.data[i0:i1]
+    up = -d[:, :3].mean(axis=0)
+    norm = float(np.linalg.norm(up))
+    if norm == 0.0:
+        return math.inf
+    rate = d[:, 3:] @ (up / norm)
+    return float(np.sum(rate[:-1] * np.diff(imu.t_ns[i0:i1]) * 1e-9))
+
+
+def _local_ned(llh: F64) -> F64:
+    """Positions (lat, lon rad, h m) as north, east, down metres from the first."""
+    rm, rn = np.vectorize(radii)(llh[:, 0])
+    return np.column_stack(
+        [
+            (llh[:, 0] - llh[0, 0]) * (rm + llh[:, 2]),
+            (llh[:, 1] - llh[0, 1]) * (rn + llh[:, 2]) * np.cos(llh[:, 0]),
+            -(llh[:, 2] - llh[0, 2]),
+        ]
+    )
 
 
 def _course_or_motion(
@@ -534,13 +648,15 @@ def _course_heading(
     init: InitParams,
     mh: heading.MotionHeading | None,
     course_sigma: float,
+    vel: F64 | None = None,
 ) -> tuple[float, float, str]:
     """(heading, 1-sigma, method) at a course start (track epoch ``k``), checked against the
     heading from motion where that is trusted there: the course if they agree within 3 sigma;
     the course + 180 deg if the vehicle reverses (backing out of a bay faster than
     ``align_speed_mps``); the heading from motion otherwise (an IMU not mounted along the
-    vehicle: its x axis is not the course)."""
-    v = track.vel[k]
+    vehicle: its x axis is not the course). ``vel``: the velocity the course is taken from
+    (default: the track's at ``k``)."""
+    v = track.vel[k] if vel is None else vel
     course = math.atan2(v[1], v[0])
     j = int(np.searchsorted(np.flatnonzero(inside), k))
     if mh is None or mh.sigma[j] > init.motion_yaw_sigma_max_rad:

@@ -14,7 +14,11 @@ from navreplay.pipeline.estimation.ins import inputs as inp
 from navreplay.pipeline.estimation.ins.alignment import align
 from navreplay.pipeline.estimation.ins.models import ins
 from navreplay.pipeline.estimation.ins.replay import run_filter
+from navreplay.pipeline.synth import car_drives
+from navreplay.pipeline.synth.car_drives import CarDriveParams
+from navreplay.pipeline.synth.trajectory import Leg
 from tests.pipeline.estimation.conftest import Tables, seoul, t0_ns, truth_state
+from tests.pipeline.scenarios.drives import params as drive_params
 
 
 def aligned(
@@ -118,3 +122,52 @@ def test_no_heading_from_noise_at_standstill(filters: FiltersParams, seed: int) 
     assert r.alignments[0].t_ns == al.t_ns
     final = ins.difference(truth_state(truth, truth.num_rows - 1), r.x[-1], ins.N_LOOSE)
     assert math.degrees(abs(final[ins.E_ATT + 2])) < 3.0  # after 2 minutes of motion
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_vehicle_too_slow_for_a_course_starts_from_distant_fixes(
+    filters: FiltersParams, seed: int
+) -> None:
+    """A robot at 1 m/s whose receiver gives no velocity (the Husky of ../shared/data):
+    neighbouring fixes difference to more noise than speed, and its accelerations are too
+    gentle for a heading from motion. It starts from the course of fixes differenced over a
+    long enough baseline, within 3 sigma of the truth (before, it never aligned)."""
+    slow = CarDriveParams(
+        duration_s=240.0,
+        stationary_s=10.0,
+        start_speed_mps=0.0,
+        yaw_deg=40.0,
+        route=(
+            Leg("straight", speed_mps=1.0, duration_s=60.0),
+            Leg("turn", speed_mps=1.0, angle_deg=90.0, radius_m=8.0),
+            Leg("straight", speed_mps=1.0, duration_s=60.0),
+            Leg("turn", speed_mps=1.0, angle_deg=-120.0, radius_m=8.0),
+            Leg("straight", speed_mps=1.0, duration_s=60.0),
+        ),
+    )
+    result = car_drives.simulate("slow_robot", drive_params().synth.seoul_campus, slow, seed=seed)
+    tables = _without_receiver_velocity(dict(result.tables))
+    p = filters.lc_ekf
+    imu = inp.prepare_imu(tables["imu"], p.step)
+    fixes = inp.prepare_fixes(tables["gnss"], p.gnss)
+    assert result.sensors.imu_noise is not None
+    lever = np.array(result.sensors.lever_arm_m)
+    al = align(imu, imu.segments[0], fixes, None, p.init, result.sensors.imu_noise, lever,
+               ins.N_LOOSE)  # fmt: skip
+    assert al is not None
+    assert al.method.startswith("slow_course")
+    truth = tables["truth"]
+    k = int(np.searchsorted(truth.column("t_ns").to_numpy(), al.t_ns))
+    err = ins.difference(truth_state(truth, k), al.x0, ins.N_LOOSE)
+    vel_sigma = np.sqrt(np.diag(al.P0))[ins.E_VEL : ins.E_VEL + 3]
+    assert np.all(np.abs(err[ins.E_VEL : ins.E_VEL + 3]) < 3.0 * vel_sigma)
+    yaw_sigma = math.sqrt(al.P0[ins.E_ATT + 2, ins.E_ATT + 2])
+    assert abs(err[ins.E_ATT + 2]) < 3.0 * yaw_sigma
+    assert yaw_sigma <= p.init.motion_yaw_sigma_max_rad + 1e-9
+    r = run_filter(tables, result.sensors, "lc_ekf", p)
+    assert r.status == "ok"
+    final = ins.difference(truth_state(truth, truth.num_rows - 1), r.x[-1], ins.N_LOOSE)
+    # at 1 m/s with fixes alone (variance x60 for their 30 s correlation) the yaw is weakly
+    # observed: seeds 1-3 end 12.0, 4.1 and 6.5 deg off at a 2.8-3.4 deg sigma (seed 1 is
+    # overconfident: the loosely coupled NEES gap of issue 22)
+    assert math.degrees(abs(final[ins.E_ATT + 2])) < 15.0
