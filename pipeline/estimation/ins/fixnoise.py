@@ -23,8 +23,15 @@ new information, the variance inflation ``(1 + phi) / (1 - phi)`` with ``phi = e
 (``~1 + 2 tau/dt``; 1 for white errors: the variance of the mean of correlated samples);
 sigma replaces the default where the receiver reports no accuracy. Without a receiver
 velocity the motion and the error cannot be told apart from the fixes alone, and the
-configured ``pos_error_corr_time_s`` and ``pos_sigma_default_m`` are used. The run's
-``metrics.json`` says which (``fix_noise``).
+configured ``pos_error_corr_time_s`` and ``pos_sigma_default_m`` are used. Where such a
+receiver reports its accuracy, the fixes' third differences still tell white errors from
+correlated ones (``_white_sigma``): motion leaves little in them (a car's jerk at 1 Hz is
+under a metre), white errors of sigma give sqrt(20) sigma, errors correlated over tens of
+seconds almost nothing. Errors white at the reported size are taken as white (no inflation);
+errors of which under half the reported size changes from fix to fix are said to be
+correlated, and keep the configured inflation: they do not become Gauss-Markov states of an
+assumed tau (on a robot creeping at 1 m/s that left the yaw 17-22 deg off at a 2.3-2.8 deg
+sigma). The run's ``metrics.json`` says which (``fix_noise``).
 """
 
 from __future__ import annotations
@@ -45,6 +52,11 @@ from navreplay.pipeline.nav.earth import F64, I64
 MIN_PAIRS = 100
 #: ... spanning at least this long in one run of fixes, s
 MIN_SPAN_S = 60.0
+#: without a receiver velocity, the fixes' third differences show their white part: at least
+#: this share of the reported variance is white errors ...
+WHITE_SHARE_MIN = 0.5
+#: ... at most this share, correlated ones
+CORRELATED_SHARE_MAX = 0.25
 #: the longest lag used, s (and a third of the longest run of fixes)
 MAX_LAG_S = 600.0
 #: lags tried (log-spaced, in fix intervals)
@@ -76,6 +88,8 @@ class FixNoise:
         states: the north and east errors are Gauss-Markov states of the filter
             (``GnssNoiseParams.fix_error_states``) rather than an inflation.
         states_sigma_m: their 1-sigma, m (the fixes' median horizontal sigma; NaN if none).
+        correlated: without a receiver velocity, the fixes' third differences showed their
+            errors correlated (the configured tau and its inflation are kept).
     """
 
     tau_s: float
@@ -89,6 +103,7 @@ class FixNoise:
     pairs: int = 0
     states: bool = False
     states_sigma_m: float = math.nan
+    correlated: bool = False
 
     def as_dict(self) -> dict[str, object]:
         """JSON-ready (NaN as None)."""
@@ -207,6 +222,53 @@ def configured(gnss: GnssNoiseParams, dt_s: float, reason: str, reported_h: floa
                     reported_h_m=reported_h)  # fmt: skip
 
 
+def _without_velocity(
+    t_ns: I64, fix: F64, gnss: GnssNoiseParams, dt: float, why: str, rep: float
+) -> FixNoise:
+    """The configured model, unless the fixes' third differences show their errors white at
+    the receiver's reported accuracy ``rep``, or mostly correlated (see the module)."""
+    base = configured(gnss, dt, why, rep)
+    if not (math.isfinite(rep) and rep > 0.0 and gnss.learn_fix_noise):
+        return base
+    sigma_w, count = _white_sigma(t_ns, fix, dt)
+    if count < MIN_PAIRS:
+        return base
+    share = (sigma_w / rep) ** 2
+    seen = (f"{why}; their third differences show {sigma_w:.2f} m of white error against "
+            f"the {rep:.2f} m reported ({count} differences)")  # fmt: skip
+    if share >= WHITE_SHARE_MIN:
+        return FixNoise(0.0, 1.0, "learned", f"{seen}: white", sigma_source="reported",
+                        reported_h_m=rep, pairs=count)  # fmt: skip
+    if share <= CORRELATED_SHARE_MAX:
+        return FixNoise(base.tau_s, base.inflation, "configured",
+                        f"{seen}: correlated, {base.tau_s:g} s taken", sigma_source="reported",
+                        reported_h_m=rep, pairs=count, correlated=True)  # fmt: skip
+    return FixNoise(base.tau_s, base.inflation, "configured", f"{seen}: undecided, "
+                    f"{base.tau_s:g} s taken", sigma_source="reported", reported_h_m=rep,
+                    pairs=count)  # fmt: skip
+
+
+def _white_sigma(t_ns: I64, fix: F64, dt: float) -> tuple[float, int]:
+    """(per-axis 1-sigma of the fixes' white errors, number of third differences): the
+    robust variance of the horizontal third differences of evenly spaced fixes over 20."""
+    ok = fix[:, me.FX_POS_DIM] >= 2
+    if ok.sum() < 4:
+        return math.nan, 0
+    pos = _local(fix, ok)[:, :2]
+    parts = []
+    for r in _runs(t_ns, ok, dt):
+        if r.size < 4:
+            continue
+        gaps = np.diff(t_ns[r]) * 1e-9
+        even = np.abs(gaps - dt) <= 0.1 * dt
+        keep = even[:-2] & even[1:-1] & even[2:]
+        parts.append(np.diff(pos[r], n=3, axis=0)[keep])
+    d3 = np.concatenate(parts) if parts else np.zeros((0, 2))
+    if d3.shape[0] == 0:
+        return math.nan, 0
+    return math.sqrt(_robust_var(d3.ravel()) / 20.0), int(d3.shape[0])
+
+
 def _unusable(t_ns: I64, fix: F64, gnss: GnssNoiseParams) -> str:
     """Why the fixes cannot teach their error model ("" if they can)."""
     if t_ns.size < 2:
@@ -252,7 +314,7 @@ def learn(t_ns: I64, fix: F64, reported_h: F64, gnss: GnssNoiseParams) -> FixNoi
         why = (f"{pairs} consecutive fixes with velocity over at most {span:.0f} s: too few to "
                f"learn from (>= {MIN_PAIRS} over {MIN_SPAN_S:.0f} s)")  # fmt: skip
     if why:
-        return configured(gnss, dt, why, rep)
+        return _without_velocity(t_ns, fix, gnss, dt, why, rep)
     pos = _local(fix, ok)
     vel = fix[:, me.FX_VN : me.FX_VN + 2]
     lag_s, d_h, count = _structure_function(t_ns, pos[:, :2], vel, runs, dt, span)

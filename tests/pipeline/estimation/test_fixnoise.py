@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pyarrow as pa
@@ -189,3 +190,52 @@ def test_pseudorange_noise_is_learned_from_single_point_residuals_where_none_is_
     assert learned.noise.pseudorange_sigma_m == pytest.approx(pr, rel=0.25)
     assert learned.noise.rate_sigma_mps == pytest.approx(rate, rel=0.35)
     np.testing.assert_allclose(learned.obs[:, me.OB_SIG_PR], learned.noise.pseudorange_sigma_m)
+
+
+def _no_velocity(tau_s: float, reported: float | None, sigma: float = 1.5) -> inp.FixData:
+    """``drive`` without a receiver velocity, with ``reported`` as the receiver's accuracy."""
+    t, cols = drive(tau_s, sigma=sigma)
+    for c in ("vel_n_mps", "vel_e_mps", "vel_d_mps"):
+        cols[c] = np.full(t.size, np.nan)
+    extra = {} if reported is None else {"h_acc_m": np.full(t.size, reported)}
+    return inp.prepare_fixes(table(t, cols, **extra), replace(GNSS, fix_error_states=True))
+
+
+@pytest.mark.parametrize("sigma", [0.5, 1.5, 5.0])
+def test_without_velocity_white_fixes_at_their_reported_accuracy_are_taken_white(
+    sigma: float,
+) -> None:
+    fixes = _no_velocity(0.0, sigma, sigma)
+    assert fixes.noise is not None
+    assert fixes.noise.tau_s == 0.0
+    assert fixes.noise.source == "learned"
+    assert "white" in fixes.noise.reason
+    assert not fixes.noise.states
+    assert fixes.fix[0, me.FX_POS_INFL] == 1.0  # no inflation: every fix is new information
+
+
+@pytest.mark.parametrize("tau_s", [10.0, 30.0, 120.0])
+def test_without_velocity_correlated_fixes_keep_the_configured_inflation(tau_s: float) -> None:
+    fixes = _no_velocity(tau_s, 1.5)
+    assert fixes.noise is not None
+    assert fixes.noise.correlated
+    assert "correlated" in fixes.noise.reason
+    # an assumed tau does not become error states (see the module docstring)
+    assert not fixes.noise.states
+    assert fixes.noise.tau_s == GNSS.pos_error_corr_time_s
+    assert fixes.fix[0, me.FX_POS_INFL] == pytest.approx(fn.inflation(30.0, 1.0))
+
+
+def test_without_velocity_and_accuracy_or_with_an_unclear_share_the_configured_model_stays() -> (
+    None
+):
+    silent = _no_velocity(0.0, None)  # no reported size to compare the white part with
+    assert silent.noise is not None
+    assert silent.noise.source == "configured"
+    assert not silent.noise.states
+    # white errors of 1.5 m reported as 2.5 m: 36 % of the variance white, neither clear case
+    unclear = _no_velocity(0.0, 2.5)
+    assert unclear.noise is not None
+    assert unclear.noise.source == "configured"
+    assert "undecided" in unclear.noise.reason
+    assert not unclear.noise.states
