@@ -26,7 +26,10 @@ import numpy as np
 from navreplay.ingest.api import ingest
 from navreplay.ingest.errors import IngestError
 
+#: a case is a hang after this much CPU time, s ...
 TIME_LIMIT_S = 20.0
+#: ... or this many times that of wall-clock time
+WALL_FACTOR = 6.0
 MUTATIONS = ("empty", "random", "truncate", "bitflip", "duplicate", "zero_block", "directory")
 
 
@@ -91,16 +94,25 @@ class Hang(BaseException):
 
 @contextlib.contextmanager
 def time_limit(seconds: float) -> Iterator[None]:
-    def _alarm(signum: int, frame: FrameType | None) -> None:
-        raise Hang(f"no result after {seconds} s")
+    """Raise ``Hang`` after ``seconds`` of this process's CPU time (a loop that never ends;
+    on a loaded machine the wall clock runs several times faster than a case's work) or
+    ``WALL_FACTOR`` times that of wall time (a wait that never ends)."""
 
-    previous = signal.signal(signal.SIGALRM, _alarm)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
+    def _alarm(signum: int, frame: FrameType | None) -> None:
+        clock = "CPU" if signum == signal.SIGPROF else "wall-clock"
+        limit = seconds if signum == signal.SIGPROF else seconds * WALL_FACTOR
+        raise Hang(f"no result after {limit} s of {clock} time")
+
+    previous = {s: signal.signal(s, _alarm) for s in (signal.SIGPROF, signal.SIGALRM)}
+    signal.setitimer(signal.ITIMER_PROF, seconds)
+    signal.setitimer(signal.ITIMER_REAL, seconds * WALL_FACTOR)
     try:
         yield
     finally:
+        signal.setitimer(signal.ITIMER_PROF, 0)
         signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 @dataclass
