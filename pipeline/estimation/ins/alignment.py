@@ -64,6 +64,9 @@ _COMPASS_HALF_NS = 1_000_000_000
 _GPS_2000_NS = 630_720_013_000_000_000
 #: GNSS speeds above this (and 3 sigma of their noise) are not at rest, m/s
 _REST_SPEED_MPS = 0.3
+#: a velocity differenced from fixes spans this many fixes on each side (the one whose speed
+#: stands further out of its noise: two at 1 Hz in an acceleration from rest)
+_DIFFERENCE_SPANS = (1, 2)
 #: the longest baseline of fixes differenced for a slow vehicle's course (``_slow_course``), s
 _SLOW_BASELINE_MAX_S = 20.0
 #: floor on the yaw 1-sigma of a heading from motion (the attitude filter's own errors), rad
@@ -174,11 +177,18 @@ def _track_from_fixes(fixes: FixData) -> _Track | None:
     # the fixes' own accuracy (FX_SIG_H carries the inflation for correlated errors)
     raw_sig_h = f[:, me.FX_SIG_H] / np.sqrt(f[:, me.FX_POS_INFL])
     for k in (int(j) for j in np.flatnonzero(~np.isfinite(vel[:, 0]))):
-        lo, hi = max(k - 1, 0), min(k + 1, int(t.size) - 1)
-        if hi > lo and ts[hi] - ts[lo] <= 2.5:
-            vel[k] = (ned[hi] - ned[lo]) / (ts[hi] - ts[lo])
+        # the neighbours one or two fixes away, whichever shows the speed over more of its
+        # noise (a centred chord of a steady turn is the course at its middle)
+        best = 0.0
+        for m in _DIFFERENCE_SPANS:
+            lo, hi = max(k - m, 0), min(k + m, int(t.size) - 1)
+            if hi <= lo or ts[hi] - ts[lo] > 2.5 * m:
+                continue
+            v = (ned[hi] - ned[lo]) / (ts[hi] - ts[lo])
             # per axis; white fix errors (correlated ones difference to less)
-            sig_speed[k] = math.hypot(raw_sig_h[lo], raw_sig_h[hi]) / (ts[hi] - ts[lo])
+            sig = math.hypot(raw_sig_h[lo], raw_sig_h[hi]) / (ts[hi] - ts[lo])
+            if math.hypot(v[0], v[1]) / sig >= best:
+                best, vel[k], sig_speed[k] = math.hypot(v[0], v[1]) / sig, v, sig
     clock = np.full((t.size, 2), math.nan)
     sig_v = f[:, me.FX_SIG_V]
     return _Track(t, llh, vel, sig_speed, differenced, f[:, me.FX_SIG_H], sig_v, clock, raw_sig_h)
