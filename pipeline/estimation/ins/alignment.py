@@ -163,14 +163,7 @@ def _track_from_fixes(fixes: FixData) -> _Track | None:
     vel = np.where(f[:, [me.FX_VEL_DIM]] > 0, f[:, me.FX_VN : me.FX_VN + 3], math.nan)
     vel[f[:, me.FX_VEL_DIM] == 2, 2] = 0.0  # no vertical velocity given: assume level
     # where the receiver gives no velocity, difference the neighbouring positions
-    rm, rn = np.vectorize(radii)(llh[:, 0])
-    ned = np.column_stack(
-        [
-            (llh[:, 0] - llh[0, 0]) * (rm + llh[:, 2]),
-            (llh[:, 1] - llh[0, 1]) * (rn + llh[:, 2]) * np.cos(llh[:, 0]),
-            -(llh[:, 2] - llh[0, 2]),
-        ]
-    )
+    ned = _local_ned(llh)
     ts = t * 1e-9
     sig_speed = f[:, me.FX_SIG_VEL].copy()
     differenced = ~np.isfinite(vel[:, 0])
@@ -187,8 +180,9 @@ def _track_from_fixes(fixes: FixData) -> _Track | None:
             v = (ned[hi] - ned[lo]) / (ts[hi] - ts[lo])
             # per axis; white fix errors (correlated ones difference to less)
             sig = math.hypot(raw_sig_h[lo], raw_sig_h[hi]) / (ts[hi] - ts[lo])
-            if math.hypot(v[0], v[1]) / sig >= best:
-                best, vel[k], sig_speed[k] = math.hypot(v[0], v[1]) / sig, v, sig
+            ratio = math.hypot(v[0], v[1]) / sig
+            if ratio >= best:
+                best, vel[k], sig_speed[k] = ratio, v, sig
     clock = np.full((t.size, 2), math.nan)
     sig_v = f[:, me.FX_SIG_V]
     return _Track(t, llh, vel, sig_speed, differenced, f[:, me.FX_SIG_H], sig_v, clock, raw_sig_h)
