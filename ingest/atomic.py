@@ -156,7 +156,7 @@ def atomic_write_json(target: str | Path, obj: Any) -> None:
 
 #: kinds of file navreplay writes into an output folder (tables, runs, reports); a folder
 #: holding anything else is not replaced (``atomic_directory``)
-OUTPUT_SUFFIXES = frozenset({".parquet", ".json", ".html", ".csv", ".svg", ".png"})
+OUTPUT_SUFFIXES = frozenset({".parquet", ".json", ".html", ".csv", ".svg", ".png", ".tum"})
 
 
 def _foreign_files(target: Path, owned: frozenset[str]) -> list[Path]:

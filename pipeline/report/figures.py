@@ -31,8 +31,9 @@ from navreplay.pipeline.report.svg import (
 
 NIS_WINDOW = 50
 MAX_SCATTER = 1500
-MAX_PATH = 3000  # points per track line
-PANEL_POINTS = 600  # per line in the small panels of the bias figure
+MAX_PATH = 1500  # points per track line
+BAND_POINTS = 400  # per 3-sigma envelope of the error figures
+PANEL_POINTS = 400  # per line in the small panels of the bias and NIS figures
 _BIASES = (
     ("acc_bias_x_mps2", "accel bias x, m/s²"),
     ("acc_bias_y_mps2", "accel bias y, m/s²"),
@@ -76,7 +77,8 @@ def _stacked(plt: Any, rows: int, height_in: float) -> tuple[Any, Any]:
 
 
 def track(data: DatasetInputs, key: str) -> str | None:
-    """East/north track of the reference and each filter's nominal run, metres."""
+    """East/north track of the reference, the onboard estimate (where the log has one) and
+    each filter's nominal run, metres."""
     origin = _origin(data)
     if origin is None:
         return None
@@ -92,6 +94,12 @@ def track(data: DatasetInputs, key: str) -> str | None:
             e, n = local_en(column(data.gnss, "lat_deg"), column(data.gnss, "lon_deg"), *origin)
             step = max(1, e.size // MAX_SCATTER)
             ax.plot(e[::step], n[::step], ".", ms=2.0, color="#888888", label="GNSS fixes")
+        if data.onboard is not None and data.onboard.num_rows:
+            ob = data.onboard
+            e, n = local_en(column(ob, "lat_deg"), column(ob, "lon_deg"), *origin)
+            step = max(1, e.size // MAX_PATH)
+            ax.plot(e[::step], n[::step], color="#000000", lw=1.0, ls="--",
+                    label="onboard estimate")  # fmt: skip
         for r in _nominal(data):
             assert r.estimate is not None
             e, n = local_en(column(r.estimate, "lat_deg"), column(r.estimate, "lon_deg"), *origin)
@@ -125,7 +133,7 @@ def errors(
             t = s.t_s(t0)
             c = colour(filters.index(r.filter))
             env = 3.0 * s.sigma_h_m
-            te, ee = decimate_minmax(t, env)
+            te, ee = decimate_minmax(t, env, BAND_POINTS)  # a smooth band needs few points
             ax.fill_between(te, 0.0, ee, color=c, alpha=0.15, lw=0, label="3σ horizontal")
             ax.plot(*decimate_minmax(t, s.err_h_m), color=c, label=f"{r.filter} horizontal error")
             wins = [((w.start_ns - t0) / 1e9, (w.end_ns - t0) / 1e9) for w in r.windows]
@@ -133,10 +141,16 @@ def errors(
             finite = s.err_h_m[np.isfinite(s.err_h_m)]
             if finite.size and np.nanmax(finite) > 50.0 * max(np.median(finite), 1e-3):
                 ax.set_yscale("log")
+                # no decades of sub-millimetre noise: a residual at a fused fix can be ~1e-9 m
+                ax.set_ylim(bottom=max(1e-3, float(np.nanmax(finite)) * 1e-5))
             ax.set_ylabel("m")
             ax.legend(loc="upper right", ncols=3)
-            ref = "truth" if s.reference == "truth" else "GNSS fixes"
-            ax.set_title(f"{r.filter}: error against {ref}", loc="left")
+            what = (
+                "error against truth"
+                if s.reference == "truth"
+                else "residual to the GNSS fixes (fused outside outage windows: not an accuracy)"
+            )
+            ax.set_title(f"{r.filter}: {what}", loc="left")
         panels[-1].set_xlabel("time since start, s")
         fig.suptitle(f"{data.dataset}: position error, scenario {scenario}")
         return figure_svg(fig, key)
@@ -169,10 +183,12 @@ def nis(data: DatasetInputs, run: Run, key: str) -> str | None:
             sel = arr == name
             ts, vs = t[sel], values[sel]
             dof = int(np.median(dims[sel])) if sel.any() else 1
-            step = max(1, ts.size // MAX_SCATTER)
-            ax.plot(ts[::step], vs[::step], ".", ms=1.5, color="#777777", label="NIS per update")
+            # every update's extremes as a thin line (a scatter of thousands of markers is
+            # megabytes of SVG), under the running mean
+            ax.plot(*decimate_minmax(ts, vs, PANEL_POINTS), color="#999999", lw=0.4,
+                    label="NIS per update")  # fmt: skip
             ax.plot(
-                *decimate_minmax(ts, _running_mean(vs, NIS_WINDOW)),
+                *decimate_minmax(ts, _running_mean(vs, NIS_WINDOW), PANEL_POINTS),
                 color="#0072B2",
                 label=f"mean of {NIS_WINDOW}",
             )

@@ -15,11 +15,18 @@ import numpy as np
 
 from navreplay.pipeline.report.inputs import DatasetInputs
 from navreplay.pipeline.report.series import ErrorSeries
-from navreplay.pipeline.report.svg import OUTAGE_COLOUR, colour, figure_svg, style
+from navreplay.pipeline.report.svg import (
+    OUTAGE_COLOUR,
+    colour,
+    decimate_minmax,
+    figure_svg,
+    style,
+)
 
 PRE_S = 10.0
 POST_S = 30.0
 MAX_PANELS = 12
+PANEL_POINTS = 400  # per line of a window's panel (a third of the page's width)
 
 
 def windows_detail(
@@ -47,7 +54,11 @@ def windows_detail(
                 b = w.end_ns + round(POST_S * 1e9)
                 sel = (s.t_ns >= a) & (s.t_ns <= b)
                 t = (s.t_ns[sel] - w.start_ns) / 1e9
-                ax.plot(t, s.err_3d_m[sel], color=colour(filters.index(r.filter)), label=r.filter)
+                ax.plot(
+                    *decimate_minmax(t, s.err_3d_m[sel], PANEL_POINTS),
+                    color=colour(filters.index(r.filter)),
+                    label=r.filter,
+                )
             sats = w.metrics.get("sats")
             extra = f", {sats} sats" if sats is not None else ""
             ax.set_title(f"window {i + 1}{extra}", loc="left")
@@ -82,4 +93,51 @@ def drift_by_length(rows: Sequence[dict[str, Any]], filters: list[str], key: str
         ax.set_ylabel("3-D error at outage end, m")
         ax.set_title("drift against outage length (complete outages; bars: 95 % CI)")
         ax.legend(loc="upper left")
+        return figure_svg(fig, key)
+
+
+def sat_reduction(rows: Sequence[dict[str, Any]], paper: dict[int, float], key: str) -> str | None:
+    """The error reduction per satellite count of every dataset and filter pair (rows of the
+    summary's ``sat_reduction.csv``: ``dataset``, ``pair``, ``sats``, ``reduction_pct``,
+    ``ci_low_pct``, ``ci_high_pct``) with its 95 % interval, beside ``paper`` (paper 001,
+    Table 1: sats -> %)."""
+
+    def num(v: Any) -> float:
+        try:
+            return float(v)
+        except (TypeError, ValueError):
+            return float("nan")
+
+    series: dict[str, list[dict[str, Any]]] = {}
+    for r in rows:
+        series.setdefault(f"{r.get('dataset')}: {r.get('pair')}", []).append(r)
+    if not series:
+        return None
+    with style() as plt:
+        fig, ax = plt.subplots(figsize=(9.0, 4.0), layout="constrained")
+        width = 0.6 / max(len(series), 1)
+        for i, (label, unsorted) in enumerate(sorted(series.items())):
+            rr = sorted(unsorted, key=lambda r: num(r.get("sats")))
+            x = np.array([num(r.get("sats")) for r in rr]) + (i - (len(series) - 1) / 2) * width
+            y = np.array([num(r.get("reduction_pct")) for r in rr])
+            lo = np.array([num(r.get("ci_low_pct")) for r in rr])
+            hi = np.array([num(r.get("ci_high_pct")) for r in rr])
+            err = np.vstack([np.nan_to_num(y - lo), np.nan_to_num(hi - y)])
+            ax.errorbar(x, y, yerr=err, color=colour(i), marker="o", ms=3.5, capsize=3, ls="none",
+                        label=label)  # fmt: skip
+        ks = sorted(paper)
+        ax.plot(
+            ks,
+            [paper[k] for k in ks],
+            "k_",
+            ms=16,
+            mew=2.0,
+            label="paper 001, Table 1 (tc_ukf -> tc_ukf_nhc)",
+        )
+        ax.axhline(0.0, color="#888888", lw=0.6)
+        ax.set_xticks(ks)
+        ax.set_xlabel("satellites visible in the window")
+        ax.set_ylabel("error reduction, %")
+        ax.set_title("error reduction per satellite count (bars: 95 % interval)")
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7.0)
         return figure_svg(fig, key)

@@ -46,6 +46,8 @@ figure.zoomed svg { cursor: grab; }
 figcaption { color: var(--muted); font-size: 12.5px; margin-top: 4px; }
 details { margin: 8px 0; }
 summary { cursor: pointer; font-weight: 600; }
+section > details > summary h2 { display: inline-block; width: calc(100% - 24px); margin: 0; }
+section#verdict { border: 2px solid var(--line); border-radius: 6px; padding: 4px 14px 8px; }
 ul.warnings li { color: #9a6200; }
 code { background: var(--bg2); padding: 0 3px; border-radius: 3px; }
 .scroll { overflow-x: auto; }
@@ -86,6 +88,13 @@ ZOOM_JS = """
     });
   }
   document.querySelectorAll("figure.zoom svg").forEach(zoomable);
+  function reveal() {
+    var target = location.hash && document.getElementById(location.hash.slice(1));
+    var folded = target && target.querySelector(":scope > details");
+    if (folded) { folded.open = true; }
+  }
+  window.addEventListener("hashchange", reveal);
+  reveal();
 })();
 """
 
@@ -170,8 +179,15 @@ def figure(svg: str | None, caption: str = "", *, png_uri: str | None = None) ->
     return f"<figure{zoom}>{inner}{cap}</figure>"
 
 
-def section(ident: str, title: str, body: str) -> str:
-    return f'<section id="{esc(ident)}"><h2>{esc(title)}</h2>{body}</section>'
+def section(ident: str, title: str, body: str, *, fold: bool = False, open_: bool = True) -> str:
+    """A section; ``fold``: its body in a ``<details>`` (open with ``open_``) under its title."""
+    if not fold:
+        return f'<section id="{esc(ident)}"><h2>{esc(title)}</h2>{body}</section>'
+    state = " open" if open_ else ""
+    return (
+        f'<section id="{esc(ident)}"><details{state}><summary><h2>{esc(title)}</h2></summary>'
+        f"{body}</details></section>"
+    )
 
 
 def para(text: str, cls: str = "") -> str:
@@ -179,14 +195,25 @@ def para(text: str, cls: str = "") -> str:
     return f"<p{c}>{esc(text)}</p>"
 
 
-def page(title: str, subtitle: str, sections: Sequence[tuple[str, str, str]]) -> str:
+def page(
+    title: str,
+    subtitle: str,
+    sections: Sequence[tuple[str, str, str]],
+    *,
+    opened: Sequence[str] | None = None,
+) -> str:
     """The whole page: header, a navigation bar of the sections, the sections, the script.
 
-    ``sections`` are (id, title, body HTML); empty bodies are left out.
+    ``sections`` are (id, title, body HTML); empty bodies are left out. With ``opened``, the
+    first section is the verdict, always shown, and the others fold (``<details>``), open
+    when their id is in ``opened``; a link to a folded section opens it.
     """
     kept = [(i, t, b) for i, t, b in sections if b]
     links = "".join(f'<a href="#{esc(i)}">{esc(t)}</a>' for i, t, _ in kept)
-    body = "".join(section(i, t, b) for i, t, b in kept)
+    body = "".join(
+        section(i, t, b, fold=opened is not None and k > 0, open_=opened is None or i in opened)
+        for k, (i, t, b) in enumerate(kept)
+    )
     return (
         "<!DOCTYPE html>\n"
         '<html lang="en"><head><meta charset="utf-8">'

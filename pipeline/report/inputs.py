@@ -3,7 +3,8 @@
 ``load_dataset(dataset, tables_dir, runs_dir, experiments_dir)`` reads:
 
 - ``tables_dir/meta.json`` (``ingest.meta``) and ``tables_dir/ingest_report.json`` (the audit;
-  ``ingest.api`` documents its structure), and the ``truth`` and ``gnss`` tables if present;
+  ``ingest.api`` documents its structure), and the ``truth``, ``gnss`` and ``estimator`` (the
+  vehicle's own estimate, ``report.onboard``) tables if present;
 - every run under ``runs_dir``: any directory holding a ``metrics.json`` (layout free, e.g.
   ``runs/<filter>/<scenario>/``), with its ``estimate.parquet`` and ``innovations.parquet``
   (written by ``navreplay run``, ``estimation.core.contract.write_run``). The run's filter and
@@ -86,6 +87,7 @@ class DatasetInputs:
     truth: pa.Table | None
     gnss: pa.Table | None
     runs: list[Run]
+    onboard: pa.Table | None = None
     experiments: list[Any] = field(default_factory=list)
 
     def t0_ns(self) -> int:
@@ -221,6 +223,7 @@ def load_dataset(
         truth=_table(tables_dir / "truth.parquet", TableName.TRUTH),
         gnss=_table(tables_dir / "gnss.parquet", TableName.GNSS),
         runs=load_runs(runs_dir) if runs_dir is not None else [],
+        onboard=_table(tables_dir / "estimator.parquet", TableName.ESTIMATOR),
         experiments=load_experiments(experiments_dir) if experiments_dir is not None else [],
     )
 

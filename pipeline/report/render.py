@@ -8,7 +8,12 @@
   ``tables/drift_by_length.csv`` (complete outages of the runs by length), the outages
   stage's ``tables/sat_reduction.csv`` and ``tables/drift_vs_length.csv`` copied as they are
   (when ``experiments_dir`` holds them: ``experiments.find_outage_results``),
-  ``tables/audit.csv`` and ``tables/provenance.json``;
+  ``tables/onboard_comparison.csv`` (each run against the log's own estimate, when the
+  dataset has an ``estimator`` table: ``report.onboard``), ``tables/audit.csv`` and
+  ``tables/provenance.json``;
+- ``trajectories/truth.tum`` and ``trajectories/onboard.tum``: the references as TUM
+  trajectories (``ingest.writers.tum``), to compare with each run's ``trajectory.tum`` in
+  evo (``evo_ape tum trajectories/truth.tum <run>/trajectory.tum``);
 - ``metrics.json``: the headline numbers per filter and scenario, flat, for
   ``dvc metrics show/diff``.
 
@@ -28,7 +33,15 @@ from typing import Any
 
 from navreplay.ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
 from navreplay.ingest.tables import git_commit, package_version
-from navreplay.pipeline.report import audit, figures, figures_outage, sections
+from navreplay.ingest.writers.tum import write_tum
+from navreplay.pipeline.report import (
+    audit,
+    figures,
+    figures_context,
+    figures_outage,
+    onboard,
+    sections,
+)
 from navreplay.pipeline.report import html as h
 from navreplay.pipeline.report import tables as tb
 from navreplay.pipeline.report.experiments import (
@@ -51,6 +64,7 @@ class RenderedReport:
     runs: list[dict[str, Any]]
     warnings: list[str]
     figures: int
+    onboard: list[dict[str, Any]]
 
 
 def _headline(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -78,6 +92,7 @@ def render_dataset(
     nis_rows = tb.nis_rows(data.runs)
     win_rows = tb.window_rows(data, series)
     drift_rows = tb.drift_by_length(win_rows)
+    onboard_rows = onboard.comparison_rows(data, onboard.differences(data))
     outage = find_outage_results(experiments_dir)
     audit_rows = audit.audit_rows(data.ingest_report)
     filters = data.filters()
@@ -91,7 +106,15 @@ def render_dataset(
 
     track = fig(
         figures.track(data, "track"),
-        "Track: reference and each filter's nominal run (east/north from the first sample).",
+        "Track: reference, the onboard estimate where the log has one, and each filter's nominal "
+        "run (east/north from the first sample).",
+    )
+
+    context = fig(
+        figures_context.context(data, "context"),
+        "The receiver's satellites, fix type and reported accuracy, the height of the fixes, "
+        "the onboard estimate and each filter's nominal run, and the measurements each filter's "
+        "gate rejected, on one time axis; outage windows shaded.",
     )
 
     def per_scenario(
@@ -153,11 +176,15 @@ def render_dataset(
             for r in data.runs
         ],
     }
+    warnings = audit.warnings(data)
     body = [
+        ("verdict", "Verdict", sections.verdict_section(data, run_rows, win_rows, warnings)),
         ("overview", "Overview", sections.overview(data, run_rows)),
         ("audit", "Data quality", audit.audit_section(data)),
+        ("context", "Log context", context),
         ("track", "Track", track),
         ("metrics", "Accuracy and consistency", sections.metrics(run_rows)),
+        ("onboard", "Against the onboard estimate", sections.onboard(onboard_rows)),
         ("noise", "Noise models", sections.noise(data.runs)),
         ("errors", "Errors against time", "".join(err_parts)),
         ("outages", "Outage windows", sections.windows(win_rows) + "".join(outage_parts)),
@@ -177,38 +204,59 @@ def render_dataset(
         ("cost", "Run cost", sections.cost(run_rows)),
         ("provenance", "Provenance", sections.provenance(provenance)),
     ]
+    ran = sum(r.ran for r in data.runs)
+    not_ran = f" ({len(data.runs) - ran} did not run)" if ran < len(data.runs) else ""
     subtitle = (
-        f"{len(data.runs)} runs of {len(filters)} filters under {len(data.scenarios())} "
+        f"{ran} runs{not_ran} of {len(filters)} filters under {len(data.scenarios())} "
         f"scenarios; navreplay {provenance['package_version']}"
     )
-    page = h.page(title or f"navreplay report: {data.dataset}", subtitle, body)
+    page = h.page(title or f"navreplay report: {data.dataset}", subtitle, body, opened=_OPENED)
+    tables = {
+        "runs.csv": tb.to_csv(run_rows),
+        "nis.csv": tb.to_csv(nis_rows, _NIS_COLS),
+        "windows.csv": tb.to_csv(win_rows, _WIN_COLS),
+        "drift_by_length.csv": tb.to_csv(drift_rows, _DRIFT),
+        "audit.csv": tb.to_csv(audit_rows, _AUDIT),
+    }
+    if onboard_rows:
+        tables["onboard_comparison.csv"] = tb.to_csv(onboard_rows, onboard.COLUMNS)
     with atomic_directory(out_dir) as tmp:
         (tmp / "tables").mkdir()
         atomic_write_text(tmp / "index.html", page)
-        atomic_write_text(tmp / "tables" / "runs.csv", tb.to_csv(run_rows))
+        for name, text in tables.items():
+            atomic_write_text(tmp / "tables" / name, text)
         atomic_write_json(tmp / "tables" / "runs.json", run_rows)
-        atomic_write_text(tmp / "tables" / "nis.csv", tb.to_csv(nis_rows, _NIS_COLS))
-        atomic_write_text(tmp / "tables" / "windows.csv", tb.to_csv(win_rows, _WIN_COLS))
-        atomic_write_text(tmp / "tables" / "drift_by_length.csv", tb.to_csv(drift_rows, _DRIFT))
-        atomic_write_text(tmp / "tables" / "audit.csv", tb.to_csv(audit_rows, _AUDIT))
         atomic_write_json(tmp / "tables" / "provenance.json", provenance)
-        for e in data.experiments:
-            for t in e.tables:
-                dest = tmp / "tables" / "experiments" / e.name / t.path.name
-                dest.parent.mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(t.path, dest)
-                if t.path.with_suffix(".json").is_file():  # the same rows as JSON
-                    shutil.copyfile(t.path.with_suffix(".json"), dest.with_suffix(".json"))
-        for table, name in ((outage.sat_reduction, SAT_REDUCTION_NAME), (outage.drift, DRIFT_NAME)):
-            if table is not None:
-                shutil.copyfile(table.path, tmp / "tables" / name)
+        _copy_inputs(tmp, data, experiments_dir)
         atomic_write_json(tmp / "metrics.json", _headline(run_rows))
     log.info("wrote %s (%d figures)", out_dir / "index.html", len(figs))
     return RenderedReport(
-        out_dir, out_dir / "index.html", run_rows, audit.warnings(data), len(figs)
+        out_dir, out_dir / "index.html", run_rows, warnings, len(figs), onboard_rows
     )
 
 
+def _copy_inputs(tmp: Path, data: DatasetInputs, experiments_dir: Path | None) -> None:
+    """The experiments' and the outages stage's tables as they are, and the references as TUM
+    trajectories (evo: ``evo_ape tum trajectories/truth.tum <run>/trajectory.tum``)."""
+    for e in data.experiments:
+        for t in e.tables:
+            dest = tmp / "tables" / "experiments" / e.name / t.path.name
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(t.path, dest)
+            if t.path.with_suffix(".json").is_file():  # the same rows as JSON
+                shutil.copyfile(t.path.with_suffix(".json"), dest.with_suffix(".json"))
+    outage = find_outage_results(experiments_dir)
+    for table, name in ((outage.sat_reduction, SAT_REDUCTION_NAME), (outage.drift, DRIFT_NAME)):
+        if table is not None:
+            shutil.copyfile(table.path, tmp / "tables" / name)
+    for ref, name in ((data.truth, "truth"), (data.onboard, "onboard")):
+        if ref is not None and ref.num_rows:
+            (tmp / "trajectories").mkdir(exist_ok=True)
+            write_tum(tmp / "trajectories" / f"{name}.tum", ref)
+
+
+# the sections shown open under the verdict; the others fold until opened
+_OPENED = ("overview", "metrics", "onboard")
 _NIS_COLS = ("filter", "scenario", "stream", "count", "nis_mean", "dof_mean", "bound_low",
              "bound_high", "consistent", "rejected")  # fmt: skip
 _WIN_COLS = ("filter", "scenario", "window", "start_s", "duration_s", "sats", "err_end_m",

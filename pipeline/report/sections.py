@@ -6,6 +6,9 @@ import re
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+
+from navreplay.pipeline.outages.stats import mean_interval
 from navreplay.pipeline.report import html as h
 from navreplay.pipeline.report import markdown
 from navreplay.pipeline.report.experiments import CsvTable, Experiment
@@ -17,9 +20,9 @@ MAX_TABLE_ROWS = 40  # rows of an experiment's CSV shown on the page
 
 
 def overview(data: DatasetInputs, rows: Sequence[Row]) -> str:
-    """What the dataset holds, which runs exist (filter x scenario), what was skipped, why;
-    first, a verdict when some runs did not end ``ok``."""
-    parts = [verdict(rows)] if rows else []
+    """What the dataset holds, which runs exist (filter x scenario), what was skipped, why
+    (the verdict, ``verdict_section``, comes before it)."""
+    parts: list[str] = []
     meta = data.meta
     if meta is not None:
         tables = ", ".join(f"{k} ({v:,} rows)" for k, v in sorted(meta.tables.items()))
@@ -70,6 +73,82 @@ def verdict(rows: Sequence[Row]) -> str:
             "covariance says"
         )
     return h.para(f"{head}: {others}{why}).", "verdict bad" if ok == 0 else "verdict warn")
+
+
+def best_rows(windows: Sequence[Row], status: dict[tuple[str, str], str]) -> list[Row]:
+    """Which filter held best in each outage condition (satellites kept, window length): the
+    lowest mean error at the windows' ends, with its 95 % interval (BCa bootstrap over the
+    windows), and the runner-up. Only runs that finished (ok or inconsistent) compete."""
+    groups: dict[tuple[int, float], dict[str, list[float]]] = {}
+    refs: dict[tuple[int, float], set[str]] = {}
+    for w in windows:
+        if w.get("err_end_m") is None or status.get((w["filter"], w["scenario"])) not in (
+            "ok", "inconsistent"):  # fmt: skip
+            continue
+        if w.get("sats") is None and not str(w["scenario"]).startswith("outage"):
+            continue
+        key = (int(w.get("sats") or 0), round(float(w["duration_s"]), 1))
+        groups.setdefault(key, {}).setdefault(str(w["filter"]), []).append(float(w["err_end_m"]))
+        refs.setdefault(key, set()).add(str(w.get("reference") or ""))
+    rows = []
+    for (sats, length), per_filter in sorted(groups.items()):
+        ranked = sorted(
+            ((mean_interval(np.asarray(e, dtype=np.float64)), f, len(e))
+             for f, e in per_filter.items()),
+            key=lambda item: (item[0].estimate, item[1]),
+        )  # fmt: skip
+        (best, name, n), rest = ranked[0], ranked[1:]
+        rows.append({
+            "condition": "complete outage" if sats == 0 else f"{sats} satellites",
+            "length_s": length,
+            "windows": n,
+            "best": name,
+            "mean_m": best.estimate,
+            "ci_low_m": best.low,
+            "ci_high_m": best.high,
+            "next": rest[0][1] if rest else None,
+            "next_mean_m": rest[0][0].estimate if rest else None,
+            "filters": len(ranked),
+            "against": ", ".join(sorted(r for r in refs[(sats, length)] if r)),
+        })  # fmt: skip
+    return rows
+
+
+def verdict_section(
+    data: DatasetInputs, rows: Sequence[Row], windows: Sequence[Row], warnings: Sequence[str]
+) -> str:
+    """The page's first screen: the runs' statuses, the data-quality verdict, which filter
+    held best for each outage length and satellite count, and the warnings."""
+    parts = [verdict(rows)] if rows else [h.para("No filter runs for this dataset yet.", "note")]
+    if warnings:
+        items = "".join(f"<li>{h.esc(w)}</li>" for w in warnings[:8])
+        more = f"<li>... and {len(warnings) - 8} more</li>" if len(warnings) > 8 else ""
+        parts.append(
+            h.para(f"Data quality: {len(warnings)} warning(s) from the ingest audit.", "warn")
+            + f'<ul class="warnings">{items}{more}</ul>'
+        )
+    elif data.ingest_report is not None:
+        parts.append(h.para("Data quality: the ingest audit raised no warning.", "ok"))
+    status = {(str(r["filter"]), str(r["scenario"])): str(r["status"]) for r in rows}
+    best = best_rows(windows, status)
+    if best:
+        cols = (("condition", "condition"), ("length_s", "length s"), ("best", "held best"),
+                ("mean_m", "mean error at end m"), ("ci_low_m", "95 % low"),
+                ("ci_high_m", "95 % high"), ("windows", "windows"), ("next", "next best"),
+                ("next_mean_m", "its mean m"), ("filters", "filters compared"),
+                ("against", "measured against"))  # fmt: skip
+        parts.append("<h3>Which filter held best</h3>" + h.table(best, cols))
+    trouble = [r for r in rows if r["status"] not in ("ok", "skipped")]
+    if trouble:
+        items = "".join(
+            f"<li><b>{h.esc(r['filter'])}</b> / {h.esc(r['scenario'])}: "
+            f"{h.esc(str(r['status']).replace('_', ' '))}: "
+            f"{h.esc(r.get('reason') or 'no reason given')}</li>"
+            for r in trouble[:12]
+        )
+        more = f"<li>... and {len(trouble) - 12} more (Overview)</li>" if len(trouble) > 12 else ""
+        parts.append(f'<ul class="warnings">{items}{more}</ul>')
+    return "".join(parts)
 
 
 def _status_cls(key: str) -> Any:
@@ -176,6 +255,48 @@ def windows(rows: Sequence[Row]) -> str:
         "window's start; drift is the error at the end over the distance travelled in it.",
         "note",
     )
+
+
+def onboard(rows: Sequence[Row]) -> str:
+    """The replayed runs against the vehicle's own estimate (``report.onboard``)."""
+    if not rows:
+        return ""
+    run_cols = (("filter", "filter"), ("scenario", "scenario"), ("samples", "samples"),
+                ("pos_h_rms_m", "horiz. RMS m"), ("pos_h_max_m", "horiz. max m"),
+                ("pos_v_rms_m", "vert. RMS m"), ("vel_3d_rms_mps", "vel RMS m/s"),
+                ("roll_rms_deg", "roll RMS °"), ("pitch_rms_deg", "pitch RMS °"),
+                ("yaw_rms_deg", "yaw RMS °"))  # fmt: skip
+    win_cols = (("filter", "filter"), ("scenario", "scenario"), ("window", "#"),
+                ("start_s", "start s"), ("duration_s", "length s"),
+                ("pos_3d_end_m", "3-D at end m"), ("pos_h_end_m", "horiz. at end m"),
+                ("pos_3d_max_m", "3-D max m"), ("pos_3d_mean_m", "3-D mean m"),
+                ("distance_m", "distance m"),
+                ("drift_pct_distance", "drift % dist."))  # fmt: skip
+    whole = [r for r in rows if r["scope"] == "run"]
+    wins = [r for r in rows if r["scope"] == "window"]
+    parts = [
+        h.para(
+            "The vehicle's own estimate (the log's onboard EKF) is the reference here, not "
+            "truth: it fused the same fixes with its own model, so outside outages these are "
+            "differences between two estimates. It kept GNSS through the injected outages, so "
+            "inside a window the difference is the replayed filter's drift against an "
+            "estimate that kept GNSS.",
+            "note",
+        ),
+        h.table(whole, run_cols),
+    ]
+    if wins:
+        parts.append("<h3>Drift against the onboard estimate in the outage windows</h3>")
+        parts.append(h.table(wins, win_cols))
+        parts.append(
+            h.para(
+                "Onboard minus replayed at the onboard samples inside each window; drift in % "
+                "of the distance the onboard track travelled, where that is over 50 m. "
+                "tables/onboard_comparison.csv holds every row.",
+                "note",
+            )
+        )
+    return "".join(parts)
 
 
 def _pair(text: str) -> tuple[str, ...]:
@@ -316,9 +437,9 @@ def experiments(exps: Sequence[Experiment], figs: list[str]) -> str:
         for i, f in enumerate(e.figures):
             svg = f.svg
             if svg is not None:
-                from navreplay.pipeline.report.svg import prefix_ids
+                from navreplay.pipeline.report.svg import compact, prefix_ids
 
-                svg = prefix_ids(svg, f"exp-{e.name}-{i}")
+                svg = prefix_ids(compact(svg), f"exp-{e.name}-{i}")
                 figs.append(svg)
             parts.append(h.figure(svg, f.caption or f.title, png_uri=f.png_data_uri))
             if svg is None:

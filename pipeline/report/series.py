@@ -21,7 +21,9 @@ from navreplay.pipeline.estimation.core.tables import truth_at
 from navreplay.pipeline.nav.earth import E2, F64, A
 from navreplay.pipeline.report.inputs import Run, column, times_ns
 
-Reference = Literal["truth", "gnss"]
+#: ``fixes_residual``: against the GNSS fixes, which the filter fused outside outage windows, so
+#: a residual there and never an accuracy
+Reference = Literal["truth", "fixes_residual"]
 
 
 @dataclass(frozen=True)
@@ -56,7 +58,9 @@ class ErrorSeries:
         return np.asarray((self.t_ns - t0_ns) / 1e9)
 
 
-def _ned(lat_deg: F64, lon_deg: F64, alt_m: F64, ref: dict[str, F64]) -> F64:
+def ned_difference(lat_deg: F64, lon_deg: F64, alt_m: F64, ref: dict[str, F64]) -> F64:
+    """``ref`` (columns ``lat_deg``, ``lon_deg``, ``alt_m``) minus the given positions, local
+    NED metres (the given latitude and height set the radii of curvature)."""
     lat = np.radians(lat_deg)
     s2 = np.sin(lat) ** 2
     rn = A / np.sqrt(1.0 - E2 * s2)
@@ -82,7 +86,9 @@ def error_series(run: Run, truth: pa.Table | None, gnss: pa.Table | None) -> Err
     if truth is not None and truth.num_rows > 1:
         inside, ref = truth_at(truth, t)
         if inside.any():
-            err = _ned(cols["lat_deg"][inside], cols["lon_deg"][inside], cols["alt_m"][inside], ref)
+            err = ned_difference(
+                cols["lat_deg"][inside], cols["lon_deg"][inside], cols["alt_m"][inside], ref
+            )
             return ErrorSeries(t[inside], "truth", err, sig[inside])
     if gnss is None or gnss.num_rows == 0:
         return None
@@ -97,7 +103,9 @@ def error_series(run: Run, truth: pa.Table | None, gnss: pa.Table | None) -> Err
     at = {c: np.interp(tgf, tf, v) for c, v in cols.items()}
     ref = {c: column(gnss, c)[ok] for c in ("lat_deg", "lon_deg", "alt_m")}
     sig_at = np.column_stack([np.interp(tgf, tf, sig[:, j]) for j in range(3)])
-    return ErrorSeries(tg, "gnss", _ned(at["lat_deg"], at["lon_deg"], at["alt_m"], ref), sig_at)
+    return ErrorSeries(
+        tg, "fixes_residual", ned_difference(at["lat_deg"], at["lon_deg"], at["alt_m"], ref), sig_at
+    )
 
 
 def local_en(lat_deg: F64, lon_deg: F64, lat0_deg: float, lon0_deg: float) -> tuple[F64, F64]:

@@ -34,12 +34,13 @@ from scipy import stats
 from navreplay.ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
 from navreplay.ingest.tables import git_commit, package_version
 from navreplay.pipeline.estimation.core.integrity import FINISHED
+from navreplay.pipeline.report import figures_outage
 from navreplay.pipeline.report import html as h
 from navreplay.pipeline.report import tables as tb
 from navreplay.pipeline.report.experiments import SAT_REDUCTION_NAME, read_csv
 from navreplay.pipeline.report.input_files import ReportInputError, read_json
 from navreplay.pipeline.report.sections import paper_pct
-from navreplay.pipeline.report.tables import PAPER_PAIR
+from navreplay.pipeline.report.tables import PAPER_PAIR, PAPER_REDUCTION_PCT
 
 Row = dict[str, Any]
 METRIC = "pos_err_3d_rms_m"
@@ -200,8 +201,15 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
             ]
             for r in red_rows
         ]
-        red_html = h.text_table([*keys, "paper %"], red_cells) + h.para(
-            f"Paper 001, Table 1 gives {' -> '.join(PAPER_PAIR)} only.", "note"
+        chart = figures_outage.sat_reduction(red_rows, PAPER_REDUCTION_PCT, "satred")
+        red_html = (
+            h.figure(
+                chart,
+                "Error reduction per satellite count with its 95 % interval, per "
+                "dataset, beside paper 001's Table 1 (black bars).",
+            )
+            + h.text_table([*keys, "paper %"], red_cells)
+            + h.para(f"Paper 001, Table 1 gives {' -> '.join(PAPER_PAIR)} only.", "note")
         )
     sections = [
         (

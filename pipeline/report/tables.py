@@ -9,7 +9,9 @@
   error at the window's end, max, mean and RMS of the 3-D error inside it, no re-alignment
   at the window's start; drift as a percentage of the distance the reference travelled.
 - ``drift_by_length``: complete outages (0 satellites) grouped per filter and window length:
-  mean error at the window's end with a 95 % t-interval across windows.
+  mean error at the window's end with a 95 % BCa bootstrap interval across windows (windows
+  as the resampling unit, as the outages stage's; it stays inside the errors' range, so it
+  never goes below zero as a t-interval of a few skewed errors can).
 The per-satellite-count reduction (paper 001, Table 1) is the outages stage's table
 (``experiments.find_outage_results``); this module does not recompute it.
 """
@@ -25,12 +27,14 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from navreplay.pipeline.outages.stats import mean_interval
 from navreplay.pipeline.report.inputs import DatasetInputs, Run
 from navreplay.pipeline.report.series import ErrorSeries, error_series, local_en
 
 Row = dict[str, Any]
 PAPER_REDUCTION_PCT = {0: 54.4, 1: 53.2, 2: 52.6, 3: 52.4, 4: 22.6}  # paper 001, Table 1
 PAPER_PAIR = ("tc_ukf", "tc_ukf_nhc")  # its baseline -> candidate
+MIN_DISTANCE_M = 50.0  # drift in % of distance only over a distance that means something
 # the numbers of a run's metrics.json in its row of ``metrics_rows``, in column order
 RUN_METRICS = (
     "pos_err_h_rms_m",
@@ -181,7 +185,7 @@ def window_rows(data: DatasetInputs, series: dict[tuple[str, str], ErrorSeries])
                     row["err_mean_m"] = float(e.mean())
                     row["err_rms_m"] = float(np.sqrt(np.mean(e**2)))
                     dist = _path_length_m(data, w.start_ns, w.end_ns)
-                    if dist is not None and dist > 1.0:
+                    if dist is not None and dist > MIN_DISTANCE_M:
                         row["drift_pct_distance"] = 100.0 * float(e[-1]) / dist
             rows.append(row)
     return rows
@@ -208,7 +212,8 @@ def drift_by_length(windows: Sequence[Row]) -> list[Row]:
         groups.setdefault(key, []).append(float(w["err_end_m"]))
     rows = []
     for (filt, length), errs in sorted(groups.items()):
-        mean, lo, hi = t_interval(np.asarray(errs))
+        iv = mean_interval(np.asarray(errs, dtype=np.float64))
+        mean, lo, hi = iv.estimate, iv.low, iv.high
         rows.append(
             {
                 "filter": filt,

@@ -18,6 +18,7 @@ import pyarrow as pa
 
 from navreplay.ingest.schema import FixType
 from navreplay.ingest.typed import to_plain
+from navreplay.pipeline.estimation.core.tables import fix_epochs
 from navreplay.pipeline.estimation.core.windows import Window
 from navreplay.pipeline.nav import earth
 from navreplay.pipeline.scenarios.config import SatellitesSpec, ScenarioSpec
@@ -161,9 +162,14 @@ def _reduce(
 def _fixes_in_windows(
     gnss: pa.Table, obs: pa.Table | None, placed: list[tuple[int, int]], sats: SatellitesSpec | None
 ) -> pa.Table:
-    """No fix inside the windows below four satellites; recomputed fixes from four on."""
+    """No fix inside the windows below four satellites; recomputed fixes from four on.
+
+    A fix is inside a window when the epoch it describes is (``fix_epochs``: its stamp less
+    the fixes' latency), so that the filter's outage is the window on the IMU's clock: a fix
+    stamped just after the window but describing a moment inside it stays withheld.
+    """
     t = times(gnss)
-    inside = in_any(t, placed)
+    inside = in_any(fix_epochs(gnss), placed)
     if sats is None or sats.keep < 4:
         return drop_rows(gnss, inside)
     if not sats.refix or obs is None:

@@ -47,8 +47,10 @@ class Expect:
         status: scenario -> status of the lc_ekf run ("skipped" for a filter that cannot
             run on the log at all).
         reason: words every run that is not ok or inconsistent gives (or the error's).
-        reference, max_rms_m: what the finished runs' nominal error is measured against,
-            and its bound.
+        reference, max_rms_m: what the finished runs' nominal error is measured against
+            (the truth, or the fixes it fused: a residual), and its bound.
+        onboard_max_m: where the log has an onboard estimate, the bound of the nominal run's
+            horizontal RMS difference from it.
     """
 
     rc: int
@@ -56,9 +58,10 @@ class Expect:
     reason: str = ""
     reference: str = ""
     max_rms_m: float = 0.0
+    onboard_max_m: float | None = None
 
 
-ROBOT = Expect(0, {"nominal": "ok", "outage_60s": "ok"}, "", "gnss", 3.0)
+ROBOT = Expect(0, {"nominal": "ok", "outage_60s": "ok"}, "", "fixes_residual", 3.0)
 LOGS: dict[str, tuple[str, Expect]] = {
     "husky_ros1_bag": ("robot_localization/test1.bag", ROBOT),
     "husky_ros1_mcap": ("robot_localization/derived/test1_ros1.mcap", ROBOT),
@@ -78,11 +81,18 @@ LOGS: dict[str, tuple[str, Expect]] = {
     # velocity innovations are larger than the filter's covariance says (inconsistent, not ok)
     "ardupilot_copter_2023": (
         "uob_flightlab_ardupilot_bin/2023-07-06_10-12-18.bin",
-        Expect(0, {"nominal": "inconsistent", "outage_60s": "inconsistent"}, "", "gnss", 1.5),
+        Expect(
+            0,
+            {"nominal": "inconsistent", "outage_60s": "inconsistent"},
+            "",
+            "fixes_residual",
+            1.5,
+            0.6,
+        ),
     ),
     "sitl_vtol_tlog": (
         "uavlogviewer_sitl_tlog/vtol.tlog",
-        Expect(0, {"nominal": "ok", "outage_60s": "ok"}, "", "truth", 1.5),
+        Expect(0, {"nominal": "ok", "outage_60s": "ok"}, "", "truth", 1.5, 0.5),
     ),
     "px4_sample_no_gnss": (
         "pyulog_samples/sample.ulg",
@@ -94,7 +104,7 @@ LOGS: dict[str, tuple[str, Expect]] = {
     ),
     "ardupilot_copter_2015_timems": (
         "corpus_2026/ap_copter33_2015_log171.bin",
-        Expect(0, {"nominal": "ok", "outage_60s": "ok"}, "", "gnss", 1.5),
+        Expect(0, {"nominal": "ok", "outage_60s": "ok"}, "", "fixes_residual", 1.5, 1.5),
     ),
     "ardupilot_copter_2024_truncated": (
         "corpus_2026/ap_copter462_2024_trunc80k.bin",
@@ -112,7 +122,7 @@ LOGS: dict[str, tuple[str, Expect]] = {
     # heading from motion, 69 deg from the course there, overrules it; 2.7 m RMS of its fixes
     "px4_2015_sdlog2": (
         "corpus_2026/px4_sdlog2_2015_purdue.px4log",
-        Expect(0, {"nominal": "inconsistent", "outage_60s": "ok"}, "", "gnss", 4.0),
+        Expect(0, {"nominal": "inconsistent", "outage_60s": "ok"}, "", "fixes_residual", 4.0),
     ),
     "px4_v190_low_rate_imu": (
         "corpus_2026/px4_v190_fmuv3_flight.ulg",
@@ -121,10 +131,12 @@ LOGS: dict[str, tuple[str, Expect]] = {
     # a multirotor: the heading from motion (its course is not its heading), from before
     # take-off; 0.07 m against the simulator's truth with the fixes' 0.16 s latency (0.38 m
     # without); the zero-velocity updates on the ground after landing find the vertical
-    # velocity off by more than their 0.02 m/s sigma allows (inconsistent)
+    # velocity off by more than their 0.02 m/s sigma allows (inconsistent: one of two 10 s
+    # windows at a mean NIS of 6.1 per dof); with the 10 s outage it aligns 0.2 s earlier
+    # and its standstill windows pass (ok)
     "px4_v190_sitl": (
         "corpus_2026/px4_v190_sitl_truth.ulg",
-        Expect(0, {"nominal": "inconsistent", "outage_60s": "inconsistent"}, "", "truth", 0.2),
+        Expect(0, {"nominal": "inconsistent", "outage_60s": "ok"}, "", "truth", 0.2, 0.4),
     ),
 }
 
@@ -167,3 +179,42 @@ def test_analyze_gives_each_real_log_its_outcome(name: str, tmp_path: Path) -> N
     else:  # the summary's and the report's first words say so
         assert "no filter could run on this log:" in done.stdout.splitlines()[2]
         assert '<p class="verdict bad">No run ended ok' in page
+    if want.onboard_max_m is not None:
+        _check_onboard(tmp_path / "out", want.onboard_max_m)
+    else:
+        assert not (tmp_path / "out/report/tables/onboard_comparison.csv").exists()
+
+
+def _check_onboard(out: Path, max_rms_m: float) -> None:
+    """The report compares the runs with the log's onboard estimate: the nominal run within
+    ``max_rms_m`` of it, and the outage run's drift at its window's end as computed by hand
+    from the Parquet files (the onboard sample last inside the window, the run's estimate
+    interpolated to it, both to ECEF by pymap3d)."""
+    import csv
+
+    import numpy as np
+    import pyarrow.parquet as pq
+    import pymap3d
+
+    with (out / "report/tables/onboard_comparison.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    nominal = next(r for r in rows if r["scenario"] == "nominal" and r["scope"] == "run")
+    assert 0.01 < float(nominal["pos_h_rms_m"]) < max_rms_m, nominal
+    page = (out / "report/index.html").read_text()
+    assert '<section id="onboard">' in page
+    assert "onboard estimate" in page.split('<section id="track">')[1].split("</section>")[0]
+    (win,) = [r for r in rows if r["scenario"] == "outage_60s" and r["scope"] == "window"]
+    run = out / "runs/lc_ekf/outage_60s"
+    (w,) = json.loads((run / "metrics.json").read_text())["outage_windows"]
+    start = int(w["start_t_ns"])
+    end = start + round(float(w["duration_s"]) * 1e9)
+    ob = pq.read_table(out / "tables/estimator.parquet").to_pandas()
+    est = pq.read_table(run / "estimate.parquet").to_pandas()
+    last = ob[(ob.t_ns >= start) & (ob.t_ns <= end)].iloc[-1]
+    ours = [np.interp(float(last.t_ns), est.t_ns.astype(float), est[c]) for c in
+            ("lat_deg", "lon_deg", "alt_m")]  # fmt: skip
+    a = np.array(pymap3d.geodetic2ecef(last.lat_deg, last.lon_deg, last.alt_m))
+    b = np.array(pymap3d.geodetic2ecef(*ours))
+    hand = float(np.linalg.norm(a - b))
+    assert float(win["pos_3d_end_m"]) == pytest.approx(hand, rel=1e-4, abs=1e-3)
+    assert float(win["pos_3d_max_m"]) >= float(win["pos_3d_end_m"])

@@ -33,6 +33,7 @@ from navreplay.ingest.meta import META_NAME, SensorMeta, read_meta
 from navreplay.ingest.schema import TableName
 from navreplay.ingest.tables import Provenance, read_table, write_table
 from navreplay.ingest.typed import to_plain
+from navreplay.ingest.writers.tum import write_tum
 from navreplay.pipeline.estimation.core.integrity import IntegrityParams, assess
 from navreplay.pipeline.estimation.core.tables import with_fix_latency
 from navreplay.pipeline.estimation.core.windows import ErrorTrack
@@ -339,5 +340,6 @@ def write_run(
         write_table(tmp / "estimate.parquet", TableName.ESTIMATOR, run.tables.estimate, prov)
         write_parquet(tmp / "innovations.parquet", run.tables.innovations, meta)
         write_parquet(tmp / "events.parquet", run.tables.events, meta)
+        write_tum(tmp / "trajectory.tum", run.tables.estimate)
         atomic_write_json(tmp / "metrics.json", metrics)
     log.info("wrote %s (%s, %s)", out_dir, run.filter, run.status)

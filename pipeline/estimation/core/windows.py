@@ -95,7 +95,7 @@ class WindowMetricsParams:
     reconverge_floor_m: float = 1.0
     reconverge_hold_s: float = 5.0
     pre_window_s: float = 30.0
-    min_distance_m: float = 1.0
+    min_distance_m: float = 50.0
 
     def __post_init__(self) -> None:
         if self.reconverge_factor < 1:
@@ -137,6 +137,8 @@ def local_ned(lat: F64, lon: F64, h: F64, origin: Origin | None) -> tuple[F64, O
     if lat.size == 0:
         return np.zeros((0, 3)), origin or (0.0, 0.0, 0.0)
     lat0, lon0, h0 = origin or (float(lat[0]), float(lon[0]), float(h[0]))
+    if not math.isfinite(h0):  # a reference without height: its down component stays NaN
+        h0 = 0.0
     s2 = math.sin(lat0) ** 2
     rn = A / math.sqrt(1.0 - E2 * s2)
     rm = rn * (1.0 - E2) / (1.0 - E2 * s2)
@@ -216,7 +218,11 @@ def window_metrics(
         level = _rms(err3[pre])
         thr = max(params.reconverge_floor_m, params.reconverge_factor * (level or 0.0))
         ref = track.ref_ned_m[inside]
-        dist = float(np.sum(np.linalg.norm(np.diff(ref, axis=0), axis=1))) if e.size > 1 else 0.0
+        dist = (
+            float(np.sum(np.linalg.norm(np.diff(ref[:, :n], axis=0), axis=1)))
+            if e.size > 1
+            else 0.0
+        )
         sig = track.sigma_ned_m[inside]
         within = np.all(np.abs(track.err_ned_m[inside][:, :n]) <= 3.0 * sig[:, :n], axis=1)
         end = float(e[-1]) if e.size else None

@@ -37,7 +37,9 @@ def truth_track(result: RunResult, truth: pa.Table, origin: Origin | None = None
     _, tr = truth_at(truth, t)
     sig = np.sqrt(np.clip(np.diagonal(result.P[inside], axis1=1, axis2=2)[:, :3], 0.0, None))
     ref, org = local_ned(np.radians(tr["lat_deg"]), np.radians(tr["lon_deg"]), tr["alt_m"], origin)
-    return ErrorTrack(t, err[:, :3], sig, ref, "truth", org)
+    # a truth without height (a simulator's state message) measures the horizontal error only
+    axes = 3 if np.isfinite(err[:, 2]).all() else 2
+    return ErrorTrack(t, err[:, :3], sig, ref, "truth", org, axes=axes)
 
 
 def fixes_track(

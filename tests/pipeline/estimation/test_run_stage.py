@@ -56,6 +56,7 @@ def test_run_writes_estimate_innovations_events_and_metrics(
         "events.parquet",
         "innovations.parquet",
         "metrics.json",
+        "trajectory.tum",
     ]
     est = read_table(out / "estimate.parquet", "estimator")
     assert est.provenance.extra["filter"] == name

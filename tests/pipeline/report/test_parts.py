@@ -83,6 +83,11 @@ def test_outage_results_are_shown_beside_the_paper_and_copied(
     # the summary collects the table of every dataset, beside the paper's values too
     summary = render_summary([tmp_path / "r"], tmp_path / "s").read_text()
     assert "<td>50</td><td>41.5</td><td>57.25</td><td>54.4</td></tr>" in summary
+    # and draws it: a point with its interval per satellite count, the paper's values beside
+    chart = summary[summary.index('id="satellites"') :].split("</figure>")[0]
+    assert "<svg" in chart
+    assert "paper 001, Table 1 (tc_ukf -&gt; tc_ukf_nhc)" in chart
+    assert "tiny: tc_ukf-&gt;tc_ukf_nhc" in chart
     assert (
         (tmp_path / "s" / "tables" / "sat_reduction.csv")
         .read_text()
@@ -112,8 +117,9 @@ def _experiment(root: Path, spec: dict[str, object]) -> Path:
     d = root / "experiments" / "cascade"
     d.mkdir(parents=True)
     (d / "convergence.csv").write_text("filter,rb_s\ncascaded_ekf,12.5\ncascaded_ukf,6.1\n")
-    (d / "bands.svg").write_text('<?xml version="1.0"?><svg viewBox="0 0 10 10"><path id="p" '
-                                 'd="M0 0L10 10"/></svg>')  # fmt: skip
+    (d / "bands.svg").write_text('<?xml version="1.0"?><svg viewBox="0 0 10 10"><defs><path '
+                                 'id="p" d="M0 0L10 10"/></defs><use xlink:href="#p"/>'
+                                 '<g id="unused"></g></svg>')  # fmt: skip
     (d / "section.json").write_text(json.dumps(spec))
     return d
 
@@ -138,7 +144,11 @@ def test_experiment_sections_render_from_their_contract(dataset_copy: Path, tmp_
     assert '<section id="experiments">' in page
     assert "Cascaded filters (paper 000)" in page
     assert "cascaded_ukf" in page
+    # the figure's ids are prefixed (several figures share the page); ids nothing refers to
+    # are dropped with the rest of matplotlib's redundancy (svg.compact)
     assert 'id="exp-cascade-0-p"' in page
+    assert 'xlink:href="#exp-cascade-0-p"' in page
+    assert "unused" not in page
 
 
 @pytest.mark.parametrize(

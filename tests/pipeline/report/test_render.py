@@ -7,6 +7,7 @@ import re
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from navreplay.pipeline.cli import main
@@ -130,3 +131,50 @@ def test_report_command_writes_the_report(dataset_dir: Path, tmp_path: Path) -> 
     assert rc == 0
     assert (tmp_path / "r" / "index.html").is_file()
     assert (tmp_path / "r" / "tables" / "provenance.json").is_file()
+
+
+def test_the_page_opens_with_the_verdict_and_folds_the_details(
+    dataset_dir: Path, tmp_path: Path
+) -> None:
+    page = (_render(dataset_dir, tmp_path / "r") / "index.html").read_text()
+    main = page.split("<main>")[1]
+    assert main.startswith('<section id="verdict"><h2>Verdict</h2>')
+    verdict = main.split("</section>")[0]
+    # the statuses, the data-quality verdict (the fixture's audit warns of NaN fixes) and
+    # which filter held best in the one 15 s outage, against the truth
+    assert "All 2 runs ended ok." in verdict
+    assert "Data quality: 1 warning(s) from the ingest audit." in verdict
+    assert "gnss: 3 fixes without a position (NaN)" in verdict
+    best = verdict.split("Which filter held best")[1]
+    assert "complete outage" in best
+    assert "lc_ekf" in best
+    assert "truth" in best
+    # every other section folds under its title; the overview and the metrics start open
+    assert '<section id="overview"><details open><summary>' in page
+    assert '<section id="metrics"><details open><summary>' in page
+    assert '<section id="nis"><details><summary>' in page
+    assert '<section id="provenance"><details><summary>' in page
+
+
+def test_the_best_filter_is_the_lowest_mean_with_an_interval_that_stays_positive() -> None:
+    from navreplay.pipeline.report.sections import best_rows
+
+    ends = {"a": [1.0, 2.0, 30.0], "b": [4.0, 5.0, 6.0], "c": [0.5, 0.6, 0.7]}
+    windows = [
+        {"filter": f, "scenario": "outage_60s", "sats": 0, "duration_s": 60.0,
+         "err_end_m": e, "reference": "truth"}
+        for f, es in ends.items() for e in es
+    ]  # fmt: skip
+    status = {("a", "outage_60s"): "ok", ("b", "outage_60s"): "inconsistent",
+              ("c", "outage_60s"): "diverged"}  # fmt: skip
+    (row,) = best_rows(windows, status)
+    # c is lowest but diverged: it does not compete; b's mean 5 beats a's 11
+    assert (row["best"], row["next"], row["filters"]) == ("b", "a", 2)
+    assert row["mean_m"] == pytest.approx(5.0)
+    assert 4.0 <= row["ci_low_m"] <= 5.0 <= row["ci_high_m"] <= 6.0
+    # a skewed few (a's 1, 2, 30): a t-interval goes below zero, the bootstrap's does not
+    from navreplay.pipeline.report.tables import drift_by_length, t_interval
+
+    assert t_interval(np.asarray(ends["a"]))[1] < 0.0
+    rows = drift_by_length([w for w in windows if w["filter"] == "a"])
+    assert rows[0]["ci_low_m"] >= 1.0

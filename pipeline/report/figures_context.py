@@ -1,0 +1,151 @@
+"""The log's context on one time axis: what the receiver said, how high the vehicle was, and
+where the filters rejected measurements, with the outage windows shaded on every panel.
+
+Panels, each only when the log has its data:
+
+- satellites used in the fix (``gnss.num_sats``) and the fix type (``gnss.fix_type``);
+- the receiver's reported accuracies (``gnss.h_acc_m``, ``v_acc_m``);
+- height: the fixes', the onboard estimate's and each filter's nominal run, from the first fix;
+- gate rejections of each filter's nominal run, per stream, as ticks (``innovations.parquet``
+  rows not accepted).
+
+The outage windows are those of the first scenario that has any.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from navreplay.pipeline.report.inputs import DatasetInputs, Run, column, times_ns
+from navreplay.pipeline.report.svg import (
+    TRUTH_COLOUR,
+    colour,
+    decimate_minmax,
+    figure_svg,
+    shade_windows,
+    style,
+)
+
+POINTS = 600  # per line
+
+
+def _has(values: np.ndarray) -> bool:
+    return bool(np.isfinite(values).any())
+
+
+def _windows_s(data: DatasetInputs, t0: int) -> list[tuple[float, float]]:
+    for r in data.runs:
+        if r.windows:
+            return [((w.start_ns - t0) / 1e9, (w.end_ns - t0) / 1e9) for w in r.windows]
+    return []
+
+
+def _rejections(run: Run) -> dict[str, np.ndarray]:
+    inn = run.innovations
+    if inn is None or inn.num_rows == 0 or "accepted" not in inn.column_names:
+        return {}
+    accepted = np.asarray(inn.column("accepted").to_numpy(zero_copy_only=False), dtype=bool)
+    streams = np.asarray(inn.column("stream").to_pylist(), dtype=object)
+    t = times_ns(inn)
+    return {str(s): t[(streams == s) & ~accepted] for s in sorted(set(streams[~accepted]))}
+
+
+def context(data: DatasetInputs, key: str) -> str | None:
+    """The context figure (see the module docstring); None when there is nothing to draw."""
+    gnss = data.gnss if data.gnss is not None and data.gnss.num_rows else None
+    nominal = [r for r in data.runs if r.scenario == "nominal" and r.ran]
+    rejections = {r.filter: _rejections(r) for r in nominal}
+    panels: list[str] = []
+    if gnss is not None and (_has(column(gnss, "num_sats")) or _has(column(gnss, "fix_type"))):
+        panels.append("sats")
+    if gnss is not None and (_has(column(gnss, "h_acc_m")) or _has(column(gnss, "v_acc_m"))):
+        panels.append("acc")
+    if gnss is not None or data.onboard is not None or nominal:
+        panels.append("height")
+    if any(rejections.values()):
+        panels.append("rejections")
+    if len(panels) < 2:
+        return None
+    t0 = data.t0_ns()
+    filters = data.filters()
+    windows = _windows_s(data, t0)
+    with style() as plt:
+        fig, axes = plt.subplots(
+            len(panels), 1, figsize=(9.0, 0.8 + 1.6 * len(panels)), sharex=True, squeeze=False,
+            layout="constrained",
+        )  # fmt: skip
+        for ax, panel in zip(axes[:, 0], panels, strict=True):
+            shade_windows(ax, windows, "outage window" if panel == panels[0] else None)
+            _draw(panel, ax, data, gnss, nominal, rejections, filters, t0)
+            ax.legend(loc="upper right", ncols=4, fontsize=7.0)
+        axes[-1, 0].set_xlabel("time since start, s")
+        fig.suptitle(f"{data.dataset}: the log's context")
+        return figure_svg(fig, key)
+
+
+_SATS = (("num_sats", "satellites used", "#0072B2"),
+         ("fix_type", "fix type (3: 3-D, 6: RTK fixed)", "#D55E00"))  # fmt: skip
+_ACC = (("h_acc_m", "reported horizontal σ", "#0072B2"),
+        ("v_acc_m", "reported vertical σ", "#009E73"))  # fmt: skip
+
+
+def _draw(
+    panel: str,
+    ax: Any,
+    data: DatasetInputs,
+    gnss: Any,
+    nominal: list[Run],
+    rejections: dict[str, dict[str, np.ndarray]],
+    filters: list[str],
+    t0: int,
+) -> None:
+    if panel in ("sats", "acc"):
+        t = (times_ns(gnss) - t0) / 1e9
+        step = panel == "sats"
+        for name, label, c in _SATS if step else _ACC:
+            v = column(gnss, name)
+            if not _has(v):
+                continue
+            if step:
+                ax.step(*decimate_minmax(t, v, POINTS), where="post", color=c, label=label)
+            else:
+                ax.plot(*decimate_minmax(t, v, POINTS), color=c, label=label)
+        ax.set_ylabel("count / type" if step else "m")
+    elif panel == "height":
+        _height(ax, data, gnss, nominal, filters, t0)
+    else:
+        _rejections_panel(ax, rejections, filters, t0)
+
+
+def _height(
+    ax: Any, data: DatasetInputs, gnss: Any, nominal: list[Run], filters: list[str], t0: int
+) -> None:
+    base = None
+    sources = [("GNSS fixes", gnss, TRUTH_COLOUR), ("onboard estimate", data.onboard, "#000000")]
+    sources += [(r.filter, r.estimate, colour(filters.index(r.filter))) for r in nominal]
+    for label, table, c in sources:
+        if table is None or table.num_rows == 0:
+            continue
+        h = column(table, "alt_m")
+        if not _has(h):
+            continue
+        base = float(h[np.isfinite(h)][0]) if base is None else base
+        t = (times_ns(table) - t0) / 1e9
+        ax.plot(*decimate_minmax(t, h - base, POINTS), color=c, label=label, lw=0.9)
+    ax.set_ylabel("height from first, m")
+
+
+def _rejections_panel(
+    ax: Any, rejections: dict[str, dict[str, np.ndarray]], filters: list[str], t0: int
+) -> None:
+    names = sorted({s for by in rejections.values() for s in by})
+    for i, f in enumerate(filters):
+        for s, ts in rejections.get(f, {}).items():
+            y = i + names.index(s) / max(len(names), 1) * 0.8
+            shown = ts[:: max(1, ts.size // POINTS)]  # the label keeps the full count
+            ax.plot((shown - t0) / 1e9, np.full(shown.size, y), "|", ms=6,
+                    color=colour(filters.index(f)), label=f"{f}: {s} ({ts.size})")  # fmt: skip
+    ax.set_yticks(range(len(filters)), filters)
+    ax.set_ylabel("gate rejections")
