@@ -1,9 +1,11 @@
 """HTML building blocks of the reports: escaping, tables, figures, the page shell.
 
-The page is one file: CSS and the small zoom script inline, figures inline SVG (or PNG data
-URIs), no network access of any kind. ``ZOOM_JS`` lets the reader magnify any figure: wheel
-to zoom around the pointer, drag to pan, double-click to reset (it changes the SVG's
-``viewBox``, so the vector drawing stays sharp at any magnification).
+The page is one file: CSS and the small script inline, figures inline SVG (or PNG data
+URIs), no network access of any kind. ``ZOOM_JS`` makes the figures interactive: wheel to
+zoom around the pointer, drag to pan, double-click to reset (it changes the SVG's
+``viewBox``, so the vector drawing stays sharp at any magnification); the data values under
+the pointer (from the figure's ``data-axes``, ``svg.figure_svg``); a click on a legend entry
+hides or shows its series; a link to a folded section opens it.
 """
 
 from __future__ import annotations
@@ -40,7 +42,10 @@ tr:nth-child(even) td { background: #fbfcfd; }
 .warn { color: #9a6200; font-weight: 600; }
 .bad { color: #b3261e; font-weight: 600; }
 figure { margin: 10px 0 18px; border: 1px solid var(--line); border-radius: 4px; padding: 6px;
-         overflow: hidden; background: #fff; }
+         overflow: hidden; background: #fff; position: relative; }
+.readout { position: absolute; display: none; pointer-events: none; background: #fffffff0;
+           border: 1px solid var(--line); border-radius: 3px; padding: 1px 5px; font-size: 11.5px;
+           font-variant-numeric: tabular-nums; }
 figure svg, figure img { display: block; width: 100%; height: auto; cursor: zoom-in; }
 figure.zoomed svg { cursor: grab; }
 figcaption { color: var(--muted); font-size: 12.5px; margin-top: 4px; }
@@ -53,7 +58,7 @@ code { background: var(--bg2); padding: 0 3px; border-radius: 3px; }
 .scroll { overflow-x: auto; }
 """
 
-ZOOM_JS = """
+ZOOM_JS = r"""
 (function () {
   "use strict";
   function zoomable(svg) {
@@ -87,7 +92,60 @@ ZOOM_JS = """
       set(home); svg.parentNode.classList.remove("zoomed");
     });
   }
-  document.querySelectorAll("figure.zoom svg").forEach(zoomable);
+  function toSvgOf(svg, ev) {
+    var r = svg.getBoundingClientRect(), b = svg.viewBox.baseVal;
+    return [b.x + (ev.clientX - r.left) / r.width * b.width,
+            b.y + (ev.clientY - r.top) / r.height * b.height];
+  }
+  // a click on a legend entry hides or shows its series
+  function toggles(svg) {
+    svg.querySelectorAll("[id]").forEach(function (entry) {
+      var m = /-ser(\d+)[ht]$/.exec(entry.id);
+      if (!m) { return; }
+      var parts = svg.querySelectorAll('[id$="-ser' + m[1] + '"], [id*="-ser' + m[1] + '_"]');
+      if (!parts.length) { return; }
+      entry.style.cursor = "pointer";
+      entry.addEventListener("click", function (ev) {
+        ev.stopPropagation();
+        var off = parts[0].style.opacity === "0";
+        parts.forEach(function (e) { e.style.opacity = off ? "" : "0"; });
+        svg.querySelectorAll('[id$="-ser' + m[1] + 'h"], [id$="-ser' + m[1] + 't"]')
+          .forEach(function (e) { e.style.opacity = off ? "" : "0.35"; });
+      });
+    });
+  }
+  // the data values under the pointer, from each axes' box and limits (data-axes)
+  function readout(svg) {
+    var axes = JSON.parse(svg.getAttribute("data-axes") || "[]");
+    if (!axes.length) { return; }
+    var tip = document.createElement("div");
+    tip.className = "readout";
+    svg.parentNode.appendChild(tip);
+    function at(lo, hi, f, scale) {
+      if (scale === "log") {
+        return Math.pow(10, Math.log10(lo) + f * (Math.log10(hi) - Math.log10(lo)));
+      }
+      return lo + f * (hi - lo);
+    }
+    svg.addEventListener("mousemove", function (ev) {
+      var p = toSvgOf(svg, ev), shown = false;
+      axes.forEach(function (a) {
+        if (shown || p[0] < a[0] || p[0] > a[2] || p[1] < a[1] || p[1] > a[3]) { return; }
+        var x = at(a[4], a[5], (p[0] - a[0]) / (a[2] - a[0]), a[8]);
+        var y = at(a[6], a[7], (a[3] - p[1]) / (a[3] - a[1]), a[9]);
+        tip.textContent = "x " + x.toPrecision(5) + ", y " + y.toPrecision(4);
+        var fr = svg.parentNode.getBoundingClientRect();
+        tip.style.left = (ev.clientX - fr.left + 12) + "px";
+        tip.style.top = (ev.clientY - fr.top + 12) + "px";
+        shown = true;
+      });
+      tip.style.display = shown ? "block" : "none";
+    });
+    svg.addEventListener("mouseleave", function () { tip.style.display = "none"; });
+  }
+  document.querySelectorAll("figure.zoom svg").forEach(function (svg) {
+    zoomable(svg); toggles(svg); readout(svg);
+  });
   function reveal() {
     var target = location.hash && document.getElementById(location.hash.slice(1));
     var folded = target && target.querySelector(":scope > details");

@@ -87,11 +87,59 @@ def figure_svg(fig: Any, key: str) -> str:
     """
     import matplotlib.pyplot as plt
 
+    _tag_series(fig)
     buf = io.StringIO()
-    fig.savefig(buf, format="svg", metadata={"Date": None, "Creator": None}, bbox_inches="tight")
+    # the whole figure (its constrained layout leaves no waste), so that the axes' places in
+    # the SVG are their figure positions: data-axes maps the reader's pointer to data values
+    fig.savefig(buf, format="svg", metadata={"Date": None, "Creator": None})
+    axes = _axes_map(fig)
     plt.close(fig)
     text = buf.getvalue()
-    return prefix_ids(compact(text[text.index("<svg") :]), key)
+    text = text[text.index("<svg") :].replace("<svg", f"<svg data-axes='{axes}'", 1)
+    return prefix_ids(compact(text), key)
+
+
+def _tag_series(fig: Any) -> None:
+    """Give every legend entry and the artist it names one id (``ser<n>``, and ``ser<n>h``,
+    ``ser<n>t`` for the entry's handle and text), so the page can hide a series on a click
+    on its entry (``html.ZOOM_JS``)."""
+    from matplotlib.container import Container
+
+    n = 0
+    for ax in fig.axes:
+        leg = ax.get_legend()
+        if leg is None:
+            continue
+        artists, _ = ax.get_legend_handles_labels()
+        for artist, handle, label in zip(
+            artists, leg.legend_handles, leg.get_texts(), strict=False
+        ):
+            # a container (error bars) is its parts: ser<n>, ser<n>_1, ser<n>_2 ...
+            parts = artist.get_children() if isinstance(artist, Container) else [artist]
+            for j, part in enumerate(parts):
+                part.set_gid(f"ser{n}" if j == 0 else f"ser{n}_{j}")
+            if handle is not None:
+                handle.set_gid(f"ser{n}h")
+            label.set_gid(f"ser{n}t")
+            n += 1
+
+
+def _axes_map(fig: Any) -> str:
+    """Each axes' box in SVG points (x0, y0, x1, y1 from the top left) with its data limits and
+    scales, as JSON: what the page needs to show the data values under the pointer."""
+    import json
+
+    width, height = (float(v) * 72.0 for v in fig.get_size_inches())
+    out = []
+    for ax in fig.axes:
+        if not ax.get_visible():
+            continue
+        b = ax.get_position()
+        out.append([round(b.x0 * width, 2), round((1.0 - b.y1) * height, 2),
+                    round(b.x1 * width, 2), round((1.0 - b.y0) * height, 2),
+                    *(float(v) for v in ax.get_xlim()), *(float(v) for v in ax.get_ylim()),
+                    ax.get_xscale(), ax.get_yscale()])  # fmt: skip
+    return json.dumps(out, separators=(",", ":"))
 
 
 def compact(svg: str) -> str:
@@ -103,12 +151,17 @@ def compact(svg: str) -> str:
     svg = _GEOM_RE.sub(lambda m: _FLOAT_RE.sub(_round2, m.group(0)), svg)
     svg = _BETWEEN_RE.sub("><", svg)
     used = set(_REF_RE.findall(svg))
-    return _ID_ATTR_RE.sub(lambda m: m.group(0) if m.group(1) in used else "", svg)
+
+    def keep(m: re.Match[str]) -> str:
+        return m.group(0) if m.group(1) in used or _SERIES_RE.match(m.group(1)) else ""
+
+    return _ID_ATTR_RE.sub(keep, svg)
 
 
 _BETWEEN_RE = re.compile(r">\s+<")
 _REF_RE = re.compile(r'(?:url\(#|href="#)([^)"]+)')
 _ID_ATTR_RE = re.compile(r' id="([^"]+)"')
+_SERIES_RE = re.compile(r"ser\d+(?:_\d+|[ht])?$")
 
 
 # A polyline's path data (M and L commands, maybe a closing z, as matplotlib writes every

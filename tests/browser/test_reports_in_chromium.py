@@ -184,3 +184,81 @@ def test_a_long_report_keeps_its_size_and_render_budget(driver: Any, long_report
     assert 0 < timing[1] < BUDGET_MS, timing
     assert 0 <= top < 900
     assert shot.stat().st_size > 10_000
+
+
+@pytest.fixture(scope="module")
+def known_figure(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A page with one figure of known axes: x 0..10, y 0..100 (linear) over y 1..1000 (log),
+    two labelled series on the top axes."""
+    from navreplay.pipeline.report import html as h
+    from navreplay.pipeline.report.svg import figure_svg, style
+
+    with style() as plt:
+        fig, (top, low) = plt.subplots(2, 1, figsize=(6.0, 5.0), layout="constrained")
+        top.plot([0, 10], [0, 100], label="rising")
+        top.plot([0, 10], [100, 0], label="falling")
+        top.set_xlim(0, 10)
+        top.set_ylim(0, 100)
+        top.legend(loc="upper center")
+        low.plot([0, 10], [1, 1000])
+        low.set_yscale("log")
+        low.set_xlim(0, 10)
+        low.set_ylim(1, 1000)
+        svg = figure_svg(fig, "known")
+    page = tmp_path_factory.mktemp("known") / "index.html"
+    page.write_text(h.page("known", "", [("fig", "Figure", h.figure(svg, "known axes"))]))
+    return page
+
+
+def _hover(driver: Any, svg: Any, fx: float, fy: float, axes: int) -> str:
+    """Move the pointer to the fraction (fx, fy) of axes ``axes``'s box (fy from its bottom)
+    and read the value the page shows."""
+    return str(
+        driver.execute_script(
+            """
+            const [svg, fx, fy, i] = arguments;
+            const a = JSON.parse(svg.getAttribute('data-axes'))[i];
+            const b = svg.viewBox.baseVal, r = svg.getBoundingClientRect();
+            const x = r.left + (a[0] + fx * (a[2] - a[0]) - b.x) / b.width * r.width;
+            const y = r.top + (a[3] - fy * (a[3] - a[1]) - b.y) / b.height * r.height;
+            svg.dispatchEvent(new MouseEvent('mousemove', {clientX: x, clientY: y,
+                                                          bubbles: true}));
+            return svg.parentNode.querySelector('.readout').textContent;
+            """,
+            svg,
+            fx,
+            fy,
+            axes,
+        )
+    )
+
+
+def _values(text: str) -> tuple[float, float]:
+    """``"x 5.0000, y 50.00"`` as (5.0, 50.0)."""
+    x, y = (part.split()[1] for part in text.split(","))
+    return float(x), float(y)
+
+
+def test_the_pointer_reads_data_values_and_a_legend_click_hides_a_series(
+    driver: Any, known_figure: Path
+) -> None:
+    from selenium.webdriver.common.by import By
+
+    driver.get(known_figure.as_uri())
+    svg = driver.find_element(By.CSS_SELECTOR, "figure.zoom svg")
+    # the middle of the linear axes is (5, 50); three quarters up the log axes is 10^2.25;
+    # a mouse event's coordinates are whole pixels: 1 px is about 0.3 % of either axes
+    x, y = _values(_hover(driver, svg, 0.5, 0.5, 0))
+    assert x == pytest.approx(5.0, abs=0.05)
+    assert y == pytest.approx(50.0, abs=0.5)
+    x, y = _values(_hover(driver, svg, 0.2, 0.75, 1))
+    assert x == pytest.approx(2.0, abs=0.05)
+    assert y == pytest.approx(10**2.25, rel=0.02)
+    entry = driver.find_element(By.CSS_SELECTOR, '[id$="-ser1t"]')
+    line = driver.find_element(By.CSS_SELECTOR, '[id$="-ser1"]')
+    entry.click()
+    assert line.value_of_css_property("opacity") == "0"
+    other = driver.find_element(By.CSS_SELECTOR, '[id$="-ser0"]')
+    assert other.value_of_css_property("opacity") == "1"
+    entry.click()
+    assert line.value_of_css_property("opacity") == "1"
