@@ -139,6 +139,11 @@ _NAV_SOLUTION = (
 )
 #: The navigation solution's fields after ``t_ns`` (position, NED velocity, attitude), in order.
 NAV_SOLUTION_FIELDS = tuple(c.name for c in _NAV_SOLUTION[1:])
+#: Extra columns of the ``estimator`` table where the log has them: the onboard EKF's
+#: innovation test ratios of velocity, position, height and magnetometer measurements. Above 1
+#: the EKF rejected the measurement (ArduPilot's XKF4/NKF4/EKF4 log the square root of the
+#: ratio, PX4's estimator_status the ratio).
+ESTIMATOR_TEST_RATIOS = ("test_ratio_vel", "test_ratio_pos", "test_ratio_hgt", "test_ratio_mag")
 
 SPECS: Mapping[TableName, TableSpec] = {
     TableName.IMU: TableSpec(

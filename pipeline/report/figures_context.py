@@ -6,6 +6,7 @@ Panels, each only when the log has its data:
 - satellites used in the fix (``gnss.num_sats``) and the fix type (``gnss.fix_type``);
 - the receiver's reported accuracies (``gnss.h_acc_m``, ``v_acc_m``);
 - height: the fixes', the onboard estimate's and each filter's nominal run, from the first fix;
+- the onboard EKF's innovation test ratios (``estimator`` ``test_ratio_*``), 1 marked;
 - gate rejections of each filter's nominal run, per stream, as ticks (``innovations.parquet``
   rows not accepted).
 
@@ -18,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from navreplay.ingest.schema import ESTIMATOR_TEST_RATIOS
 from navreplay.pipeline.report.inputs import DatasetInputs, Run, column, times_ns
 from navreplay.pipeline.report.svg import (
     TRUTH_COLOUR,
@@ -64,6 +66,10 @@ def context(data: DatasetInputs, key: str) -> str | None:
         panels.append("acc")
     if gnss is not None or data.onboard is not None or nominal:
         panels.append("height")
+    if data.onboard is not None and any(
+        _has(column(data.onboard, c)) for c in ESTIMATOR_TEST_RATIOS
+    ):
+        panels.append("tests")
     if any(rejections.values()):
         panels.append("rejections")
     if len(panels) < 2:
@@ -115,6 +121,17 @@ def _draw(
         ax.set_ylabel("count / type" if step else "m")
     elif panel == "height":
         _height(ax, data, gnss, nominal, filters, t0)
+    elif panel == "tests":
+        ob = data.onboard
+        t = (times_ns(ob) - t0) / 1e9
+        for i, name in enumerate(ESTIMATOR_TEST_RATIOS):
+            v = column(ob, name)
+            if _has(v):
+                ok = np.isfinite(v)
+                ax.plot(*decimate_minmax(t[ok], v[ok], POINTS), color=colour(i), lw=0.8,
+                        label=name.removeprefix("test_ratio_"))  # fmt: skip
+        ax.axhline(1.0, color="#b3261e", lw=0.8, ls="--", label="rejected above")
+        ax.set_ylabel("onboard test ratio")
     else:
         _rejections_panel(ax, rejections, filters, t0)
 

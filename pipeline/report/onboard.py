@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from navreplay.ingest.schema import ESTIMATOR_TEST_RATIOS
 from navreplay.pipeline.nav.earth import F64
 from navreplay.pipeline.report.inputs import DatasetInputs, Run, column, times_ns
 from navreplay.pipeline.report.series import local_en, ned_difference
@@ -198,3 +199,25 @@ def comparison_rows(data: DatasetInputs, diffs: dict[tuple[str, str], Difference
         rows.append(_run_row(r, d, t0))
         rows.extend(_window_row(r, d, i, t0) for i in range(len(r.windows)))
     return [{c: row.get(c) for c in COLUMNS} for row in rows]
+
+
+def test_ratio_rows(data: DatasetInputs) -> list[Row]:
+    """The onboard EKF's innovation test ratios where the log has them (``ingest.schema``
+    ``ESTIMATOR_TEST_RATIOS``): per measurement kind, the samples, mean, maximum and the
+    fraction above 1 (the onboard EKF rejected the measurement there)."""
+    if data.onboard is None:
+        return []
+    rows = []
+    for name in ESTIMATOR_TEST_RATIOS:
+        v = column(data.onboard, name)
+        v = v[np.isfinite(v)]
+        if not v.size:
+            continue
+        rows.append({
+            "measurement": name.removeprefix("test_ratio_"),
+            "samples": int(v.size),
+            "mean": float(v.mean()),
+            "max": float(v.max()),
+            "above_1_frac": float(np.mean(v > 1.0)),
+        })  # fmt: skip
+    return rows

@@ -184,7 +184,11 @@ def render_dataset(
         ("context", "Log context", context),
         ("track", "Track", track),
         ("metrics", "Accuracy and consistency", sections.metrics(run_rows)),
-        ("onboard", "Against the onboard estimate", sections.onboard(onboard_rows)),
+        (
+            "onboard",
+            "Against the onboard estimate",
+            sections.onboard(onboard_rows, onboard.test_ratio_rows(data)),
+        ),
         ("noise", "Noise models", sections.noise(data.runs)),
         ("errors", "Errors against time", "".join(err_parts)),
         ("outages", "Outage windows", sections.windows(win_rows) + "".join(outage_parts)),

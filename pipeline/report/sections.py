@@ -257,9 +257,10 @@ def windows(rows: Sequence[Row]) -> str:
     )
 
 
-def onboard(rows: Sequence[Row]) -> str:
-    """The replayed runs against the vehicle's own estimate (``report.onboard``)."""
-    if not rows:
+def onboard(rows: Sequence[Row], ratios: Sequence[Row] = ()) -> str:
+    """The replayed runs against the vehicle's own estimate (``report.onboard``), and the
+    onboard EKF's own innovation test ratios."""
+    if not rows and not ratios:
         return ""
     run_cols = (("filter", "filter"), ("scenario", "scenario"), ("samples", "samples"),
                 ("pos_h_rms_m", "horiz. RMS m"), ("pos_h_max_m", "horiz. max m"),
@@ -293,6 +294,18 @@ def onboard(rows: Sequence[Row]) -> str:
                 "Onboard minus replayed at the onboard samples inside each window; drift in % "
                 "of the distance the onboard track travelled, where that is over 50 m. "
                 "tables/onboard_comparison.csv holds every row.",
+                "note",
+            )
+        )
+    if ratios:
+        cols = (("measurement", "measurement"), ("samples", "samples"), ("mean", "mean"),
+                ("max", "max"), ("above_1_frac", "fraction above 1"))  # fmt: skip
+        parts.append("<h3>The onboard EKF's innovation test ratios</h3>" + h.table(ratios, cols))
+        parts.append(
+            h.para(
+                "As the log recorded them (ArduPilot XKF4/NKF4/EKF4: the square root of the "
+                "ratio; PX4 estimator_status: the ratio). Above 1 the onboard EKF rejected "
+                "that measurement.",
                 "note",
             )
         )

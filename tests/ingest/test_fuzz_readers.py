@@ -53,6 +53,10 @@ def seeds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Seed]:
     for name, make in SEEDS.items():
         (root / name).mkdir()
         out[name] = make(root / name)
+        # the first ingest of a format compiles its readers' kernels (numba: tens of seconds
+        # of CPU on a slow host with a cold cache); done here, so that a case's time limit
+        # measures the case's own work
+        ingest(list(out[name].logs), root / f"{name}-warm")
     return out
 
 

@@ -51,6 +51,7 @@ class Expect:
             (the truth, or the fixes it fused: a residual), and its bound.
         onboard_max_m: where the log has an onboard estimate, the bound of the nominal run's
             horizontal RMS difference from it.
+        onboard_tests: the log records the onboard EKF's innovation test ratios.
     """
 
     rc: int
@@ -59,6 +60,7 @@ class Expect:
     reference: str = ""
     max_rms_m: float = 0.0
     onboard_max_m: float | None = None
+    onboard_tests: bool = False
 
 
 ROBOT = Expect(0, {"nominal": "ok", "outage_60s": "ok"}, "", "fixes_residual", 3.0)
@@ -88,6 +90,7 @@ LOGS: dict[str, tuple[str, Expect]] = {
             "fixes_residual",
             1.5,
             0.6,
+            onboard_tests=True,
         ),
     ),
     "sitl_vtol_tlog": (
@@ -104,7 +107,7 @@ LOGS: dict[str, tuple[str, Expect]] = {
     ),
     "ardupilot_copter_2015_timems": (
         "corpus_2026/ap_copter33_2015_log171.bin",
-        Expect(0, {"nominal": "ok", "outage_60s": "ok"}, "", "fixes_residual", 1.5, 1.5),
+        Expect(0, {"nominal": "ok", "outage_60s": "ok"}, "", "fixes_residual", 1.5, 1.5, True),
     ),
     "ardupilot_copter_2024_truncated": (
         "corpus_2026/ap_copter462_2024_trunc80k.bin",
@@ -136,7 +139,7 @@ LOGS: dict[str, tuple[str, Expect]] = {
     # and its standstill windows pass (ok)
     "px4_v190_sitl": (
         "corpus_2026/px4_v190_sitl_truth.ulg",
-        Expect(0, {"nominal": "inconsistent", "outage_60s": "ok"}, "", "truth", 0.2, 0.4),
+        Expect(0, {"nominal": "inconsistent", "outage_60s": "ok"}, "", "truth", 0.2, 0.4, True),
     ),
 }
 
@@ -181,6 +184,8 @@ def test_analyze_gives_each_real_log_its_outcome(name: str, tmp_path: Path) -> N
         assert '<p class="verdict bad">No run ended ok' in page
     if want.onboard_max_m is not None:
         _check_onboard(tmp_path / "out", want.onboard_max_m)
+        tests = "innovation test ratios</h3>" in page
+        assert tests == want.onboard_tests
     else:
         assert not (tmp_path / "out/report/tables/onboard_comparison.csv").exists()
 

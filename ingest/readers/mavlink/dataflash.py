@@ -43,7 +43,6 @@ from navreplay.ingest.readers.base import (
 from navreplay.ingest.readers.mavlink.dfclock import DfSurvey, RecordClock, instances, survey
 from navreplay.ingest.readers.mavlink.dfformat import DfFormat
 from navreplay.ingest.readers.mavlink.dfmsgs import (
-    JOIN_COLUMNS,
     DfExtras,
     DfStream,
     finish_gnss,
@@ -135,7 +134,7 @@ class DataFlashReader(LogReader):
         self._check_usable(s, wanted)
         extras = s.extras()
         joins = {
-            key: AsofJoin(JOIN_COLUMNS, JOIN_TOLERANCE_NS)
+            key: AsofJoin(spec.join.columns, JOIN_TOLERANCE_NS)
             for key, (spec, _) in wanted.items()
             if spec.join is not None
         }
@@ -163,11 +162,11 @@ class DataFlashReader(LogReader):
                     join.push_left(Left(cols.pop("t_ns"), cols, dict(b.nulls), b.offsets))
                 out = join.pop()
                 if out is not None:
-                    yield _gnss_batch(key, out, extras)
+                    yield _joined_batch(key, spec, out, extras)
         for key, join in joins.items():
             out = join.pop(final=True)
             if out is not None:
-                yield _gnss_batch(key, out, extras)
+                yield _joined_batch(key, wanted[key][0], out, extras)
         self._record_damage(stats, formats, s)
 
     def _check_usable(self, s: DfSurvey, wanted: dict[str, tuple[DfStream, int]]) -> None:
@@ -275,6 +274,13 @@ def _parse_key(key: str, specs: dict[str, DfStream]) -> tuple[DfStream, int] | N
     if spec is None:
         return None
     return spec, int(rest.rstrip("]")) if rest else spec.instance
+
+
+def _joined_batch(key: str, spec: DfStream, out: Left, extras: DfExtras) -> Batch:
+    """A stream's rows after their join: a GPS batch finished, any other as it is."""
+    if spec.table == TableName.GNSS:
+        return _gnss_batch(key, out, extras)
+    return Batch(key, spec.table, {"t_ns": out.t, **out.columns}, out.offsets, out.nulls)
 
 
 def _gnss_batch(

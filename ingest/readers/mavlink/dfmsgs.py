@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -38,7 +39,7 @@ import numpy.typing as npt
 from navreplay.ingest.arrays import F64, I64
 from navreplay.ingest.readers.mavlink.dfformat import DfFormat
 from navreplay.ingest.readers.mavlink.mavmsgs import Converted
-from navreplay.ingest.schema import FixType, TableName
+from navreplay.ingest.schema import ESTIMATOR_TEST_RATIOS, FixType, TableName
 
 #: ArduPilot's LOCATION_SCALING_FACTOR_INV: 1e-7 degree units per metre (sphere 6378100 m).
 LOCATION_SCALING_FACTOR_INV = 89.83204953368922
@@ -68,6 +69,15 @@ Convert = Callable[[np.ndarray, DfFormat, DfExtras, I64], Converted]
 """Decoded records, their format, the file's extras and the records' boot time (us)."""
 
 
+class DfJoin(NamedTuple):
+    """A message of the same instance joined to a stream's rows by nearest time: its name, its
+    conversion and the columns it adds."""
+
+    message: str
+    convert: Convert
+    columns: tuple[str, ...]
+
+
 @dataclass(frozen=True)
 class DfStream:
     """A DataFlash message that feeds a canonical table.
@@ -89,7 +99,7 @@ class DfStream:
     table: TableName
     convert: Convert
     instance: int = 0
-    join: tuple[str, Convert] | None = None
+    join: DfJoin | None = None
     detail: str = ""
     suffix: str = ""
     needs: str = ""
@@ -246,6 +256,24 @@ def _ekf(rec: np.ndarray, fmt: DfFormat, ex: DfExtras, t_us: I64) -> Converted:
     return Converted(cols, counters=counters | more)
 
 
+#: the onboard EKF's innovation test ratios (XKF4/NKF4/EKF4 ``SV``, ``SP``, ``SH``, ``SM``;
+#: the legacy EKF4's largest of ``SMX/SMY/SMZ``): a measurement is rejected above 1
+TEST_RATIOS = ESTIMATOR_TEST_RATIOS
+
+
+def _ekf_tests(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Converted:
+    mag_fields = (
+        ["SM"] if "SM" in fmt.columns else [c for c in ("SMX", "SMY", "SMZ") if c in fmt.columns]
+    )
+    nan = np.full(len(rec), np.nan)
+    mag = np.max([fmt.scaled(rec, c) for c in mag_fields], axis=0) if mag_fields else nan
+    cols = {
+        name: fmt.scaled(rec, field) if field in fmt.columns else nan
+        for name, field in zip(TEST_RATIOS[:3], ("SV", "SP", "SH"), strict=True)
+    }
+    return Converted(cols | {"test_ratio_mag": np.asarray(mag, dtype=np.float64)})
+
+
 def _sim(rec: np.ndarray, fmt: DfFormat, ex: DfExtras, _t: I64) -> Converted:
     alt, counters = _msl_to_ellipsoid(fmt.scaled(rec, "Alt"), None, ex)
     cols = {
@@ -257,6 +285,9 @@ def _sim(rec: np.ndarray, fmt: DfFormat, ex: DfExtras, _t: I64) -> Converted:
     return Converted(cols, counters=counters)
 
 
+#: the GPA columns joined into GPS
+JOIN_COLUMNS = ("h_acc_m", "v_acc_m", "speed_acc_mps", "und")
+_GPA = DfJoin("GPA", _gpa, JOIN_COLUMNS)
 _IMU = TableName.IMU
 _EST = TableName.ESTIMATOR
 _MAG = TableName.MAG
@@ -264,13 +295,36 @@ STREAMS: tuple[DfStream, ...] = (
     DfStream("IMU", _IMU, _imu, detail="rad/s, m/s^2"),
     DfStream("IMU2", _IMU, _imu, instance=1, detail="rad/s, m/s^2 (legacy second IMU)"),
     DfStream("IMU3", _IMU, _imu, instance=2, detail="rad/s, m/s^2 (legacy third IMU)"),
-    DfStream("GPS", TableName.GNSS, _gps, join=("GPA", _gpa), detail="GPS week and ms -> GPS time"),
+    DfStream("GPS", TableName.GNSS, _gps, join=_GPA, detail="GPS week and ms -> GPS time"),
     DfStream(
-        "GPS2", TableName.GNSS, _gps, instance=1, join=("GPA2", _gpa), detail="legacy 2nd GPS"
+        "GPS2",
+        TableName.GNSS,
+        _gps,
+        instance=1,
+        join=DfJoin("GPA2", _gpa, JOIN_COLUMNS),
+        detail="legacy 2nd GPS",
     ),
-    DfStream("XKF1", _EST, _ekf, detail="EKF3 core output, position from ORGN"),
-    DfStream("NKF1", _EST, _ekf, detail="EKF2 core output, position from ORGN"),
-    DfStream("EKF1", _EST, _ekf, detail="EKF (2014-2015 NavEKF) output, position from ORGN"),
+    DfStream(
+        "XKF1",
+        _EST,
+        _ekf,
+        join=DfJoin("XKF4", _ekf_tests, TEST_RATIOS),
+        detail="EKF3 core output, position from ORGN; test ratios from XKF4",
+    ),
+    DfStream(
+        "NKF1",
+        _EST,
+        _ekf,
+        join=DfJoin("NKF4", _ekf_tests, TEST_RATIOS),
+        detail="EKF2 core output, position from ORGN; test ratios from NKF4",
+    ),
+    DfStream(
+        "EKF1",
+        _EST,
+        _ekf,
+        join=DfJoin("EKF4", _ekf_tests, TEST_RATIOS),
+        detail="EKF (2014-2015 NavEKF) output, position from ORGN; test ratios from EKF4",
+    ),
     DfStream("SIM", TableName.TRUTH, _sim, detail="SITL truth (no velocity)"),
     DfStream("MAG", _MAG, _mag, detail="milligauss -> gauss, body FRD"),
     DfStream("MAG2", _MAG, _mag, instance=1, detail="milligauss (legacy second compass)"),
@@ -325,4 +379,3 @@ def by_message(specs: dict[str, DfStream]) -> dict[str, tuple[DfStream, ...]]:
 
 BY_MESSAGE = by_message(BY_NAME)
 PX4_BY_MESSAGE = by_message(PX4_BY_NAME)
-JOIN_COLUMNS = ("h_acc_m", "v_acc_m", "speed_acc_mps", "und")

@@ -65,13 +65,14 @@ from navreplay.ingest.readers.ulog.ulogmsgs import (
     attitude_columns,
     gyro_columns,
 )
-from navreplay.ingest.schema import TableName
+from navreplay.ingest.schema import ESTIMATOR_TEST_RATIOS, TableName
 from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
 
 log = logging.getLogger(__name__)
 
 JOIN_TOLERANCE_NS = 50_000_000
 _STATUS = "vehicle_status"
+_EKF_STATUS = "estimator_status"  # the onboard EKF's test ratios (joined to its estimate)
 _STATUS_FIELDS = ("system_type", "is_vtol", "is_rotary_wing", "vehicle_type")
 _HEADER = 16
 
@@ -94,7 +95,7 @@ class UlogReader(LogReader):
         from pyulog.core import ULogException
 
         names = [*(t.name for t in TOPICS), *{t.attitude or t.pair for t in TOPICS} - {""}]
-        names.append(_STATUS)
+        names += [_STATUS, _EKF_STATUS]
         printed = io.StringIO()
         try:
             with contextlib.redirect_stdout(printed):  # pyulog prints its warnings
@@ -106,7 +107,7 @@ class UlogReader(LogReader):
         finally:
             for line in printed.getvalue().splitlines():
                 log.info("%s: pyulog: %s", self.file, line)
-        if not [d for d in self._ulog.data_list if d.name != _STATUS]:
+        if not [d for d in self._ulog.data_list if d.name not in (_STATUS, _EKF_STATUS)]:
             corrupt = " and reports the file corrupt" if self._ulog.file_corruption else ""
             raise CorruptLogError(
                 f"pyulog finds no data message of the topics navreplay converts{corrupt}",
@@ -271,8 +272,29 @@ class UlogReader(LogReader):
         out = join.pop(final=True)
         assert out is not None
         info = {**conv.info, "attitude": f"{topic.attitude}[0] q, nearest in time"}
+        if topic.table == TableName.ESTIMATOR:
+            out = self._with_test_ratios(out, ulog)
         cols = {"t_ns": out.t, **out.columns}
         return Batch(key, topic.table, cols, out.offsets, out.nulls, None, conv.counters, info)
+
+    def _with_test_ratios(self, rows: Left, ulog: Any) -> Left:
+        """The onboard EKF's test ratios (``estimator_status[0]``, nearest in time) joined to
+        its estimate, where the log has them."""
+        fields = [f.replace("test_ratio_", "") + "_test_ratio" for f in ESTIMATOR_TEST_RATIOS]
+        status = [d for d in ulog.data_list if d.name == _EKF_STATUS and d.multi_id == 0]
+        if not status or not all(f in status[0].data for f in fields):
+            return rows
+        d = status[0]
+        join = AsofJoin(ESTIMATOR_TEST_RATIOS, JOIN_TOLERANCE_NS)
+        columns = {
+            name: np.asarray(d.data[f], dtype=np.float64)
+            for name, f in zip(ESTIMATOR_TEST_RATIOS, fields, strict=True)
+        }
+        join.push_right(self.to_base(d.data["timestamp"]), columns)
+        join.push_left(rows)
+        out = join.pop(final=True)
+        assert out is not None
+        return out
 
     # -------------------------------------------------------------------------------- damage
     def _record_damage(self, ulog: Any) -> None:

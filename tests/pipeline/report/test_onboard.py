@@ -25,6 +25,7 @@ from navreplay.ingest.schema import TableName
 from navreplay.ingest.tables import Provenance, read_table, write_table
 from navreplay.pipeline.report.inputs import load_dataset
 from navreplay.pipeline.report.render import render_dataset
+from navreplay.pipeline.report.tables import fmt
 from tests.pipeline.report.conftest import OUTAGE_S
 
 NORTH_M, UP_M, YAW_DEG = 2.0, 1.0, 3.0
@@ -56,6 +57,8 @@ def _onboard(root: Path) -> pa.Table:
         "alt_m": alt,
         **{c: at(c) for c in ("vel_n_mps", "vel_e_mps", "vel_d_mps", "roll_rad", "pitch_rad")},
         "yaw_rad": np.angle(np.exp(1j * (_unwrapped_at(est, tm) + math.radians(YAW_DEG)))),
+        # the onboard EKF's velocity test ratio: above 1 (rejected) in one sample of ten
+        "test_ratio_vel": np.where(np.arange(tm.size) % 10 == 0, 1.5, 0.2),
     }
     return pa.table(cols)
 
@@ -130,6 +133,16 @@ def test_the_page_shows_the_onboard_track_and_tables(with_onboard: Path) -> None
     section = page.split('<section id="onboard">')[1].split("</section>")[0]
     assert "not truth" in section
     assert "Drift against the onboard estimate in the outage windows" in section
+    # the onboard EKF's own test ratios: velocity only, rejected in one sample of ten
+    ratios = section.split("innovation test ratios")[1]
+    assert '<td class="t">vel</td>' in ratios
+    ob = read_table(with_onboard / "tables/estimator.parquet", "estimator").table
+    above = float(np.mean(np.asarray(ob.column("test_ratio_vel").to_numpy()) > 1.0))
+    assert 0.09 < above < 0.11
+    assert f"<td>{fmt(above)}</td>" in ratios
+    assert '<td class="t">pos</td>' not in ratios
+    context = page.split('<section id="context">')[1].split("</section>")[0]
+    assert "onboard test ratio" in context
     track = page.split('<section id="track">')[1].split("</section>")[0]
     assert "onboard estimate" in track
 
