@@ -141,6 +141,7 @@ class DataFlashReader(LogReader):
         formats = Formats()
         stats = ScanStats()
         clock = RecordClock()
+        pending: dict[str, dict[str, int]] = {}  # counters of rows held by a join
         for rec in scan_blocks(self.file, formats, stats):
             t_us, _ = clock.times(formats, rec)
             for key, (spec, inst) in wanted.items():
@@ -157,16 +158,14 @@ class DataFlashReader(LogReader):
                     continue
                 if spec.join is not None:
                     self._push_right(rec, t_us, formats, spec.join[0], spec, inst, join, extras)
-                for b in batches:
-                    cols = dict(b.columns)
-                    join.push_left(Left(cols.pop("t_ns"), cols, dict(b.nulls), b.offsets))
+                _hold(batches, join, pending.setdefault(key, {}))
                 out = join.pop()
                 if out is not None:
-                    yield _joined_batch(key, spec, out, extras)
+                    yield _joined_batch(key, spec, out, extras, pending.pop(key, {}))
         for key, join in joins.items():
             out = join.pop(final=True)
             if out is not None:
-                yield _joined_batch(key, wanted[key][0], out, extras)
+                yield _joined_batch(key, wanted[key][0], out, extras, pending.pop(key, {}))
         self._record_damage(stats, formats, s)
 
     def _check_usable(self, s: DfSurvey, wanted: dict[str, tuple[DfStream, int]]) -> None:
@@ -276,11 +275,24 @@ def _parse_key(key: str, specs: dict[str, DfStream]) -> tuple[DfStream, int] | N
     return spec, int(rest.rstrip("]")) if rest else spec.instance
 
 
-def _joined_batch(key: str, spec: DfStream, out: Left, extras: DfExtras) -> Batch:
-    """A stream's rows after their join: a GPS batch finished, any other as it is."""
+def _hold(batches: list[Batch], join: AsofJoin, counters: dict[str, int]) -> None:
+    """Give a join the rows of ``batches``, adding their counters to ``counters``."""
+    for b in batches:
+        cols = dict(b.columns)
+        join.push_left(Left(cols.pop("t_ns"), cols, dict(b.nulls), b.offsets))
+        for name, n in b.counters.items():
+            counters[name] = counters.get(name, 0) + n
+
+
+def _joined_batch(
+    key: str, spec: DfStream, out: Left, extras: DfExtras, counters: dict[str, int]
+) -> Batch:
+    """A stream's rows after their join, with the counters of the conversions they came from:
+    a GPS batch finished (its counters its own), any other as it is."""
     if spec.table == TableName.GNSS:
         return _gnss_batch(key, out, extras)
-    return Batch(key, spec.table, {"t_ns": out.t, **out.columns}, out.offsets, out.nulls)
+    cols = {"t_ns": out.t, **out.columns}
+    return Batch(key, spec.table, cols, out.offsets, out.nulls, None, counters)
 
 
 def _gnss_batch(
