@@ -61,6 +61,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "navreplay.pipeline.stages.bench",
         "run the speed benchmarks against reference backends",
     ),
+    "export": (
+        "navreplay.pipeline.stages.export",
+        "a table or run as flat CSV (PlotJuggler) or a TUM trajectory (evo)",
+    ),
     "where-reports": ("navreplay.pipeline.stages.where_reports", "list the generated reports"),
     "params": (
         "navreplay.pipeline.stages.params",
