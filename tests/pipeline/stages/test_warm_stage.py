@@ -58,8 +58,9 @@ def test_groups_put_filters_that_share_a_kernel_together() -> None:
 
 @pytest.mark.slow
 def test_after_warm_the_first_run_loads_the_kernel_and_compiles_nothing(tmp_path: Path) -> None:
+    # No cold control run (it costs a whole compile): a hit can only be a load from the cache
+    # warm wrote, and no miss means nothing compiled.
     cache = tmp_path / "cache"
-    assert _stats(tmp_path / "cold") == {"hits": 0, "misses": 1}  # the control: it compiles
     stamp = tmp_path / "warm.json"
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
     done = subprocess.run(
