@@ -58,6 +58,7 @@ from typing import Any
 from navreplay.ingest.alignment import Alignment, check_tables, fix_latency
 from navreplay.ingest.atomic import atomic_directory, atomic_write_json
 from navreplay.ingest.config import DatasetConfig
+from navreplay.ingest.context import LogContext, write_context
 from navreplay.ingest.damage import Completeness, DamageLog, Defect
 from navreplay.ingest.detect import Detected, Format, detect
 from navreplay.ingest.errors import IngestError, PlausibilityError
@@ -261,10 +262,7 @@ def _ingest(
         _report_copies(sinks, opened, warnings)
         _check_usable(sinks, opened, warnings)
         _report_implausible(sinks, opened, warnings)
-        for t, n in rows.items():
-            if n == 0:
-                warnings.append(f"table {t} ({plans[TableName(t)].key}) is empty")
-                log.warning("table %s (%s) is empty", t, plans[TableName(t)].key)
+        _note_empty(rows, plans, warnings)
         checks = _cross_file_checks(sinks, names, warnings)
         gnss_check = _gnss_check(tmp, sinks, names, warnings, options)
         aligned = check_tables(tmp, [t for t, n in rows.items() if n > 1])
@@ -273,13 +271,22 @@ def _ingest(
             if a.suspicious:
                 warnings.append(f"time bases disagree: {a.text()}")
                 log.warning("time bases disagree: %s", a.text())
+        context_rows = _write_context(
+            tmp,
+            opened,
+            recon.base,
+            sources,
+            {"ingest": to_plain(options), "params": params},
+            warnings,
+        )
+        rows |= context_rows
         report = _report(opened, plans, sinks, recon, options, warnings, names)
         limits = find_limits(tmp, report["tables"], inventories)
         report["limits"] = [lim.to_json() for lim in limits]
         for lim in limits:
             log.warning("%s: %s", lim.table, lim.reason)
-        report["time_base"]["checks"] = checks
-        report["time_base"]["alignment"] = [a.to_json() for a in aligned]
+        report["time_base"] |= {"checks": checks, "alignment": [a.to_json() for a in aligned]}
+        report["context"] = context_rows
         if gnss_check is not None:
             report["time_base"]["gnss_check"] = gnss_check
         meta = DatasetMeta(
@@ -300,6 +307,43 @@ def _ingest(
         write_meta(tmp, meta)
         atomic_write_json(tmp / REPORT_NAME, report)
     return IngestResult(out_dir, rows, report)
+
+
+def _note_empty(
+    rows: dict[str, int], plans: dict[TableName, TablePlan], warnings: list[str]
+) -> None:
+    for t, n in rows.items():
+        if n == 0:
+            warnings.append(f"table {t} ({plans[TableName(t)].key}) is empty")
+            log.warning("table %s (%s) is empty", t, plans[TableName(t)].key)
+
+
+def _write_context(
+    tmp: Path,
+    opened: list[_Log],
+    base: TimeBase,
+    sources: tuple[SourceFile, ...],
+    params: dict[str, Any],
+    warnings: list[str],
+) -> dict[str, int]:
+    """Write each file's messages, modes, arming, events and vibration
+    (``LogReader.context``); returns the rows per table. They are context, not data a filter
+    needs: a file whose context cannot be read is noted and left out, never a reason to fail
+    the ingest."""
+    out: list[tuple[str, LogContext]] = []
+    for o in opened:
+        name = o.detected.path.name
+        try:
+            found = o.reader.context()
+        except (IngestError, KeyError, ValueError) as err:
+            warnings.append(f"{name}: its messages, modes and vibration cannot be read: {err}")
+            log.warning("%s: context not read: %s", name, err)
+            continue
+        if found is not None:
+            out.append((name, found))
+    written, notes = write_context(tmp, out, base, sources, params)
+    warnings += notes
+    return written
 
 
 def _follow_imu(sinks: dict[TableName, TableSink]) -> None:

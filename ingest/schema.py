@@ -49,6 +49,26 @@ class TableName(StrEnum):
     MAG = "mag"
 
 
+class ContextName(StrEnum):
+    """Tables of the log's context beside its sensor streams (file stems too): what the
+    vehicle said and did (``events``: messages, modes, arming, events, errors) and how its
+    IMUs shook (``vibration``). Readers write them where the log has them
+    (``LogReader.context``); no stream selection applies to them."""
+
+    EVENTS = "events"
+    VIBRATION = "vibration"
+
+
+class EventKind(StrEnum):
+    """``events.kind``: what a row of the events table is."""
+
+    MESSAGE = "message"  # text the vehicle logged or sent (MSG, STATUSTEXT, logged_messages)
+    MODE = "mode"  # a flight or drive mode entered; text is its name
+    ARMING = "arming"  # "armed" or "disarmed"
+    EVENT = "event"  # an autopilot event (ArduPilot EV)
+    ERROR = "error"  # a subsystem error or failsafe (ArduPilot ERR)
+
+
 class FixType:
     """``gnss.fix_type`` values, those of MAVLink ``GPS_FIX_TYPE``."""
 
@@ -93,7 +113,7 @@ class TableSpec:
         extra_float_columns: other float64 columns (e.g. sensor biases in ``truth``) are allowed.
     """
 
-    name: TableName
+    name: TableName | ContextName
     columns: tuple[Column, ...]
     key: tuple[str, ...]
     extra_float_columns: bool
@@ -144,8 +164,20 @@ NAV_SOLUTION_FIELDS = tuple(c.name for c in _NAV_SOLUTION[1:])
 #: the EKF rejected the measurement (ArduPilot's XKF4/NKF4/EKF4 log the square root of the
 #: ratio, PX4's estimator_status the ratio).
 ESTIMATOR_TEST_RATIOS = ("test_ratio_vel", "test_ratio_pos", "test_ratio_hgt", "test_ratio_mag")
+#: ... and its velocity and position innovations as it logs them (ArduPilot XKF3/NKF3/EKF3,
+#: PX4 estimator_innovations: the prediction minus the measurement), NED, m/s and m: the
+#: velocity and horizontal position are the GNSS measurements', the vertical position that of
+#: the EKF's height source (usually the barometer).
+ESTIMATOR_INNOVATIONS = (
+    "innov_vel_n_mps",
+    "innov_vel_e_mps",
+    "innov_vel_d_mps",
+    "innov_pos_n_m",
+    "innov_pos_e_m",
+    "innov_pos_d_m",
+)
 
-SPECS: Mapping[TableName, TableSpec] = {
+SPECS: Mapping[TableName | ContextName, TableSpec] = {
     TableName.IMU: TableSpec(
         TableName.IMU,
         (
@@ -268,22 +300,75 @@ SPECS: Mapping[TableName, TableSpec] = {
         key=("t_ns",),
         extra_float_columns=True,
     ),
+    ContextName.EVENTS: TableSpec(
+        ContextName.EVENTS,
+        (
+            _T_NS,
+            Column("seq", pa.int32(), True, False, "order of the rows sharing a t_ns, from 0"),
+            Column("kind", pa.string(), True, False, "EventKind: message, mode, arming, ..."),
+            Column(
+                "severity",
+                pa.int8(),
+                True,
+                True,
+                "syslog severity of a message (0 emergency ... 7 debug; MAVLink MAV_SEVERITY, "
+                "PX4 log levels); null where the log gives none",
+            ),
+            Column("text", pa.string(), True, False, "the text as logged (untrusted)"),
+            Column("source", pa.string(), True, False, "the log record it came from (MSG, ...)"),
+        ),
+        key=("t_ns", "seq"),
+        extra_float_columns=False,
+    ),
+    ContextName.VIBRATION: TableSpec(
+        ContextName.VIBRATION,
+        (
+            _T_NS,
+            Column("imu", pa.int16(), True, False, "IMU instance, from 0"),
+            _f(
+                "vibe_x_mps2",
+                "vibration level, body x, m/s^2 (ArduPilot VIBE, MAVLink VIBRATION); null where "
+                "the log gives another measure (PX4's, as extra columns)",
+                nullable=True,
+            ),
+            _f("vibe_y_mps2", "vibration level, body y, m/s^2", nullable=True),
+            _f("vibe_z_mps2", "vibration level, body z, m/s^2", nullable=True),
+            _f(
+                "clip_count",
+                "accelerometer clipping events since boot (cumulative), null where not logged",
+                nullable=True,
+            ),
+        ),
+        key=("t_ns", "imu"),
+        extra_float_columns=True,
+    ),
 }
+_BY_VALUE: Mapping[str, TableName | ContextName] = {str(k): k for k in SPECS}
 
 
-def spec(name: TableName | str) -> TableSpec:
+def table_name(name: TableName | ContextName | str) -> TableName | ContextName:
+    """The enum of a table name (a canonical stream table or a context table).
+
+    Raises:
+        TableValidationError: for an unknown name, listing the known ones.
+    """
+    found = _BY_VALUE.get(str(name))
+    if found is None:
+        known = ", ".join(_BY_VALUE)
+        raise TableValidationError(f"unknown canonical table (known: {known})", table=str(name))
+    return found
+
+
+def spec(name: TableName | ContextName | str) -> TableSpec:
     """The spec of a canonical table; raises ``TableValidationError`` for an unknown name."""
-    try:
-        return SPECS[TableName(name)]
-    except ValueError as err:
-        known = ", ".join(t.value for t in TableName)
-        raise TableValidationError(
-            f"unknown canonical table (known: {known})", table=str(name)
-        ) from err
+    return SPECS[table_name(name)]
 
 
 def validate(
-    name: TableName | str, table: pa.Table, *, previous_key: tuple[Any, ...] | None = None
+    name: TableName | ContextName | str,
+    table: pa.Table,
+    *,
+    previous_key: tuple[Any, ...] | None = None,
 ) -> None:
     """Check ``table`` against the canonical schema of ``name``.
 
@@ -324,7 +409,7 @@ def validate(
     _check_key_order(ts, table, previous_key)
 
 
-def last_key(name: TableName | str, table: pa.Table) -> tuple[Any, ...] | None:
+def last_key(name: TableName | ContextName | str, table: pa.Table) -> tuple[Any, ...] | None:
     """The key tuple of the last row (for validating a stream chunk by chunk)."""
     if table.num_rows == 0:
         return None
@@ -367,9 +452,11 @@ def _check_key_order(ts: TableSpec, table: pa.Table, previous_key: tuple[Any, ..
         )
     same = np.flatnonzero(dt == 0)
     if same.size:
-        # Only gnss_obs has a secondary key (sv); compare it where t_ns ties.
+        # A secondary key (gnss_obs's sv, events' seq, vibration's imu) decides where t_ns ties.
         sec_name = ts.key[1]
-        sec = np.asarray(table.column(sec_name).to_numpy(zero_copy_only=False)).astype(str)
+        sec = np.asarray(table.column(sec_name).to_numpy(zero_copy_only=False))
+        if sec.dtype.kind == "O":
+            sec = sec.astype(str)
         bad = same[sec[same + 1] <= sec[same]]
         if bad.size:
             i = int(bad[0])
@@ -386,7 +473,7 @@ def _secondary(ts: TableSpec, table: pa.Table, row: int) -> tuple[Any, ...]:
     return tuple(table.column(k)[row].as_py() for k in ts.key[1:])
 
 
-def from_columns(name: TableName | str, columns: Mapping[str, Any]) -> pa.Table:
+def from_columns(name: TableName | ContextName | str, columns: Mapping[str, Any]) -> pa.Table:
     """Build a canonical table from column arrays (numpy arrays, lists or Arrow arrays).
 
     Columns are cast to the canonical types (an unsafe cast, e.g. float to int with a fraction,
@@ -444,6 +531,6 @@ def _to_arrow(table: str, column: str, values: Any, typ: pa.DataType) -> pa.Arra
         ) from err
 
 
-def empty(name: TableName | str) -> pa.Table:
+def empty(name: TableName | ContextName | str) -> pa.Table:
     """An empty table with the full canonical schema (required and optional columns)."""
     return spec(name).arrow_schema().empty_table()

@@ -29,7 +29,15 @@ from navreplay.ingest.errors import (
     ProvenanceError,
     TableValidationError,
 )
-from navreplay.ingest.schema import SCHEMA_VERSION, TableName, last_key, spec, validate
+from navreplay.ingest.schema import (
+    SCHEMA_VERSION,
+    ContextName,
+    TableName,
+    last_key,
+    spec,
+    table_name,
+    validate,
+)
 
 PROVENANCE_KEY = b"navreplay"
 _ROW_GROUP_ROWS = 262_144
@@ -112,7 +120,7 @@ class Provenance:
     @classmethod
     def create(
         cls,
-        table: TableName | str,
+        table: TableName | ContextName | str,
         *,
         sources: Iterable[str | Path | SourceFile] = (),
         params: Mapping[str, Any] | None = None,
@@ -124,7 +132,7 @@ class Provenance:
             for s in sources
         )
         return cls(
-            table=TableName(table).value,
+            table=table_name(table).value,
             package_version=package_version(),
             git_commit=git_commit(),
             sources=files,
@@ -176,9 +184,11 @@ class TableWriter(AtomicWriter):
         provenance: stored in the file metadata; its ``table`` must equal ``name``.
     """
 
-    def __init__(self, path: str | Path, name: TableName | str, provenance: Provenance) -> None:
+    def __init__(
+        self, path: str | Path, name: TableName | ContextName | str, provenance: Provenance
+    ) -> None:
         self.path = Path(path)
-        self.name = TableName(name)
+        self.name = table_name(name)
         if provenance.table != self.name.value:
             raise ProvenanceError(
                 f"provenance is for table {provenance.table!r}, writing {self.name.value!r}",
@@ -261,7 +271,10 @@ class TableWriter(AtomicWriter):
 
 
 def write_table(
-    path: str | Path, name: TableName | str, table: pa.Table, provenance: Provenance
+    path: str | Path,
+    name: TableName | ContextName | str,
+    table: pa.Table,
+    provenance: Provenance,
 ) -> None:
     """Validate ``table`` and write it atomically to ``path`` with ``provenance``."""
     with TableWriter(path, name, provenance) as writer:
@@ -302,7 +315,10 @@ def _read_schema(path: Path) -> pa.Schema:
 
 
 def read_table(
-    path: str | Path, name: TableName | str, *, columns: list[str] | None = None
+    path: str | Path,
+    name: TableName | ContextName | str,
+    *,
+    columns: list[str] | None = None,
 ) -> TableFile:
     """Read a canonical table, verifying page checksums, provenance and the schema.
 
@@ -313,7 +329,7 @@ def read_table(
         TableValidationError: the content breaks the canonical schema.
     """
     path = Path(path)
-    tname = TableName(name).value
+    tname = table_name(name).value
     prov = read_provenance(path)
     if prov.table != tname:
         raise ProvenanceError(f"file holds table {prov.table!r}, expected {tname!r}", path=path)

@@ -126,6 +126,17 @@ class AsofJoin:
             self._rcols = {k: v[cut:] for k, v in self._rcols.items()}
 
 
+def through(chain: list[AsofJoin], *, final: bool = False) -> Left | None:
+    """The left rows that have passed every join of ``chain`` in turn (each hands on the
+    rows it has settled to the next); None when none has passed them all yet."""
+    out = chain[0].pop(final=final)
+    for join in chain[1:]:
+        if out is not None:
+            join.push_left(out)
+        out = join.pop(final=final)
+    return out
+
+
 def _concat(parts: list[Left]) -> Left:
     if len(parts) == 1:
         return parts[0]

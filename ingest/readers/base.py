@@ -52,6 +52,7 @@ import numpy.typing as npt
 
 from navreplay.ingest.arrays import I64
 from navreplay.ingest.config import DatasetConfig
+from navreplay.ingest.context import LogContext
 from navreplay.ingest.damage import DamageLog
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.platform import UNKNOWN, Platform
@@ -223,6 +224,12 @@ class LogReader(ABC):
     @abstractmethod
     def read(self, selections: Sequence[Selection]) -> Iterator[Batch]:
         """Yield batches of the selected streams, in file order."""
+
+    def context(self) -> LogContext | None:
+        """The log's messages, modes, arming, events and vibration (``ingest.context``), on
+        the time base of its streams; None for a format that logs none. Called after
+        ``read``."""
+        return None
 
     def close(self) -> None:  # noqa: B027 (optional hook: most readers hold nothing open)
         """Release open files; called once after reading."""

@@ -8,7 +8,11 @@ Panels, each only when the log has its data:
 - height: the fixes', the onboard estimate's and each filter's nominal run, from the first fix;
 - the onboard EKF's innovation test ratios (``estimator`` ``test_ratio_*``), 1 marked;
 - gate rejections of each filter's nominal run, per stream, as ticks (``innovations.parquet``
-  rows not accepted).
+  rows not accepted);
+- the log's events (``events``: ``ingest.context``): the mode (named spans), armed spans,
+  autopilot events and errors, and messages as ticks coloured by severity;
+- vibration (``vibration``): levels of the first IMU (ArduPilot's 30 m/s^2 guide line, PX4's
+  own metrics) with the clipping events of every IMU marked.
 
 The outage windows are those of the first scenario that has any.
 """
@@ -72,6 +76,10 @@ def context(data: DatasetInputs, key: str) -> str | None:
         panels.append("tests")
     if any(rejections.values()):
         panels.append("rejections")
+    if data.events is not None and data.events.num_rows:
+        panels.append("events")
+    if data.vibration is not None and data.vibration.num_rows:
+        panels.append("vibration")
     if len(panels) < 2:
         return None
     t0 = data.t0_ns()
@@ -121,6 +129,10 @@ def _draw(
         ax.set_ylabel("count / type" if step else "m")
     elif panel == "height":
         _height(ax, data, gnss, nominal, filters, t0)
+    elif panel == "events":
+        _events_panel(ax, data.events, t0)
+    elif panel == "vibration":
+        _vibration_panel(ax, data.vibration, t0)
     elif panel == "tests":
         ob = data.onboard
         t = (times_ns(ob) - t0) / 1e9
@@ -166,3 +178,96 @@ def _rejections_panel(
                     color=colour(filters.index(f)), label=f"{f}: {s} ({ts.size})")  # fmt: skip
     ax.set_yticks(range(len(filters)), filters)
     ax.set_ylabel("gate rejections")
+
+
+_LANES = ("messages", "events, errors", "armed", "mode")
+_SEVERITY_COLOURS = (("#b3261e", 3), ("#E69F00", 4), ("#7f7f7f", 7))  # up to error, warning, rest
+#: ArduPilot: "vibration levels below 30 m/s/s are normally acceptable"
+VIBE_GUIDE_MPS2 = 30.0
+
+
+def _kind_times(events: Any, kind: str, t0: int) -> tuple[np.ndarray, list[str]]:
+    kinds = np.asarray(events.column("kind").to_pylist(), dtype=object)
+    pick = np.flatnonzero(kinds == kind)
+    t = (times_ns(events)[pick] - t0) / 1e9
+    texts = events.column("text").to_pylist()
+    return t, [str(texts[i]) for i in pick]
+
+
+def _events_panel(ax: Any, events: Any, t0: int) -> None:
+    t_all = (times_ns(events) - t0) / 1e9
+    t_end = float(max(t_all.max(), ax.get_xlim()[1]))
+    t, modes = _kind_times(events, "mode", t0)
+    span = max(t_end - float(t_all.min()), 1e-9)
+    for i, (start, name) in enumerate(zip(t, modes, strict=True)):
+        stop = t[i + 1] if i + 1 < len(t) else t_end
+        ax.broken_barh([(start, stop - start)], (2.7, 0.6), color=colour(i % 8), alpha=0.35)
+        if (stop - start) / span > 0.04:
+            ax.text(start, 3.0, f" {name}", va="center", fontsize=6.5, clip_on=True)
+    t, states = _kind_times(events, "arming", t0)
+    for i, (start, state) in enumerate(zip(t, states, strict=True)):
+        if state == "armed":
+            stop = t[i + 1] if i + 1 < len(t) else t_end
+            ax.broken_barh([(start, stop - start)], (1.7, 0.6), color="#009E73", alpha=0.6)
+    for state, c in (("armed", "#009E73"), ("disarmed", "#000000")):
+        at = t[[s == state for s in states]] if len(states) else t
+        if at.size:  # the changes themselves (a log started armed shows only its disarm)
+            ax.plot(at, np.full(at.size, 2.0), "|", ms=10, mew=1.5, color=c, label=state)
+    for kind, c in (("event", "#0072B2"), ("error", "#b3261e")):
+        t, _ = _kind_times(events, kind, t0)
+        if t.size:
+            ax.plot(t, np.full(t.size, 1.0), "|", ms=8, color=c, label=f"{kind}s ({t.size})")
+    kinds = np.asarray(events.column("kind").to_pylist(), dtype=object)
+    severity = column(events, "severity")
+    t = (times_ns(events) - t0) / 1e9
+    done = np.zeros(len(t), bool)
+    for c, worst in _SEVERITY_COLOURS:
+        pick = (kinds == "message") & ~done & ((severity <= worst) | (worst == 7))
+        done |= pick
+        if pick.any():
+            label = {3: "messages: error or worse", 4: "warnings"}.get(worst, "messages")
+            ax.plot(t[pick], np.zeros(int(pick.sum())), "|", ms=8, color=c,
+                    label=f"{label} ({int(pick.sum())})")  # fmt: skip
+    ax.set_yticks(range(len(_LANES)), _LANES)
+    ax.set_ylim(-0.6, 3.6)
+
+
+def _vibration_panel(ax: Any, vib: Any, t0: int) -> None:
+    imu = column(vib, "imu")
+    first = imu == np.nanmin(imu)
+    t = (times_ns(vib) - t0) / 1e9
+    drew_levels = False
+    for i, name in enumerate(("vibe_x_mps2", "vibe_y_mps2", "vibe_z_mps2", "accel_vibe_mps2")):
+        v = column(vib, name)
+        ok = first & np.isfinite(v)
+        if ok.any():
+            label = name.removesuffix("_mps2").replace("_", " ") + " (IMU 0), m/s²"
+            ax.plot(*decimate_minmax(t[ok], v[ok], POINTS), color=colour(i), lw=0.8, label=label)
+            drew_levels |= name != "accel_vibe_mps2"
+    if drew_levels:
+        ax.axhline(VIBE_GUIDE_MPS2, color="#b3261e", lw=0.8, ls="--", label="30 m/s² (ArduPilot)")
+    for i, name in enumerate(("dvel_vibe_mps", "dang_vibe_rad")):
+        v = column(vib, name)
+        ok = first & np.isfinite(v)
+        if ok.any():
+            unit = "m/s" if name.endswith("mps") else "rad"
+            label = f"{'Δvelocity' if i == 0 else 'Δangle'} vibration (PX4), {unit}"
+            ax.plot(*decimate_minmax(t[ok], v[ok], POINTS), color=colour(4 + i), lw=0.8,
+                    label=label)  # fmt: skip
+    clips = _clip_times(vib, imu, t)
+    if clips.size:
+        ax.plot(clips, np.zeros(clips.size), "x", ms=5, color="#b3261e",
+                label=f"clipping ({clips.size} samples with new clips)")  # fmt: skip
+    ax.set_ylabel("vibration")
+
+
+def _clip_times(vib: Any, imu: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Times where some IMU's cumulative clipping count rose."""
+    count = column(vib, "clip_count")
+    out = []
+    for k in np.unique(imu[np.isfinite(imu)]):
+        pick = (imu == k) & np.isfinite(count)
+        c, tt = count[pick], t[pick]
+        rose = np.flatnonzero(np.diff(c) > 0) + 1
+        out.append(tt[rose])
+    return np.sort(np.concatenate(out)) if out else np.empty(0)

@@ -4,7 +4,8 @@
 
 - ``tables_dir/meta.json`` (``ingest.meta``) and ``tables_dir/ingest_report.json`` (the audit;
   ``ingest.api`` documents its structure), and the ``truth``, ``gnss`` and ``estimator`` (the
-  vehicle's own estimate, ``report.onboard``) tables if present;
+  vehicle's own estimate, ``report.onboard``) tables if present, and the log's ``events`` and
+  ``vibration`` (``ingest.context``);
 - every run under ``runs_dir``: any directory holding a ``metrics.json`` (layout free, e.g.
   ``runs/<filter>/<scenario>/``), with its ``estimate.parquet`` and ``innovations.parquet``
   (written by ``navreplay run``, ``estimation.core.contract.write_run``). The run's filter and
@@ -34,7 +35,7 @@ import pyarrow.parquet as pq
 
 from navreplay.ingest.errors import IngestError
 from navreplay.ingest.meta import META_NAME, DatasetMeta, read_meta
-from navreplay.ingest.schema import TableName
+from navreplay.ingest.schema import ContextName, TableName
 from navreplay.ingest.tables import read_table
 from navreplay.pipeline.report.experiments import load_experiments
 from navreplay.pipeline.report.input_files import ReportInputError, read_json
@@ -89,6 +90,8 @@ class DatasetInputs:
     runs: list[Run]
     onboard: pa.Table | None = None
     experiments: list[Any] = field(default_factory=list)
+    events: pa.Table | None = None
+    vibration: pa.Table | None = None
 
     def t0_ns(self) -> int:
         """The time origin of every plot: the first truth, fix or estimate time."""
@@ -114,7 +117,7 @@ class DatasetInputs:
         return sorted(names, key=lambda s: (s != "nominal", s))
 
 
-def _table(path: Path, name: TableName | None = None) -> pa.Table | None:
+def _table(path: Path, name: TableName | ContextName | None = None) -> pa.Table | None:
     if not path.is_file():
         return None
     try:
@@ -225,6 +228,8 @@ def load_dataset(
         runs=load_runs(runs_dir) if runs_dir is not None else [],
         onboard=_table(tables_dir / "estimator.parquet", TableName.ESTIMATOR),
         experiments=load_experiments(experiments_dir) if experiments_dir is not None else [],
+        events=_table(tables_dir / "events.parquet", ContextName.EVENTS),
+        vibration=_table(tables_dir / "vibration.parquet", ContextName.VIBRATION),
     )
 
 

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from navreplay.ingest.schema import ESTIMATOR_TEST_RATIOS
+from navreplay.ingest.schema import ESTIMATOR_INNOVATIONS, ESTIMATOR_TEST_RATIOS
 from navreplay.pipeline.nav.earth import F64
 from navreplay.pipeline.report.inputs import DatasetInputs, Run, column, times_ns
 from navreplay.pipeline.report.series import local_en, ned_difference
@@ -219,5 +219,30 @@ def test_ratio_rows(data: DatasetInputs) -> list[Row]:
             "mean": float(v.mean()),
             "max": float(v.max()),
             "above_1_frac": float(np.mean(v > 1.0)),
+        })  # fmt: skip
+    return rows
+
+
+def innovation_rows(data: DatasetInputs) -> list[Row]:
+    """The onboard EKF's velocity and position innovations where the log has them
+    (``ingest.schema.ESTIMATOR_INNOVATIONS``): per component, the samples, mean, standard
+    deviation, RMS and largest magnitude. A mean far from zero against the deviation is a
+    bias between the EKF's prediction and that measurement (a lever arm, a late fix, a
+    height source drifting)."""
+    if data.onboard is None:
+        return []
+    rows = []
+    for name in ESTIMATOR_INNOVATIONS:
+        v = column(data.onboard, name)
+        v = v[np.isfinite(v)]
+        if not v.size:
+            continue
+        rows.append({
+            "component": name.removeprefix("innov_"),
+            "samples": int(v.size),
+            "mean": float(v.mean()),
+            "std": float(v.std()),
+            "rms": float(np.sqrt(np.mean(v * v))),
+            "max_abs": float(np.abs(v).max()),
         })  # fmt: skip
     return rows

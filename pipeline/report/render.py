@@ -36,6 +36,7 @@ from navreplay.ingest.tables import git_commit, package_version
 from navreplay.ingest.writers.tum import write_tum
 from navreplay.pipeline.report import (
     audit,
+    events,
     figures,
     figures_context,
     figures_outage,
@@ -113,9 +114,12 @@ def render_dataset(
     context = fig(
         figures_context.context(data, "context"),
         "The receiver's satellites, fix type and reported accuracy, the height of the fixes, "
-        "the onboard estimate and each filter's nominal run, and the measurements each filter's "
-        "gate rejected, on one time axis; outage windows shaded.",
+        "the onboard estimate and each filter's nominal run, the measurements each filter's "
+        "gate rejected, and the log's modes, arming, events, messages and vibration where it "
+        "has them, on one time axis; outage windows shaded.",
     )
+    log_events = events.event_rows(data)
+    context += events.section(log_events, events.vibration_rows(data))
 
     def per_scenario(
         plot: Callable[[DatasetInputs, str, dict[tuple[str, str], ErrorSeries], str], str | None],
@@ -187,7 +191,9 @@ def render_dataset(
         (
             "onboard",
             "Against the onboard estimate",
-            sections.onboard(onboard_rows, onboard.test_ratio_rows(data)),
+            sections.onboard(
+                onboard_rows, onboard.test_ratio_rows(data), onboard.innovation_rows(data)
+            ),
         ),
         ("noise", "Noise models", sections.noise(data.runs)),
         ("errors", "Errors against time", "".join(err_parts)),
@@ -224,6 +230,8 @@ def render_dataset(
     }
     if onboard_rows:
         tables["onboard_comparison.csv"] = tb.to_csv(onboard_rows, onboard.COLUMNS)
+    if log_events:
+        tables["events.csv"] = tb.to_csv(log_events, events.COLUMNS)
     with atomic_directory(out_dir) as tmp:
         (tmp / "tables").mkdir()
         atomic_write_text(tmp / "index.html", page)

@@ -257,10 +257,12 @@ def windows(rows: Sequence[Row]) -> str:
     )
 
 
-def onboard(rows: Sequence[Row], ratios: Sequence[Row] = ()) -> str:
+def onboard(
+    rows: Sequence[Row], ratios: Sequence[Row] = (), innovations: Sequence[Row] = ()
+) -> str:
     """The replayed runs against the vehicle's own estimate (``report.onboard``), and the
-    onboard EKF's own innovation test ratios."""
-    if not rows and not ratios:
+    onboard EKF's own innovation test ratios and innovations."""
+    if not rows and not ratios and not innovations:
         return ""
     run_cols = (("filter", "filter"), ("scenario", "scenario"), ("samples", "samples"),
                 ("pos_h_rms_m", "horiz. RMS m"), ("pos_h_max_m", "horiz. max m"),
@@ -306,6 +308,19 @@ def onboard(rows: Sequence[Row], ratios: Sequence[Row] = ()) -> str:
                 "As the log recorded them (ArduPilot XKF4/NKF4/EKF4: the square root of the "
                 "ratio; PX4 estimator_status: the ratio). Above 1 the onboard EKF rejected "
                 "that measurement.",
+                "note",
+            )
+        )
+    if innovations:
+        inn_cols = (("component", "innovation"), ("samples", "samples"), ("mean", "mean"),
+                ("std", "std"), ("rms", "RMS"), ("max_abs", "max |x|"))  # fmt: skip
+        parts.append("<h3>The onboard EKF's innovations</h3>" + h.table(innovations, inn_cols))
+        parts.append(
+            h.para(
+                "Prediction minus measurement as the log recorded them (ArduPilot XKF3/NKF3/"
+                "EKF3, PX4 estimator_innovations), m/s and m; the vertical position is the "
+                "EKF's height source, usually the barometer. A mean far from zero against "
+                "the spread is a bias between the EKF and that sensor.",
                 "note",
             )
         )

@@ -3,7 +3,9 @@
 The format of each LOG is detected from its content (magic bytes), not its extension. Several
 files of one drive (e.g. a bag with the IMU plus the receiver's RINEX observation and
 navigation files) merge into one dataset with their time bases reconciled. Writes
-DIR/{imu,gnss,gnss_obs,vehicle,truth,estimator}.parquet (those the logs contain),
+DIR/{imu,gnss,gnss_obs,vehicle,truth,estimator,mag}.parquet (those the logs contain), the
+log's messages, modes, arming and events in DIR/events.parquet and its vibration in
+DIR/vibration.parquet (autopilot logs),
 DIR/meta.json and DIR/ingest_report.json; nothing partial is ever left at DIR.
 
 examples:
@@ -133,6 +135,9 @@ def format_listing(
     return "\n".join(lines) + "\n"
 
 
+_CONTEXT = {"events": "messages, modes, arming, events", "vibration": "vibration, clipping"}
+
+
 def format_summary(report: dict, out_dir: Path) -> str:  # type: ignore[type-arg]
     """A few lines after a successful ingest: tables, rows, completeness, warnings."""
     lines = [f"wrote {out_dir}"]
@@ -140,6 +145,8 @@ def format_summary(report: dict, out_dir: Path) -> str:  # type: ignore[type-arg
         st = t["stats"]
         rate = f"{st['rate_hz']:.2f} Hz" if st.get("rate_hz") else "-"
         lines.append(f"  {name:<9} {st['rows']:>9} rows  {rate:>11}  from {t['stream']}")
+    for name, rows in report.get("context", {}).items():
+        lines.append(f"  {name:<9} {rows:>9} rows  {'':>11}  the log's {_CONTEXT[name]}")
     for f in report["files"]:
         checked = f.get("verification", "")
         unverified = " (unverified: no checksums)" if checked.startswith("unverified") else ""

@@ -297,8 +297,15 @@ class UlogLog:
         return b"".join(self.parts)
 
 
-def ulog_drive(seconds: float = 2.0, imu_hz: int = 200, *, gps: bool = True) -> UlogLog:
-    """sensor_combined at ``imu_hz`` at rest, vehicle_gps_position at 5 Hz with UTC time."""
+def ulog_drive(
+    seconds: float = 2.0,
+    imu_hz: int = 200,
+    *,
+    gps: bool = True,
+    formats: tuple[tuple[str, str, str], ...] = (),
+) -> UlogLog:
+    """sensor_combined at ``imu_hz`` at rest, vehicle_gps_position at 5 Hz with UTC time;
+    ``formats`` (name, fields, struct codes) are declared too, for a test's own topics."""
     rng = np.random.default_rng(3)
     ulog = UlogLog()
     ulog.info("sys_name", "PX4")
@@ -314,6 +321,8 @@ def ulog_drive(seconds: float = 2.0, imu_hz: int = 200, *, gps: bool = True) -> 
         "uint8_t satellites_used;"
     )
     ulog.format("vehicle_gps_position", gps_fields, "QQiiiiffffffB?B")
+    for fmt in formats:
+        ulog.format(*fmt)
     ulog.subscribe("sensor_combined")
     if gps:
         ulog.subscribe("vehicle_gps_position")

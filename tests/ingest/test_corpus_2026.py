@@ -45,7 +45,9 @@ def codes(result: IngestResult) -> dict[str, str]:
 
 def test_copter33_2015_timems_log(tmp_path: Path) -> None:
     result = run("ap_copter33_2015_log171.bin", tmp_path)
-    assert result.tables == {"imu": 11916, "gnss": 1198, "estimator": 2383, "mag": 2384}
+    assert result.tables == {
+        "imu": 11916, "gnss": 1198, "estimator": 2383, "mag": 2384, "events": 13,
+    }  # fmt: skip
     assert result.report["time_base"]["base"] == "gps"
     assert result.report["limits"] == []
     notes = result.report["files"][0]["inventory_notes"]

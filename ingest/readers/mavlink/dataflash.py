@@ -28,10 +28,19 @@ import numpy as np
 import numpy.typing as npt
 
 from navreplay.ingest.arrays import I64
+from navreplay.ingest.context import (
+    ARDUPILOT_ARMING_EVENTS,
+    LogContext,
+    ardupilot_error_text,
+    ardupilot_event_name,
+    ardupilot_mode_name,
+    changes,
+    decode_text,
+)
 from navreplay.ingest.detect import DATAFLASH_MAGIC, Detected, Format
 from navreplay.ingest.errors import CorruptLogError, UnsupportedFormatError
 from navreplay.ingest.platform import from_firmware, with_q_enable
-from navreplay.ingest.readers.asof import AsofJoin, Left
+from navreplay.ingest.readers.asof import AsofJoin, Left, through
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
@@ -44,13 +53,14 @@ from navreplay.ingest.readers.mavlink.dfclock import DfSurvey, RecordClock, inst
 from navreplay.ingest.readers.mavlink.dfformat import DfFormat
 from navreplay.ingest.readers.mavlink.dfmsgs import (
     DfExtras,
+    DfJoin,
     DfStream,
     finish_gnss,
 )
 from navreplay.ingest.readers.mavlink.dfscan import Formats, Records, ScanStats, scan_blocks
 from navreplay.ingest.readers.mavlink.mavclock import note_week_rollover
 from navreplay.ingest.readers.mavlink.mavmsgs import Converted
-from navreplay.ingest.schema import FixType, TableName
+from navreplay.ingest.schema import EventKind, FixType, TableName
 
 JOIN_TOLERANCE_NS = 50_000_000
 
@@ -111,8 +121,9 @@ class DataFlashReader(LogReader):
                     detail=unusable or spec.detail,
                 )
             )
+        joined = {j.message: spec.message for spec in s.specs.values() for j in spec.joins}
         for name, count in s.other_messages().items():
-            detail = "accuracies joined into GPS" if name.startswith("GPA") else "not converted"
+            detail = f"joined into {joined[name]}" if name in joined else "not converted"
             if name == "ORGN":
                 detail = "EKF origin of XKF1/NKF1"
             streams.append(StreamInfo(name, name, count, None, None, None, s.base, detail=detail))
@@ -133,10 +144,10 @@ class DataFlashReader(LogReader):
                 wanted[sel.key] = found
         self._check_usable(s, wanted)
         extras = s.extras()
-        joins = {
-            key: AsofJoin(spec.join.columns, JOIN_TOLERANCE_NS)
+        joins = {  # a chain per stream: its rows pass each join in turn
+            key: [AsofJoin(j.columns, JOIN_TOLERANCE_NS) for j in spec.joins]
             for key, (spec, _) in wanted.items()
-            if spec.join is not None
+            if spec.joins
         }
         formats = Formats()
         stats = ScanStats()
@@ -146,8 +157,8 @@ class DataFlashReader(LogReader):
             t_us, _ = clock.times(formats, rec)
             for key, (spec, inst) in wanted.items():
                 batches = self._batches(rec, t_us, formats, spec, inst, key, extras)
-                join = joins.get(key)
-                if join is None:
+                chain = joins.get(key)
+                if chain is None:
                     for b in batches:
                         if spec.table != TableName.GNSS:
                             yield b
@@ -156,21 +167,47 @@ class DataFlashReader(LogReader):
                         left = Left(cols.pop("t_ns"), cols, dict(b.nulls), b.offsets)
                         yield _gnss_batch(key, left, extras, "EPH/EPV (PX4)")
                     continue
-                if spec.join is not None:
-                    self._push_right(rec, t_us, formats, spec.join[0], spec, inst, join, extras)
-                _hold(batches, join, pending.setdefault(key, {}))
-                out = join.pop()
+                for dj, join in zip(spec.joins, chain, strict=True):
+                    self._push_right(rec, t_us, formats, dj, spec.instance, inst, join, extras)
+                _hold(batches, chain[0], pending.setdefault(key, {}))
+                out = through(chain)
                 if out is not None:
                     yield _joined_batch(key, spec, out, extras, pending.pop(key, {}))
-        for key, join in joins.items():
-            out = join.pop(final=True)
+        for key, chain in joins.items():
+            out = through(chain, final=True)
             if out is not None:
                 yield _joined_batch(key, wanted[key][0], out, extras, pending.pop(key, {}))
         self._record_damage(stats, formats, s)
 
+    # ------------------------------------------------------------------------------- context
+    def context(self) -> LogContext:
+        """``MSG`` text, ``MODE`` (named for the firmware of the ``MSG`` banner), ``ARM``,
+        ``EV`` and ``ERR`` as events; ``VIBE`` (``VibeX/Y/Z`` m/s^2, clipping counts, per
+        ``IMU`` or the ``Clip0..2`` of the three IMUs of logs before 2019) as vibration."""
+        s = self._survey()
+        out = LogContext(s.base)
+        firmware = " ".join(s.platform)
+        formats = Formats()
+        clock = RecordClock()
+        vibe: list[dict[str, np.ndarray]] = []
+        for rec in scan_blocks(self.file, formats, ScanStats()):
+            t_us, _ = clock.times(formats, rec)
+            for name in _CONTEXT_MESSAGES:
+                for idx, data, fmt in self._matching(rec, formats, name, 0, 0):
+                    t = s.to_base(t_us[idx], rec.offset[idx])
+                    if name == "VIBE":
+                        vibe.append(_vibe_columns(t, data, fmt))
+                    else:
+                        _add_events(out, name, t, data, firmware)
+        if vibe:
+            out.vibration = {k: np.concatenate([v[k] for v in vibe]) for k in vibe[0]}
+        if "ARM" in out.events.source:  # ARM states it; EV 10/11 repeat it
+            out.events.drop(EventKind.ARMING, "EV")
+        return out
+
     def _check_usable(self, s: DfSurvey, wanted: dict[str, tuple[DfStream, int]]) -> None:
         names = {spec.message for spec, _ in wanted.values()}
-        names |= {spec.join[0] for spec, _ in wanted.values() if spec.join is not None}
+        names |= {j.message for spec, _ in wanted.values() for j in spec.joins}
         for u in s.unusable:
             if u.name in names:
                 raise CorruptLogError(
@@ -236,18 +273,17 @@ class DataFlashReader(LogReader):
         rec: Records,
         t_us: I64,
         formats: Formats,
-        name: str,
-        spec: DfStream,
+        dj: DfJoin,
+        fixed: int,
         inst: int,
         join: AsofJoin,
         extras: DfExtras,
     ) -> None:
-        assert spec.join is not None
-        convert = spec.join[1]
+        """Give ``join`` the records of ``dj``'s message of instance ``inst`` in a block."""
         s = self._survey()
-        for idx, data, fmt in self._matching(rec, formats, name, spec.instance, inst):
+        for idx, data, fmt in self._matching(rec, formats, dj.message, fixed, inst):
             t = s.to_base(t_us[idx], rec.offset[idx])
-            join.push_right(t, convert(data, fmt, extras, t_us[idx]).columns)
+            join.push_right(t, dj.convert(data, fmt, extras, t_us[idx]).columns)
 
     # -------------------------------------------------------------------------------- damage
     def _record_damage(self, stats: ScanStats, formats: Formats, s: DfSurvey) -> None:
@@ -265,6 +301,64 @@ class DataFlashReader(LogReader):
         stats.trailing_header(self.file, DATAFLASH_MAGIC)
         stats.record_garbage(dmg, "DataFlash records")
         stats.record_partial(dmg)
+
+
+_CONTEXT_MESSAGES = ("MSG", "MODE", "ARM", "EV", "ERR", "VIBE")
+
+
+def _add_events(out: LogContext, name: str, t: I64, data: np.ndarray, firmware: str) -> None:
+    """Events of one message type's records (see ``DataFlashReader.context``)."""
+    ev = out.events
+    if name == "MSG":
+        ev.add(t, EventKind.MESSAGE, decode_text(data["Message"]), name)
+    elif name == "MODE":
+        modes = data["Mode"].astype(int)
+        keep = changes(modes)  # a repeated MODE record (re-entering the mode) is one change
+        names = [ardupilot_mode_name(int(m), firmware) for m in modes[keep]]
+        ev.add(t[keep], EventKind.MODE, names, name)
+    elif name == "ARM":
+        armed = data["ArmState"].astype(int)
+        ev.add(t, EventKind.ARMING, ["armed" if a else "disarmed" for a in armed], name)
+    elif name == "EV":
+        ids = data["Id"].astype(int)
+        arming = np.isin(ids, list(ARDUPILOT_ARMING_EVENTS))
+        names = [ardupilot_event_name(int(i)) for i in ids]
+        ev.add(
+            t[~arming],
+            EventKind.EVENT,
+            [n for n, a in zip(names, arming, strict=True) if not a],
+            name,
+        )
+        ev.add(
+            t[arming], EventKind.ARMING, [n for n, a in zip(names, arming, strict=True) if a], name
+        )
+    elif name == "ERR":
+        pairs = zip(data["Subsys"].astype(int), data["ECode"].astype(int), strict=True)
+        ev.add(t, EventKind.ERROR, [ardupilot_error_text(int(a), int(b)) for a, b in pairs], name)
+
+
+def _vibe_columns(t: I64, data: np.ndarray, fmt: DfFormat) -> dict[str, np.ndarray]:
+    """VIBE records as vibration columns: one row per IMU (``IMU`` column, ``Clip``) or, in
+    older logs, one row for IMU 0 carrying the levels and the clipping counts of every IMU
+    (``Clip0..2``: rows for IMUs 1 and 2 carry their count and NaN levels)."""
+    levels = {f"vibe_{a}_mps2": fmt.scaled(data, f"Vibe{a.upper()}") for a in "xyz"}
+    if "IMU" in fmt.columns:
+        return {
+            "t_ns": t,
+            "imu": data["IMU"].astype(np.int64),
+            **levels,
+            "clip_count": fmt.scaled(data, "Clip"),
+        }
+    clips = [c for c in ("Clip0", "Clip1", "Clip2") if c in fmt.columns]
+    n = len(t)
+    rows: dict[str, list[np.ndarray]] = {k: [] for k in ("t_ns", "imu", *levels, "clip_count")}
+    for i, clip in enumerate(clips or [None]):
+        rows["t_ns"].append(t)
+        rows["imu"].append(np.full(n, i, np.int64))
+        for k, v in levels.items():
+            rows[k].append(v if i == 0 else np.full(n, np.nan))
+        rows["clip_count"].append(fmt.scaled(data, clip) if clip else np.full(n, np.nan))
+    return {k: np.concatenate(v) for k, v in rows.items()}
 
 
 def _parse_key(key: str, specs: dict[str, DfStream]) -> tuple[DfStream, int] | None:

@@ -39,7 +39,12 @@ import numpy.typing as npt
 from navreplay.ingest.arrays import F64, I64
 from navreplay.ingest.readers.mavlink.dfformat import DfFormat
 from navreplay.ingest.readers.mavlink.mavmsgs import Converted
-from navreplay.ingest.schema import ESTIMATOR_TEST_RATIOS, FixType, TableName
+from navreplay.ingest.schema import (
+    ESTIMATOR_INNOVATIONS,
+    ESTIMATOR_TEST_RATIOS,
+    FixType,
+    TableName,
+)
 
 #: ArduPilot's LOCATION_SCALING_FACTOR_INV: 1e-7 degree units per metre (sphere 6378100 m).
 LOCATION_SCALING_FACTOR_INV = 89.83204953368922
@@ -88,7 +93,8 @@ class DfStream:
         convert: decoded records -> canonical columns.
         instance: the instance when the name implies it (legacy ``IMU2``); else the
             ``I``/``C`` column gives it.
-        join: a message of the same instance joined by nearest time, with its conversion.
+        joins: messages of the same instance joined by nearest time, each with its
+            conversion, in turn.
         detail: what ``--list`` shows.
         suffix: appended to the message name to name the stream when the message feeds a
             second table (legacy PX4 ``IMU`` -> ``IMU.mag``).
@@ -99,7 +105,7 @@ class DfStream:
     table: TableName
     convert: Convert
     instance: int = 0
-    join: DfJoin | None = None
+    joins: tuple[DfJoin, ...] = ()
     detail: str = ""
     suffix: str = ""
     needs: str = ""
@@ -274,6 +280,23 @@ def _ekf_tests(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Conver
     return Converted(cols | {"test_ratio_mag": np.asarray(mag, dtype=np.float64)})
 
 
+def _ekf_innovations(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Converted:
+    nan = np.full(len(rec), np.nan)
+    fields = ("IVN", "IVE", "IVD", "IPN", "IPE", "IPD")
+    return Converted({
+        name: fmt.scaled(rec, f) if f in fmt.columns else nan
+        for name, f in zip(ESTIMATOR_INNOVATIONS, fields, strict=True)
+    })  # fmt: skip
+
+
+def _ekf_joins(n: str) -> tuple[DfJoin, ...]:
+    """The test ratios (``<x>KF4``) and GNSS innovations (``<x>KF3``) of an EKF's core."""
+    return (
+        DfJoin(f"{n}4", _ekf_tests, TEST_RATIOS),
+        DfJoin(f"{n}3", _ekf_innovations, ESTIMATOR_INNOVATIONS),
+    )
+
+
 def _sim(rec: np.ndarray, fmt: DfFormat, ex: DfExtras, _t: I64) -> Converted:
     alt, counters = _msl_to_ellipsoid(fmt.scaled(rec, "Alt"), None, ex)
     cols = {
@@ -295,35 +318,35 @@ STREAMS: tuple[DfStream, ...] = (
     DfStream("IMU", _IMU, _imu, detail="rad/s, m/s^2"),
     DfStream("IMU2", _IMU, _imu, instance=1, detail="rad/s, m/s^2 (legacy second IMU)"),
     DfStream("IMU3", _IMU, _imu, instance=2, detail="rad/s, m/s^2 (legacy third IMU)"),
-    DfStream("GPS", TableName.GNSS, _gps, join=_GPA, detail="GPS week and ms -> GPS time"),
+    DfStream("GPS", TableName.GNSS, _gps, joins=(_GPA,), detail="GPS week and ms -> GPS time"),
     DfStream(
         "GPS2",
         TableName.GNSS,
         _gps,
         instance=1,
-        join=DfJoin("GPA2", _gpa, JOIN_COLUMNS),
+        joins=(DfJoin("GPA2", _gpa, JOIN_COLUMNS),),
         detail="legacy 2nd GPS",
     ),
     DfStream(
         "XKF1",
         _EST,
         _ekf,
-        join=DfJoin("XKF4", _ekf_tests, TEST_RATIOS),
-        detail="EKF3 core output, position from ORGN; test ratios from XKF4",
+        joins=_ekf_joins("XKF"),
+        detail="EKF3 core output, position from ORGN; test ratios from XKF4, innovations from XKF3",
     ),
     DfStream(
         "NKF1",
         _EST,
         _ekf,
-        join=DfJoin("NKF4", _ekf_tests, TEST_RATIOS),
-        detail="EKF2 core output, position from ORGN; test ratios from NKF4",
+        joins=_ekf_joins("NKF"),
+        detail="EKF2 core output, position from ORGN; test ratios from NKF4, innovations from NKF3",
     ),
     DfStream(
         "EKF1",
         _EST,
         _ekf,
-        join=DfJoin("EKF4", _ekf_tests, TEST_RATIOS),
-        detail="EKF (2014-2015 NavEKF) output, position from ORGN; test ratios from EKF4",
+        joins=_ekf_joins("EKF"),
+        detail="EKF (2014-2015 NavEKF) output, position from ORGN; EKF4 tests, EKF3 innovations",
     ),
     DfStream("SIM", TableName.TRUTH, _sim, detail="SITL truth (no velocity)"),
     DfStream("MAG", _MAG, _mag, detail="milligauss -> gauss, body FRD"),

@@ -15,7 +15,8 @@ GPS2_RAW            extension; 0 when absent); ``vel`` cm/s ground speed and ``c
                     else ``eph``/``epv`` (DOP x 100, UINT16_MAX unknown) taken as metres;
                     ``satellites_visible`` (UINT8_MAX unknown) -> num_sats
 GLOBAL_POSITION_INT ``lat/lon`` 1e-7 deg, ``alt`` mm MSL, ``vx/vy/vz`` cm/s NED; joined with
- + ATTITUDE         ATTITUDE ``roll/pitch/yaw`` (rad) by time -> ``estimator``
+ + ATTITUDE         ATTITUDE ``roll/pitch/yaw`` (rad) and EKF_STATUS_REPORT (the square
+ + EKF_STATUS_...   roots of the EKF's test ratios) by time -> ``estimator``
 SIMSTATE            ArduPilot SITL truth: attitude (rad), ``lat/lng`` 1e-7 deg; no altitude
                     or velocity (alt NaN, velocity null)
 SIM_STATE           common-set simulator truth: attitude, ``lat_int/lon_int`` 1e-7 deg (else
@@ -37,12 +38,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
-from navreplay.ingest.schema import FixType, TableName
+from navreplay.ingest.schema import ESTIMATOR_TEST_RATIOS, FixType, TableName
 
 G0 = 9.80665
 UINT8_MAX = 255
@@ -70,6 +71,16 @@ class Extras:
     undulation_m: float | None = None
 
 
+class MavJoin(NamedTuple):
+    """A message joined to a stream's rows by nearest time: its name, time field (None: the
+    tlog stamp on the vehicle clock), conversion and the columns it adds."""
+
+    message: str
+    time_field: str | None
+    convert: Callable[[Rec, Extras], Converted]
+    columns: tuple[str, ...]
+
+
 @dataclass(frozen=True)
 class MavStream:
     """A message that feeds a canonical table.
@@ -82,7 +93,8 @@ class MavStream:
         convert: structured payloads -> canonical columns.
         instance_field: field holding the sensor instance, if any.
         instance: the instance when the message name implies it.
-        join: a message joined to each row by nearest time, with its own conversion.
+        joins: messages joined to each row by nearest time, in turn, each with its time field
+            and conversion.
         detail: what ``--list`` shows.
         suffix: appended to the message name to name the stream when the message feeds a
             second table (``RAW_IMU.mag``).
@@ -96,7 +108,7 @@ class MavStream:
     convert: Callable[[Rec, Extras], Converted]
     instance_field: str | None = None
     instance: int = 0
-    join: tuple[str, str, Callable[[Rec, Extras], Converted]] | None = None
+    joins: tuple[MavJoin, ...] = ()
     detail: str = ""
     suffix: str = ""
     carries: tuple[str, ...] = ()
@@ -265,6 +277,21 @@ def _attitude(rec: Rec, _ex: Extras) -> Converted:
     return Converted({f"{a}_rad": _f64(rec, a) for a in ("roll", "pitch", "yaw")})
 
 
+_ATTITUDE = ("roll_rad", "pitch_rad", "yaw_rad")
+
+
+def _ekf_status(rec: Rec, _ex: Extras) -> Converted:
+    """EKF_STATUS_REPORT: ArduPilot sends the square roots of its EKF's innovation test ratios
+    in the ``*_variance`` fields (``getVariances``; compass: the length of the three axes'
+    vector), as XKF4 logs them; a report with ``flags`` 0 (no EKF solution yet) is NaN."""
+    running = rec["flags"] != 0
+    fields = ("velocity_variance", "pos_horiz_variance", "pos_vert_variance", "compass_variance")
+    return Converted({
+        name: np.where(running, _f64(rec, f), np.nan)
+        for name, f in zip(ESTIMATOR_TEST_RATIOS, fields, strict=True)
+    })  # fmt: skip
+
+
 def _simstate(rec: Rec, _ex: Extras) -> Converted:
     n = len(rec)
     cols: Columns = {
@@ -308,8 +335,11 @@ STREAMS: tuple[MavStream, ...] = (
         TableName.ESTIMATOR,
         "time_boot_ms",
         _global_position,
-        join=("ATTITUDE", "time_boot_ms", _attitude),
-        detail="autopilot estimate; attitude from ATTITUDE",
+        joins=(
+            MavJoin("ATTITUDE", "time_boot_ms", _attitude, _ATTITUDE),
+            MavJoin("EKF_STATUS_REPORT", None, _ekf_status, ESTIMATOR_TEST_RATIOS),
+        ),
+        detail="autopilot estimate; attitude from ATTITUDE, test ratios from EKF_STATUS_REPORT",
     ),
     MavStream("SIMSTATE", TableName.TRUTH, None, _simstate, detail="SITL truth (no alt/vel)"),
     MavStream("SIM_STATE", TableName.TRUTH, None, _sim_state, detail="simulator truth"),

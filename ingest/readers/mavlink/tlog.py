@@ -32,10 +32,17 @@ import numpy as np
 import numpy.typing as npt
 
 from navreplay.ingest.arrays import I64
+from navreplay.ingest.context import (
+    LogContext,
+    changes,
+    decode_text,
+    forward,
+    mavlink_mode_name,
+)
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import CorruptLogError
-from navreplay.ingest.readers.asof import AsofJoin, Left
+from navreplay.ingest.readers.asof import AsofJoin, Left, through
 from navreplay.ingest.readers.base import (
     Batch,
     Inventory,
@@ -58,7 +65,7 @@ from navreplay.ingest.readers.mavlink.tlogclock import (
     survey,
 )
 from navreplay.ingest.readers.mavlink.tlogscan import Packets, ScanStats, scan_blocks
-from navreplay.ingest.schema import TableName
+from navreplay.ingest.schema import EventKind, TableName
 from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
 
 JOIN_TOLERANCE_NS = 100_000_000
@@ -120,7 +127,7 @@ class TlogReader(LogReader):
                 )
             )
         listed = {st.msgtype for st in streams}
-        joined = {spec.join[0]: spec.message for spec in BY_NAME.values() if spec.join}
+        joined = {j.message: spec.message for spec in BY_NAME.values() for j in spec.joins}
         for msgid, count in sorted(s.stats.valid.items()):
             name = self.dialect.msg_name(msgid)
             if name not in listed:
@@ -144,38 +151,77 @@ class TlogReader(LogReader):
         s = self._surveyed()
         wanted = _wanted(selections)
         extras = Extras(s.undulation_m)
-        joins = {
-            key: AsofJoin(("roll_rad", "pitch_rad", "yaw_rad"), JOIN_TOLERANCE_NS)
+        joins = {  # a chain per stream: its rows pass each join in turn
+            key: [AsofJoin(j.columns, JOIN_TOLERANCE_NS) for j in spec.joins]
             for key, (spec, _) in wanted.items()
-            if spec.join is not None
+            if spec.joins
         }
+        held = any(
+            spec.time_field is None or any(j.time_field is None for j in spec.joins)
+            for spec, _ in wanted.values()
+        )
         pending: dict[str, Batch] = {}  # counters of joined batches not yet released
         stats = ScanStats()
         self._held = HeldClock(s.segments[0].stamp_to_utc_ns if s.segments else 0)
         for p in scan_blocks(self.file, self.dialect, stats):
             mine = (p.flag == VALID) & (p.source == s.vehicle)
-            if any(spec.time_field is None for spec, _ in wanted.values()):
+            if held:
                 self._update_held(p, mine)
             for key, (spec, inst) in wanted.items():
                 batch = self._stream_batch(p, mine, spec, inst, key, extras)
                 if batch is None:
                     continue
-                join = joins.get(key)
-                if join is None:
+                chain = joins.get(key)
+                if chain is None:
                     yield batch
                     continue
-                self._push_join(p, mine, spec, join, batch, extras)
-                held = pending.setdefault(key, Batch(key, spec.table, {}, batch.offsets[:0]))
-                _merge_counts(held, batch)
-                out = join.pop()
+                self._push_joins(p, mine, spec, chain, batch, extras)
+                waiting = pending.setdefault(key, Batch(key, spec.table, {}, batch.offsets[:0]))
+                _merge_counts(waiting, batch)
+                out = through(chain)
                 if out is not None:
                     yield _joined(pending.pop(key), out)
-        for key, join in joins.items():
-            out = join.pop(final=True)
+        for key, chain in joins.items():
+            out = through(chain, final=True)
             if out is not None:
                 spec, _ = wanted[key]
                 yield _joined(pending.pop(key, Batch(key, spec.table, {}, out.offsets)), out)
         self._record_damage(stats, s)
+
+    # ------------------------------------------------------------------------------- context
+    def context(self) -> LogContext:
+        """The vehicle's ``STATUSTEXT`` (with its severity) as messages, its ``HEARTBEAT``'s
+        mode changes (named by pymavlink) and arming changes (``base_mode`` bit 128), and
+        ``VIBRATION`` (m/s^2, clipping counts of the three accelerometers) as vibration."""
+        s = self._surveyed()
+        out = LogContext(s.base)
+        self._held = HeldClock(s.segments[0].stamp_to_utc_ns if s.segments else 0)
+        beats: list[tuple[I64, np.ndarray]] = []
+        vibe: list[dict[str, np.ndarray]] = []
+        for p in scan_blocks(self.file, self.dialect, ScanStats()):
+            mine = (p.flag == VALID) & (p.source == s.vehicle)
+            self._update_held(p, mine)
+            for name in ("STATUSTEXT", "HEARTBEAT", "VIBRATION"):
+                mdef = self.dialect.by_name(name)
+                if mdef is None:
+                    continue
+                idx = np.flatnonzero(mine & (p.msgid == mdef.msgid))
+                if not len(idx):
+                    continue
+                rec = decode(p, idx, mdef)
+                t, _ = self._times(p, idx, rec, "time_usec" if name == "VIBRATION" else None)
+                if name == "STATUSTEXT":
+                    severity = [int(v) for v in rec["severity"]]
+                    out.events.add(t, EventKind.MESSAGE, decode_text(rec["text"]), name, severity)
+                elif name == "HEARTBEAT":
+                    beats.append((t, rec))
+                else:
+                    vibe.append(_vibration(t, rec))
+        if beats:
+            _heartbeat_events(out, beats)
+        if vibe:
+            out.vibration = {k: np.concatenate([v[k] for v in vibe]) for k in vibe[0]}
+        return out
 
     def _stream_batch(
         self,
@@ -203,26 +249,28 @@ class TlogReader(LogReader):
         info = {"time": how, **conv.info}
         return Batch(key, spec.table, cols, p.offset[idx], conv.nulls, None, conv.counters, info)
 
-    def _push_join(
+    def _push_joins(
         self,
         p: Packets,
         mine: npt.NDArray[np.bool_],
         spec: MavStream,
-        join: AsofJoin,
+        chain: list[AsofJoin],
         batch: Batch,
         extras: Extras,
     ) -> None:
-        assert spec.join is not None
-        name, time_field, convert = spec.join
-        mdef = self.dialect.by_name(name)
-        if mdef is not None:
+        """Give each join of ``chain`` its message's packets in a block, and the first the
+        stream's rows."""
+        for mj, join in zip(spec.joins, chain, strict=True):
+            mdef = self.dialect.by_name(mj.message)
+            if mdef is None:
+                continue
             idx = np.flatnonzero(mine & (p.msgid == mdef.msgid))
             if len(idx):
                 rec = decode(p, idx, mdef)
-                t, _ = self._times(p, idx, rec, time_field)
-                join.push_right(t, convert(rec, extras).columns)
+                t, _ = self._times(p, idx, rec, mj.time_field)
+                join.push_right(t, mj.convert(rec, extras).columns)
         cols = dict(batch.columns)
-        join.push_left(Left(cols.pop("t_ns"), cols, dict(batch.nulls), batch.offsets))
+        chain[0].push_left(Left(cols.pop("t_ns"), cols, dict(batch.nulls), batch.offsets))
 
     def _utc(
         self, p: Packets, idx: npt.NDArray[np.intp], rec: np.ndarray, time_field: str
@@ -343,6 +391,47 @@ class TlogReader(LogReader):
                     messages_lost=bad,
                 )
             )
+
+
+#: HEARTBEAT ``base_mode``: MAV_MODE_FLAG_SAFETY_ARMED
+_ARMED = 128
+
+
+def _heartbeat_events(out: LogContext, beats: list[tuple[I64, np.ndarray]]) -> None:
+    """Mode and arming changes of the vehicle's heartbeats (the first beat states both)."""
+    t = np.concatenate([b[0] for b in beats])
+    rec = np.concatenate([b[1] for b in beats])
+    ahead = forward(t)
+    t, rec = t[ahead], rec[ahead]
+    base = rec["base_mode"].astype(np.int64)
+    custom = rec["custom_mode"].astype(np.int64)
+    armed = (base & _ARMED) != 0
+    mode_key = custom * 256 + (base & ~_ARMED)
+    at = changes(mode_key)
+    names = [
+        mavlink_mode_name(
+            int(rec["type"][i]), int(rec["autopilot"][i]), int(base[i]), int(custom[i])
+        )
+        for i in at
+    ]
+    out.events.add(t[at], EventKind.MODE, names, "HEARTBEAT")
+    at = changes(armed)
+    out.events.add(
+        t[at], EventKind.ARMING, ["armed" if armed[i] else "disarmed" for i in at], "HEARTBEAT"
+    )
+
+
+def _vibration(t: I64, rec: np.ndarray) -> dict[str, np.ndarray]:
+    """VIBRATION as vibration rows: the levels on IMU 0's row, each accelerometer's clipping
+    count on its own row (``clipping_0..2``)."""
+    n = len(t)
+    levels = {f"vibe_{a}_mps2": rec[f"vibration_{a}"].astype(np.float64) for a in "xyz"}
+    return {
+        "t_ns": np.tile(t, 3),
+        "imu": np.repeat(np.arange(3), n),
+        **{k: np.concatenate([v, np.full(2 * n, np.nan)]) for k, v in levels.items()},
+        "clip_count": np.concatenate([rec[f"clipping_{i}"].astype(np.float64) for i in range(3)]),
+    }
 
 
 def _wanted(selections: Sequence[Selection]) -> dict[str, tuple[MavStream, int]]:

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from navreplay.ingest.arrays import I64
+from navreplay.ingest.context import LogContext, changes, forward, px4_mode_name
 from navreplay.ingest.damage import Completeness, Defect
 from navreplay.ingest.detect import Detected, Format
 from navreplay.ingest.errors import CorruptLogError
@@ -65,7 +66,12 @@ from navreplay.ingest.readers.ulog.ulogmsgs import (
     attitude_columns,
     gyro_columns,
 )
-from navreplay.ingest.schema import ESTIMATOR_TEST_RATIOS, TableName
+from navreplay.ingest.schema import (
+    ESTIMATOR_INNOVATIONS,
+    ESTIMATOR_TEST_RATIOS,
+    EventKind,
+    TableName,
+)
 from navreplay.ingest.timebase import TimeBase, utc_to_gps_ns
 
 log = logging.getLogger(__name__)
@@ -73,8 +79,19 @@ log = logging.getLogger(__name__)
 JOIN_TOLERANCE_NS = 50_000_000
 _STATUS = "vehicle_status"
 _EKF_STATUS = "estimator_status"  # the onboard EKF's test ratios (joined to its estimate)
+_IMU_STATUS = "vehicle_imu_status"  # vibration and clipping per IMU (PX4 1.11 on)
+# the onboard EKF's innovations, joined to its estimate (ekf2_innovations until PX4 1.10)
+_INNOVATIONS = ("estimator_innovations", "ekf2_innovations")
+_AUXILIARY = (_STATUS, _EKF_STATUS, _IMU_STATUS, *_INNOVATIONS)  # platform, ratios, context
 _STATUS_FIELDS = ("system_type", "is_vtol", "is_rotary_wing", "vehicle_type")
 _HEADER = 16
+_ARMED = 2  # vehicle_status.arming_state ARMING_STATE_ARMED
+#: estimator_innovations fields of ESTIMATOR_INNOVATIONS, PX4 1.9 and then 1.11 on
+_INNOVATION_FIELDS = (
+    tuple(f"vel_pos_innov[{i}]" for i in range(6)),
+    ("gps_hvel[0]", "gps_hvel[1]", "gps_vvel", "gps_hpos[0]", "gps_hpos[1]", "gps_vpos"),
+)
+_CLIPPING = ("accel_clipping[0]", "accel_clipping[1]", "accel_clipping[2]")
 
 
 class UlogReader(LogReader):
@@ -95,7 +112,7 @@ class UlogReader(LogReader):
         from pyulog.core import ULogException
 
         names = [*(t.name for t in TOPICS), *{t.attitude or t.pair for t in TOPICS} - {""}]
-        names += [_STATUS, _EKF_STATUS]
+        names += list(_AUXILIARY)
         printed = io.StringIO()
         try:
             with contextlib.redirect_stdout(printed):  # pyulog prints its warnings
@@ -107,7 +124,7 @@ class UlogReader(LogReader):
         finally:
             for line in printed.getvalue().splitlines():
                 log.info("%s: pyulog: %s", self.file, line)
-        if not [d for d in self._ulog.data_list if d.name not in (_STATUS, _EKF_STATUS)]:
+        if not [d for d in self._ulog.data_list if d.name not in _AUXILIARY]:
             corrupt = " and reports the file corrupt" if self._ulog.file_corruption else ""
             raise CorruptLogError(
                 f"pyulog finds no data message of the topics navreplay converts{corrupt}",
@@ -233,6 +250,71 @@ class UlogReader(LogReader):
             yield Batch(key, topic.table, cols, offsets, conv.nulls, None, conv.counters, conv.info)
         self._record_damage(ulog)
 
+    # ------------------------------------------------------------------------------- context
+    def context(self) -> LogContext:
+        """``logged_messages`` (their log level as severity), ``vehicle_status`` mode
+        (``nav_state``) and arming changes, and vibration: ``vehicle_imu_status`` per IMU
+        (``accel_vibration_metric`` m/s^2, ``gyro_vibration_metric`` rad/s, the clipping
+        counts of its three axes summed) or, in older logs, ``estimator_status.vibe``
+        (high-frequency delta-angle and delta-velocity vibration, rad and m/s)."""
+        ulog = self._load()
+        out = LogContext(self.base)
+        msgs = ulog.logged_messages
+        if msgs:
+            t = self.to_base(np.array([m.timestamp for m in msgs], np.int64))
+            levels = [m.log_level - ord("0") for m in msgs]
+            severity = [lv if 0 <= lv <= 7 else None for lv in levels]
+            texts = [str(m.message) for m in msgs]
+            out.events.add(t, EventKind.MESSAGE, texts, "logged_messages", severity)
+        for d in ulog.data_list:
+            if d.name == _STATUS and d.multi_id == 0 and len(d.data["timestamp"]):
+                self._status_events(out, d.data)
+        out.vibration = self._vibration(ulog)
+        return out
+
+    def _status_events(self, out: LogContext, data: dict[str, np.ndarray]) -> None:
+        ahead = forward(data["timestamp"])
+        data = {k: v[ahead] for k, v in data.items()}
+        t = self.to_base(data["timestamp"])
+        if "nav_state" in data:
+            nav = data["nav_state"].astype(int)
+            at = changes(nav)
+            modes = [px4_mode_name(int(nav[i])) for i in at]
+            out.events.add(t[at], EventKind.MODE, modes, _STATUS)
+        if "arming_state" in data:
+            armed = data["arming_state"].astype(int) == _ARMED
+            at = changes(armed)
+            states = ["armed" if armed[i] else "disarmed" for i in at]
+            out.events.add(t[at], EventKind.ARMING, states, _STATUS)
+
+    def _vibration(self, ulog: Any) -> dict[str, np.ndarray]:
+        parts: list[dict[str, np.ndarray]] = []
+        for d in ulog.data_list:
+            data, n = d.data, len(d.data["timestamp"])
+            if d.name == _IMU_STATUS and n and "accel_vibration_metric" in data:
+                clips = [data[f] for f in _CLIPPING if f in data]
+                gyro = data.get("gyro_vibration_metric", np.full(n, np.nan))
+                clip = np.sum(np.array(clips, np.float64), axis=0) if clips else np.full(n, np.nan)
+                parts.append({
+                    "t_ns": self.to_base(data["timestamp"]),
+                    "imu": np.full(n, d.multi_id, np.int64),
+                    "accel_vibe_mps2": np.asarray(data["accel_vibration_metric"], np.float64),
+                    "gyro_vibe_radps": np.asarray(gyro, np.float64),
+                    "clip_count": clip,
+                })  # fmt: skip
+        if parts:
+            return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+        for d in ulog.data_list:
+            data, n = d.data, len(d.data["timestamp"])
+            if d.name == _EKF_STATUS and d.multi_id == 0 and n and "vibe[2]" in data:
+                return {
+                    "t_ns": self.to_base(data["timestamp"]),
+                    "imu": np.zeros(n, np.int64),
+                    "dang_vibe_rad": data["vibe[1]"].astype(np.float64),
+                    "dvel_vibe_mps": data["vibe[2]"].astype(np.float64),
+                }
+        return {}
+
     def _undulation(self) -> float | None:
         for d in self._ulog.data_list:
             if d.name in GPS_TOPICS and "alt_ellipsoid" in d.data and "alt" in d.data:
@@ -274,6 +356,7 @@ class UlogReader(LogReader):
         info = {**conv.info, "attitude": f"{topic.attitude}[0] q, nearest in time"}
         if topic.table == TableName.ESTIMATOR:
             out = self._with_test_ratios(out, ulog)
+            out = self._with_innovations(out, ulog)
         cols = {"t_ns": out.t, **out.columns}
         return Batch(key, topic.table, cols, out.offsets, out.nulls, None, conv.counters, info)
 
@@ -291,6 +374,30 @@ class UlogReader(LogReader):
             for name, f in zip(ESTIMATOR_TEST_RATIOS, fields, strict=True)
         }
         join.push_right(self.to_base(d.data["timestamp"]), columns)
+        join.push_left(rows)
+        out = join.pop(final=True)
+        assert out is not None
+        return out
+
+    def _with_innovations(self, rows: Left, ulog: Any) -> Left:
+        """The onboard EKF's GNSS velocity and position innovations (``ekf2_innovations``
+        ``vel_pos_innov[0..5]`` until PX4 1.10, ``estimator_innovations`` ``gps_hvel``/
+        ``gps_vvel``/``gps_hpos``/``gps_vpos`` after), nearest in time, where logged."""
+        found = [d for d in ulog.data_list if d.name in _INNOVATIONS and d.multi_id == 0]
+        if not found:
+            return rows
+        data = found[0].data
+        for fields in _INNOVATION_FIELDS:
+            if all(f in data for f in fields):
+                break
+        else:
+            return rows
+        join = AsofJoin(ESTIMATOR_INNOVATIONS, JOIN_TOLERANCE_NS)
+        columns = {
+            name: np.asarray(data[f], dtype=np.float64)
+            for name, f in zip(ESTIMATOR_INNOVATIONS, fields, strict=True)
+        }
+        join.push_right(self.to_base(data["timestamp"]), columns)
         join.push_left(rows)
         out = join.pop(final=True)
         assert out is not None

@@ -59,6 +59,8 @@ def _onboard(root: Path) -> pa.Table:
         "yaw_rad": np.angle(np.exp(1j * (_unwrapped_at(est, tm) + math.radians(YAW_DEG)))),
         # the onboard EKF's velocity test ratio: above 1 (rejected) in one sample of ten
         "test_ratio_vel": np.where(np.arange(tm.size) % 10 == 0, 1.5, 0.2),
+        # and its north velocity innovation: +0.3 and -0.1 alternating (mean 0.1, std 0.2)
+        "innov_vel_n_mps": np.where(np.arange(tm.size) % 2 == 0, 0.3, -0.1),
     }
     return pa.table(cols)
 
@@ -141,6 +143,11 @@ def test_the_page_shows_the_onboard_track_and_tables(with_onboard: Path) -> None
     assert 0.09 < above < 0.11
     assert f"<td>{fmt(above)}</td>" in ratios
     assert '<td class="t">pos</td>' not in ratios
+    innovations = section.split("The onboard EKF's innovations</h3>")[1]
+    n = ob.num_rows
+    mean = 0.1 if n % 2 == 0 else (0.3 * ((n + 1) // 2) - 0.1 * (n // 2)) / n
+    assert f'<td class="t">vel_n_mps</td><td>{n}</td><td>{fmt(mean)}</td>' in innovations
+    assert '<td class="t">pos_n_m</td>' not in innovations  # not logged: no row
     context = page.split('<section id="context">')[1].split("</section>")[0]
     assert "onboard test ratio" in context
     track = page.split('<section id="track">')[1].split("</section>")[0]

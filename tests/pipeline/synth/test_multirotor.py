@@ -258,7 +258,10 @@ def test_the_tlog_ingests_as_a_multirotor_with_imu_gnss_mag_and_truth(
 ) -> None:
     # without a descriptor, as a user's log: the HEARTBEAT says multirotor
     res = ingest([flight_dir / "multirotor_flight.tlog"], tmp_path / "auto")
-    assert res.tables == {"imu": 35401, "gnss": 886, "mag": 35401, "truth": 8851}
+    # and its context: the heartbeats' mode and arming (one state each over the flight)
+    assert res.tables == {
+        "imu": 35401, "gnss": 886, "mag": 35401, "truth": 8851, "events": 2,
+    }  # fmt: skip
     platform = read_meta(tmp_path / "auto").sensors.platform
     assert (platform.kind, platform.source) == (
         "multirotor",
