@@ -2,7 +2,10 @@
 
 Reads each dataset report's ``tables/runs.json`` (``render``) and ``tables/sat_reduction.csv``.
 A *cell* is one (dataset, scenario) in which several filters ran; filters are compared only
-inside cells, on the same data (paired):
+inside cells, on the same data (paired), and only on errors against a truth: a run of a log
+without one reports residuals to the fixes it fused (``reference`` ``fixes_residual``), which
+rank how closely a filter follows its inputs, not how accurate it is, so such runs are listed
+but never ranked (``not_ranked``):
 
 - rank: per cell, filters ranked by 3-D RMS position error, or by horizontal RMS in a cell
   where a filter has no 3-D error (the planar vehicle-model and cascaded filters) (1 = best,
@@ -84,12 +87,29 @@ def _finite(v: Any) -> bool:
     return isinstance(v, int | float) and math.isfinite(v)
 
 
+def _against_truth(run: Row) -> bool:
+    """Whether a run's errors are against a truth (a report before the ``reference`` column
+    had only those)."""
+    return bool(run.get("reference", "truth") == "truth")
+
+
+def not_ranked(results: Sequence[DatasetResult]) -> list[str]:
+    """The datasets with finished runs whose errors are residuals, not errors (no truth)."""
+    return [
+        d.dataset
+        for d in results
+        if any(r.get("status") in FINISHED and not _against_truth(r) for r in d.runs)
+    ]
+
+
 def _cells(results: Sequence[DatasetResult]) -> dict[tuple[str, str], dict[str, float]]:
     """Per (dataset, scenario) with two or more finished runs: each filter's error, the 3-D
     RMS where every run of the cell has one, else the horizontal RMS."""
     runs: dict[tuple[str, str], dict[str, Row]] = {}
     for d in results:
         for r in d.runs:
+            if not _against_truth(r):
+                continue
             if r.get("status") in FINISHED and (_finite(r.get(METRIC)) or _finite(r.get(METRIC_H))):
                 runs.setdefault((d.dataset, str(r["scenario"])), {})[str(r["filter"])] = r
     cells: dict[tuple[str, str], dict[str, float]] = {}
@@ -150,6 +170,17 @@ def paired(cells: dict[tuple[str, str], dict[str, float]], order: Sequence[str])
             }
         )
     return rows
+
+
+def _unranked_note(results: Sequence[DatasetResult]) -> str:
+    names = not_ranked(results)
+    if not names:
+        return ""
+    return (
+        f" Not ranked: {', '.join(names)}. They have no truth, so their errors are residuals "
+        "to the fixes the filters fused (how closely a filter follows its inputs, not its "
+        "accuracy); their reports compare each run with the onboard estimate."
+    )
 
 
 def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
@@ -241,12 +272,13 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
             )
             + h.para(
                 "A cell is one dataset under one scenario; ranks by 3-D RMS position error "
-                "among the filters that ran there, or by horizontal RMS where one of them has "
-                "no 3-D error (the planar vehicle-model and cascaded filters) (1 = best).",
+                "against the truth among the filters that ran there, or by horizontal RMS "
+                "where one of them has no 3-D error (the planar vehicle-model and cascaded "
+                "filters) (1 = best)." + _unranked_note(results),
                 "note",
             )
             if rank
-            else "",
+            else (h.para(_unranked_note(results).strip(), "note") if not_ranked(results) else ""),
         ),
         (
             "paired",

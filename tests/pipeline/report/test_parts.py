@@ -282,3 +282,29 @@ def test_the_report_says_first_how_its_runs_ended() -> None:
     none = verdict([{"status": "diverged"}, {"status": "skipped"}])
     assert none.startswith('<p class="verdict bad">No run ended ok: 1 diverged, 1 skipped')
     assert "inconsistent run" not in none
+
+
+def _fake_report(root: Path, name: str, reference: str, errors: dict[str, float]) -> Path:
+    tables = root / name / "tables"
+    tables.mkdir(parents=True)
+    runs = [
+        {"filter": f, "scenario": "nominal", "status": "ok", "reference": reference,
+         "pos_err_3d_rms_m": e, "pos_err_h_rms_m": e}
+        for f, e in errors.items()
+    ]  # fmt: skip
+    (tables / "runs.json").write_text(json.dumps(runs))
+    (tables / "provenance.json").write_text(json.dumps({"dataset": name}))
+    return root / name
+
+
+def test_the_summary_ranks_only_errors_against_a_truth(tmp_path: Path) -> None:
+    # a log without truth: its "errors" are residuals to the fixes each filter fused; the
+    # filter that follows its fixes best (tc_ukf here) would top a ranking it cannot earn
+    sim = _fake_report(tmp_path, "sim", "truth", {"lc_ekf": 1.0, "tc_ukf": 2.0})
+    flight = _fake_report(tmp_path, "flight", "fixes_residual", {"lc_ekf": 9.0, "tc_ukf": 0.1})
+    index = render_summary([sim, flight], tmp_path / "summary")
+    ranking = _csv_rows(tmp_path / "summary" / "tables" / "ranking.csv")
+    assert [(r["filter"], r["cells"]) for r in ranking] == [("lc_ekf", "1"), ("tc_ukf", "1")]
+    page = index.read_text()
+    assert "Not ranked: flight." in page
+    assert "residuals to the fixes the filters fused" in page
