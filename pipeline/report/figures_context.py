@@ -5,6 +5,8 @@ Panels, each only when the log has its data:
 
 - satellites used in the fix (``gnss.num_sats``) and the fix type (``gnss.fix_type``);
 - the receiver's reported accuracies (``gnss.h_acc_m``, ``v_acc_m``);
+- its dilutions of precision (``gnss.hdop``, ``vdop``; 99.99, a receiver's "unknown", is left
+  out);
 - height: the fixes', the onboard estimate's and each filter's nominal run, from the first fix;
 - the onboard EKF's innovation test ratios (``estimator`` ``test_ratio_*``), 1 marked;
 - gate rejections of each filter's nominal run, per stream, as ticks (``innovations.parquet``
@@ -35,6 +37,7 @@ from navreplay.pipeline.report.svg import (
 )
 
 POINTS = 600  # per line
+DOP_UNKNOWN = 99.0  # receivers say 99.99 for "no solution"
 
 
 def _has(values: np.ndarray) -> bool:
@@ -68,6 +71,8 @@ def context(data: DatasetInputs, key: str) -> str | None:
         panels.append("sats")
     if gnss is not None and (_has(column(gnss, "h_acc_m")) or _has(column(gnss, "v_acc_m"))):
         panels.append("acc")
+    if gnss is not None and (_has(column(gnss, "hdop")) or _has(column(gnss, "vdop"))):
+        panels.append("dop")
     if gnss is not None or data.onboard is not None or nominal:
         panels.append("height")
     if data.onboard is not None and any(
@@ -115,18 +120,8 @@ def _draw(
     filters: list[str],
     t0: int,
 ) -> None:
-    if panel in ("sats", "acc"):
-        t = (times_ns(gnss) - t0) / 1e9
-        step = panel == "sats"
-        for name, label, c in _SATS if step else _ACC:
-            v = column(gnss, name)
-            if not _has(v):
-                continue
-            if step:
-                ax.step(*decimate_minmax(t, v, POINTS), where="post", color=c, label=label)
-            else:
-                ax.plot(*decimate_minmax(t, v, POINTS), color=c, label=label)
-        ax.set_ylabel("count / type" if step else "m")
+    if panel in ("sats", "acc", "dop"):
+        _gnss_panel(panel, ax, gnss, t0)
     elif panel == "height":
         _height(ax, data, gnss, nominal, filters, t0)
     elif panel == "events":
@@ -134,18 +129,43 @@ def _draw(
     elif panel == "vibration":
         _vibration_panel(ax, data.vibration, t0)
     elif panel == "tests":
-        ob = data.onboard
-        t = (times_ns(ob) - t0) / 1e9
-        for i, name in enumerate(ESTIMATOR_TEST_RATIOS):
-            v = column(ob, name)
-            if _has(v):
-                ok = np.isfinite(v)
-                ax.plot(*decimate_minmax(t[ok], v[ok], POINTS), color=colour(i), lw=0.8,
-                        label=name.removeprefix("test_ratio_"))  # fmt: skip
-        ax.axhline(1.0, color="#b3261e", lw=0.8, ls="--", label="rejected above")
-        ax.set_ylabel("onboard test ratio")
+        _tests_panel(ax, data.onboard, t0)
     else:
         _rejections_panel(ax, rejections, filters, t0)
+
+
+def _gnss_panel(panel: str, ax: Any, gnss: Any, t0: int) -> None:
+    t = (times_ns(gnss) - t0) / 1e9
+    if panel == "dop":
+        for name, c in (("hdop", "#0072B2"), ("vdop", "#009E73")):
+            v = column(gnss, name)
+            ok = np.isfinite(v) & (v < DOP_UNKNOWN)
+            if ok.any():
+                ax.plot(*decimate_minmax(t[ok], v[ok], POINTS), color=c, label=name.upper())
+        ax.set_ylabel("DOP")
+        return
+    step = panel == "sats"
+    for name, label, c in _SATS if step else _ACC:
+        v = column(gnss, name)
+        if not _has(v):
+            continue
+        if step:
+            ax.step(*decimate_minmax(t, v, POINTS), where="post", color=c, label=label)
+        else:
+            ax.plot(*decimate_minmax(t, v, POINTS), color=c, label=label)
+    ax.set_ylabel("count / type" if step else "m")
+
+
+def _tests_panel(ax: Any, ob: Any, t0: int) -> None:
+    t = (times_ns(ob) - t0) / 1e9
+    for i, name in enumerate(ESTIMATOR_TEST_RATIOS):
+        v = column(ob, name)
+        if _has(v):
+            ok = np.isfinite(v)
+            ax.plot(*decimate_minmax(t[ok], v[ok], POINTS), color=colour(i), lw=0.8,
+                    label=name.removeprefix("test_ratio_"))  # fmt: skip
+    ax.axhline(1.0, color="#b3261e", lw=0.8, ls="--", label="rejected above")
+    ax.set_ylabel("onboard test ratio")
 
 
 def _height(

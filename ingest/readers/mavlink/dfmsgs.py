@@ -6,9 +6,10 @@ Column units are the logged ones after the format-character multipliers (``DfFor
 IMU[I]      ``GyrX/Y/Z`` rad/s, ``AccX/Y/Z`` m/s^2, body FRD (also legacy IMU2, IMU3)
 GPS[I]      ``Status`` (the MAVLink GPS_FIX_TYPE values), ``GWk``/``GMS`` GPS week and ms of
  + GPA[I]   week (-> t_ns of the fix, GPS time), ``NSats``, ``Lat``/``Lng`` deg, ``Alt`` m
-            above MSL, ``Spd`` m/s and ``GCrs`` deg (ground track), ``VZ`` m/s down; GPA of
-            the same instance (nearest in time): ``HAcc``/``VAcc`` m, ``SAcc`` m/s (0 =
-            unknown: null) and ``Und`` (MSL - ellipsoid, m: ellipsoidal = Alt - Und)
+            above MSL, ``Spd`` m/s and ``GCrs`` deg (ground track), ``VZ`` m/s down,
+            ``HDop``; GPA of the same instance (nearest in time): ``HAcc``/``VAcc`` m,
+            ``SAcc`` m/s (0 = unknown: null), ``VDop`` and ``Und`` (MSL - ellipsoid, m:
+            ellipsoidal = Alt - Und)
 XKF1[C]     EKF3 (NKF1: EKF2) core C: ``Roll``/``Pitch``/``Yaw`` deg, ``VN/VE/VD`` m/s,
             ``PN/PE/PD`` m from the EKF origin (``ORGN`` type 0, MSL height), placed on the
             earth with ArduPilot's own flat-earth offset (``Location::offset``), so the
@@ -171,6 +172,7 @@ def _gps(rec: np.ndarray, fmt: DfFormat, ex: DfExtras, _t: I64) -> Converted:
         "vel_d_mps": fmt.scaled(rec, "VZ") if "VZ" in fmt.columns else np.zeros(n),
         "fix_type": fix,
         "num_sats": np.asarray(rec["NSats"], dtype=np.int16),
+        "hdop": fmt.scaled(rec, "HDop") if "HDop" in fmt.columns else np.full(n, np.nan),
     }
     nulls = {} if "VZ" in fmt.columns else {"vel_d_mps": np.ones(n, bool)}
     return Converted(cols, nulls, counters={"no_fix": int((fix < FixType.FIX_2D).sum())})
@@ -203,6 +205,7 @@ def _gpa(rec: np.ndarray, fmt: DfFormat, _ex: DfExtras, _t: I64) -> Converted:
         "v_acc_m": fmt.scaled(rec, "VAcc"),
         "speed_acc_mps": fmt.scaled(rec, "SAcc"),
         "und": fmt.scaled(rec, "Und") if "Und" in fmt.columns else np.zeros(len(rec)),
+        "vdop": fmt.scaled(rec, "VDop") if "VDop" in fmt.columns else np.full(len(rec), np.nan),
     }
     return Converted(cols)
 
@@ -309,7 +312,7 @@ def _sim(rec: np.ndarray, fmt: DfFormat, ex: DfExtras, _t: I64) -> Converted:
 
 
 #: the GPA columns joined into GPS
-JOIN_COLUMNS = ("h_acc_m", "v_acc_m", "speed_acc_mps", "und")
+JOIN_COLUMNS = ("h_acc_m", "v_acc_m", "speed_acc_mps", "und", "vdop")
 _GPA = DfJoin("GPA", _gpa, JOIN_COLUMNS)
 _IMU = TableName.IMU
 _EST = TableName.ESTIMATOR

@@ -13,7 +13,8 @@ GPS_RAW_INT,        ``lat/lon`` 1e-7 deg; ``alt`` mm above MSL, ``alt_ellipsoid`
 GPS2_RAW            extension; 0 when absent); ``vel`` cm/s ground speed and ``cog`` cdeg
                     (UINT16_MAX unknown); ``h_acc``/``v_acc`` mm, ``vel_acc`` mm/s (0 unknown),
                     else ``eph``/``epv`` (DOP x 100, UINT16_MAX unknown) taken as metres;
-                    ``satellites_visible`` (UINT8_MAX unknown) -> num_sats
+                    ``satellites_visible`` (UINT8_MAX unknown) -> num_sats; ``eph``/``epv``
+                    / 100 -> ``hdop``/``vdop`` too
 GLOBAL_POSITION_INT ``lat/lon`` 1e-7 deg, ``alt`` mm MSL, ``vx/vy/vz`` cm/s NED; joined with
  + ATTITUDE         ATTITUDE ``roll/pitch/yaw`` (rad) and EKF_STATUS_REPORT (the square
  + EKF_STATUS_...   roots of the EKF's test ratios) by time -> ``estimator``
@@ -244,12 +245,16 @@ def _gps(rec: Rec, ex: Extras) -> Converted:
         "speed_acc_mps": s_acc,
         "fix_type": fix,
         "num_sats": sats,
+        "hdop": _f64(rec, "eph", 100.0),
+        "vdop": _f64(rec, "epv", 100.0),
     }
     nulls: Nulls = {
         "vel_n_mps": ~known,
         "vel_e_mps": ~known,
         "h_acc_m": h_null,
         "v_acc_m": v_null,
+        "hdop": np.asarray(rec["eph"]) == UINT16_MAX,
+        "vdop": np.asarray(rec["epv"]) == UINT16_MAX,
         "speed_acc_mps": s_acc <= 0,
         "num_sats": sats == UINT8_MAX,
     }

@@ -113,6 +113,7 @@ def _gps(data: Data, und: float | None) -> Converted:
         "speed_acc_mps": _f(data, "s_variance_m_s"),
         "fix_type": fix,
         "num_sats": np.asarray(data["satellites_used"], dtype=np.int16),
+        **{dop: _f(data, dop) for dop in ("hdop", "vdop") if dop in data},
     }
     nulls = {f"vel_{a}_mps": ~valid_vel for a in "ned"}
     counters = {"no_fix": int((fix < FixType.FIX_2D).sum())}
