@@ -37,6 +37,8 @@ Row = dict[str, Any]
 MAX_GAP_S = 1.0  # a replayed estimate's gap longer than this is not interpolated across
 REFERENCE = "onboard"
 
+#: the report's table of these rows (``tables/<name>``)
+CSV_NAME = "onboard_comparison.csv"
 COLUMNS = ("filter", "scenario", "scope", "window", "start_s", "duration_s", "samples",
            "pos_h_rms_m", "pos_h_max_m", "pos_v_rms_m", "vel_3d_rms_mps", "roll_rms_deg",
            "pitch_rms_deg", "yaw_rms_deg", "pos_3d_end_m", "pos_h_end_m", "pos_3d_max_m",

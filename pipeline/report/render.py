@@ -229,7 +229,7 @@ def render_dataset(
         "audit.csv": tb.to_csv(audit_rows, _AUDIT),
     }
     if onboard_rows:
-        tables["onboard_comparison.csv"] = tb.to_csv(onboard_rows, onboard.COLUMNS)
+        tables[onboard.CSV_NAME] = tb.to_csv(onboard_rows, onboard.COLUMNS)
     if log_events:
         tables["events.csv"] = tb.to_csv(log_events, events.COLUMNS)
     with atomic_directory(out_dir) as tmp:

@@ -16,7 +16,10 @@ but never ranked (``not_ranked``):
   ``exp(mean)`` (below 1: B is better), and the mean difference in metres with its interval.
   One cell gives a point value without an interval.
 
-Also the per-satellite-count reduction table of every dataset that has one (paper 001).
+For the logs without truth, filters are ranked the same way on their drift against the
+onboard estimate at the ends of the outage windows (``onboard_cells``, from each report's
+``tables/onboard_comparison.csv``): a leaderboard across logs, labelled as against another
+estimate. Also the per-satellite-count reduction table of every dataset that has one (paper 001).
 Writes ``index.html``, ``tables/ranking.csv``, ``tables/paired.csv``, ``tables/runs.csv``
 (every finished run of every dataset, the data of ``dvc plots``),
 ``tables/sat_reduction.csv`` and ``metrics.json`` (the ranking, for ``dvc metrics``).
@@ -27,7 +30,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +45,7 @@ from navreplay.pipeline.report import html as h
 from navreplay.pipeline.report import tables as tb
 from navreplay.pipeline.report.experiments import SAT_REDUCTION_NAME, read_csv
 from navreplay.pipeline.report.input_files import ReportInputError, read_json
+from navreplay.pipeline.report.onboard import CSV_NAME as ONBOARD_NAME
 from navreplay.pipeline.report.sections import paper_pct
 from navreplay.pipeline.report.tables import PAPER_PAIR, PAPER_REDUCTION_PCT
 
@@ -59,6 +63,7 @@ class DatasetResult:
     path: Path
     runs: list[Row]
     sat_reduction: tuple[tuple[str, ...], tuple[tuple[str, ...], ...]] | None
+    onboard_windows: list[Row] = field(default_factory=list)
 
 
 def load_report(report_dir: Path) -> DatasetResult:
@@ -76,7 +81,13 @@ def load_report(report_dir: Path) -> DatasetResult:
     if red_path.is_file():
         t = read_csv(red_path)
         red = (t.header, t.rows)
-    return DatasetResult(dataset or report_dir.name, report_dir, runs, red)
+    windows: list[Row] = []
+    onboard_path = report_dir / "tables" / ONBOARD_NAME
+    if onboard_path.is_file():
+        t = read_csv(onboard_path)
+        rows = [dict(zip(t.header, r, strict=True)) for r in t.rows]
+        windows = [r for r in rows if r.get("scope") == "window"]
+    return DatasetResult(dataset or report_dir.name, report_dir, runs, red, windows)
 
 
 _RUN_COLS = ("run", "dataset", "filter", "scenario", "pos_err_h_rms_m", "pos_err_3d_rms_m",
@@ -119,6 +130,29 @@ def _cells(results: Sequence[DatasetResult]) -> dict[tuple[str, str], dict[str, 
         if len(errs) >= 2:
             cells[key] = errs
     return cells
+
+
+def onboard_cells(results: Sequence[DatasetResult]) -> dict[tuple[str, str], dict[str, float]]:
+    """Per (dataset, scenario) of a log without truth where two or more filters drifted
+    through outage windows: each filter's mean 3-D difference from the onboard estimate at
+    the windows' ends (``report.onboard``; the onboard EKF kept GNSS through them)."""
+    ends: dict[tuple[str, str], dict[str, list[float]]] = {}
+    for d in results:
+        if d.dataset not in not_ranked(results):
+            continue  # a dataset with a truth is ranked on its errors
+        for w in d.onboard_windows:
+            try:
+                end = float(w.get("pos_3d_end_m", ""))
+            except ValueError:
+                continue
+            if math.isfinite(end):
+                by = ends.setdefault((d.dataset, str(w["scenario"])), {})
+                by.setdefault(str(w["filter"]), []).append(end)
+    return {
+        key: {f: float(np.mean(v)) for f, v in by.items()}
+        for key, by in sorted(ends.items())
+        if len(by) >= 2
+    }
 
 
 def ranking(cells: dict[tuple[str, str], dict[str, float]]) -> list[Row]:
@@ -198,6 +232,26 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
         if r.get("status") in FINISHED
         and (r.get(METRIC) is not None or r.get(METRIC_H) is not None)
     ]
+    onboard_rank = ranking(onboard_cells(results))
+    onboard_html = ""
+    if onboard_rank:
+        onboard_html = h.table(
+            onboard_rank,
+            (
+                ("filter", "filter"),
+                ("mean_rank", "mean rank"),
+                ("cells", "cells"),
+                ("wins", "best in"),
+                ("datasets", "logs"),
+            ),
+        ) + h.para(
+            "For the logs without a truth: a cell is one log under one outage scenario; "
+            "filters rank by their mean 3-D difference from the vehicle's onboard estimate at "
+            "the ends of the outage windows (the onboard EKF kept GNSS there, so this is each "
+            "filter's drift against an estimate that did: another estimate, not truth). "
+            "tables/ranking_onboard.csv holds it.",
+            "note",
+        )
     red_rows: list[Row] = []
     for d in results:
         if d.sat_reduction is not None:
@@ -293,6 +347,7 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
             if vs_best
             else "",
         ),
+        ("onboard", "Logs without truth: drift against the onboard estimate", onboard_html),
         ("satellites", "Error reduction per satellite count", red_html),
         (
             "provenance",
@@ -309,6 +364,8 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
         (tmp / "tables").mkdir()
         atomic_write_text(tmp / "index.html", page)
         atomic_write_text(tmp / "tables" / "ranking.csv", tb.to_csv(rank))
+        if onboard_rank:
+            atomic_write_text(tmp / "tables" / "ranking_onboard.csv", tb.to_csv(onboard_rank))
         atomic_write_text(tmp / "tables" / "runs.csv", tb.to_csv(all_runs, _RUN_COLS))
         atomic_write_text(
             tmp / "tables" / "paired.csv", tb.to_csv(pairs, [k for k, _ in pair_cols])

@@ -308,3 +308,28 @@ def test_the_summary_ranks_only_errors_against_a_truth(tmp_path: Path) -> None:
     page = index.read_text()
     assert "Not ranked: flight." in page
     assert "residuals to the fixes the filters fused" in page
+
+
+def test_logs_without_truth_rank_by_their_drift_against_the_onboard_estimate(
+    tmp_path: Path,
+) -> None:
+    logs = []
+    for name, ends in (("flight_a", {"lc_ekf": (4.0, 6.0), "tc_ekf": (9.0, 11.0)}),
+                       ("flight_b", {"lc_ekf": (30.0,), "tc_ekf": (20.0,)})):  # fmt: skip
+        report = _fake_report(tmp_path, name, "fixes_residual", dict.fromkeys(ends, 1.0))
+        lines = ["filter,scenario,scope,window,pos_3d_end_m"]
+        lines += [f"{f},nominal,run,," for f in ends]  # whole-run rows are not ranked
+        lines += [f"{f},outage_30s,window,{i},{e}"
+                  for f, es in ends.items() for i, e in enumerate(es)]  # fmt: skip
+        (report / "tables" / "onboard_comparison.csv").write_text("\n".join(lines) + "\n")
+        logs.append(report)
+    index = render_summary(logs, tmp_path / "summary")
+    rows = _csv_rows(tmp_path / "summary" / "tables" / "ranking_onboard.csv")
+    # flight_a: lc_ekf 5 m vs tc_ekf 10 m; flight_b: tc_ekf 20 m vs lc_ekf 30 m: one each
+    assert [(r["filter"], r["mean_rank"], r["wins"]) for r in rows] == [
+        ("lc_ekf", "1.5", "1"), ("tc_ekf", "1.5", "1"),
+    ]  # fmt: skip
+    assert (
+        not (tmp_path / "summary" / "tables" / "ranking.csv").read_text().strip("\n").count("\n")
+    )  # nothing ranked on residuals
+    assert "drift against the onboard estimate" in index.read_text()
