@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from navreplay.ingest.api import ingest
+from navreplay.ingest.api import ingest, inspect
 from navreplay.ingest.context import EventRows, events_table, forward, vibration_table
 from navreplay.ingest.schema import EventKind
 from navreplay.ingest.tables import read_table
@@ -111,6 +111,11 @@ def test_tlog_statustext_heartbeat_and_vibration(tmp_path: Path) -> None:
     assert vib.loc[vib["imu"] == 1, "clip_count"].tolist() == [0.0, 1.0, 2.0]
     assert vib.loc[vib["imu"] == 1, "vibe_x_mps2"].isna().all()  # levels are IMU 0's
     assert np.all(np.diff(vib["t_ns"]) >= 0)
+    # --list says where these messages went
+    (inventory,), _ = inspect([path])
+    detail = {s.key: s.detail for s in inventory.streams}
+    assert detail["STATUSTEXT"] == "events table (context)"
+    assert detail["VIBRATION"] == "vibration table (context)"
 
 
 # -------------------------------------------------------------------------------- DataFlash
@@ -155,7 +160,12 @@ def _df_with_context(path: Path, vibe: tuple[int, str, str]) -> Path:
 
 def test_dataflash_messages_modes_arming_events_and_errors(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    ingest([_df_with_context(tmp_path / "f.bin", _VIBE_NEW)], out)
+    path = _df_with_context(tmp_path / "f.bin", _VIBE_NEW)
+    ingest([path], out)
+    (inventory,), _ = inspect([path])
+    detail = {s.key: s.detail for s in inventory.streams}
+    assert detail["MODE"] == "events table (context)"
+    assert detail["VIBE"] == "vibration table (context)"
     ev = _events(out)
     assert list(zip(ev["kind"], ev["text"], ev["source"], strict=True)) == [
         ("message", "ArduCopter V4.3.6 (0c5e999c)", "MSG"),

@@ -124,6 +124,8 @@ class DataFlashReader(LogReader):
         joined = {j.message: spec.message for spec in s.specs.values() for j in spec.joins}
         for name, count in s.other_messages().items():
             detail = f"joined into {joined[name]}" if name in joined else "not converted"
+            if name in _CONTEXT_MESSAGES:
+                detail = "vibration table (context)" if name == "VIBE" else "events table (context)"
             if name == "ORGN":
                 detail = "EKF origin of XKF1/NKF1"
             streams.append(StreamInfo(name, name, count, None, None, None, s.base, detail=detail))

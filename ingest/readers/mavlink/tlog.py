@@ -132,6 +132,7 @@ class TlogReader(LogReader):
             name = self.dialect.msg_name(msgid)
             if name not in listed:
                 detail = f"joined into {joined[name]}" if name in joined else "not converted"
+                detail = _CONTEXT.get(name, detail)
                 streams.append(
                     StreamInfo(name, name, count, None, None, None, s.base, detail=detail)
                 )
@@ -393,6 +394,12 @@ class TlogReader(LogReader):
             )
 
 
+#: the messages ``context`` reads, as ``--list`` shows them
+_CONTEXT = {
+    "STATUSTEXT": "events table (context)",
+    "HEARTBEAT": "events table (context: mode, arming)",
+    "VIBRATION": "vibration table (context)",
+}
 #: HEARTBEAT ``base_mode``: MAV_MODE_FLAG_SAFETY_ARMED
 _ARMED = 128
 
