@@ -116,6 +116,33 @@ def section(rows: list[Row], vibration: list[Row]) -> str:
     return "".join(parts)
 
 
+def summary(rows: list[Row], vibration: list[Row]) -> str | None:
+    """The log's own account in one line, for a terminal: its modes, its errors and warnings
+    (the first few named), and its worst vibration and clipping; None when it has none."""
+    parts = []
+    modes = [r["text"] for r in rows if r["kind"] == "mode"]
+    if modes:
+        parts.append("modes " + " > ".join(modes[:8]) + (" ..." if len(modes) > 8 else ""))
+    bad = [r for r in rows if r["kind"] == "error" or r["severity"] in _BAD]
+    warn = [r for r in rows if r["severity"] == "warning"]
+    for what, found in (("error", bad), ("warning", warn)):
+        if found:
+            named = "; ".join(str(r["text"])[:60] for r in found[:3])
+            more = ", ..." if len(found) > 3 else ""
+            parts.append(f"{len(found)} {what}{'s' if len(found) > 1 else ''} ({named}{more})")
+    levels = [r for r in vibration if r["vibe_max_mps2"] is not None]
+    if levels:
+        worst = max(levels, key=lambda r: r["vibe_max_mps2"])
+        parts.append(f"vibration up to {worst['vibe_max_mps2']:.3g} m/s^2 (IMU {worst['imu']})")
+    clips = sum(r["clips"] or 0 for r in vibration)
+    if clips:
+        parts.append(f"{clips:.0f} clipping events")
+    return "; ".join(parts) if parts else None
+
+
+_BAD = ("emergency", "alert", "critical", "error")
+
+
 def _severity_class(row: Row) -> str:
     return (
         "bad"

@@ -94,7 +94,8 @@ class DatasetInputs:
     vibration: pa.Table | None = None
 
     def t0_ns(self) -> int:
-        """The time origin of every plot: the first truth, fix or estimate time."""
+        """The time origin of every plot: the first truth, fix or estimate time (without any,
+        the first event's)."""
         starts: list[int] = []
         for t in (self.truth, self.gnss):
             if t is not None and t.num_rows:
@@ -102,6 +103,10 @@ class DatasetInputs:
         for r in self.runs:
             if r.ran and r.estimate is not None:
                 starts.append(int(r.estimate.column("t_ns")[0].as_py()))
+        if not starts:  # a log with nothing but its own account
+            for t in (self.events, self.vibration):
+                if t is not None and t.num_rows:
+                    starts.append(int(t.column("t_ns")[0].as_py()))
         return min(starts) if starts else 0
 
     def filters(self) -> list[str]:

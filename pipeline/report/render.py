@@ -66,6 +66,7 @@ class RenderedReport:
     warnings: list[str]
     figures: int
     onboard: list[dict[str, Any]]
+    log_account: str | None = None  # the log's own account in a line (``events.summary``)
 
 
 def _headline(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -119,7 +120,8 @@ def render_dataset(
         "has them, on one time axis; outage windows shaded.",
     )
     log_events = events.event_rows(data)
-    context += events.section(log_events, events.vibration_rows(data))
+    vibration = events.vibration_rows(data)
+    context += events.section(log_events, vibration)
 
     def per_scenario(
         plot: Callable[[DatasetInputs, str, dict[tuple[str, str], ErrorSeries], str], str | None],
@@ -243,7 +245,13 @@ def render_dataset(
         atomic_write_json(tmp / "metrics.json", _headline(run_rows))
     log.info("wrote %s (%d figures)", out_dir / "index.html", len(figs))
     return RenderedReport(
-        out_dir, out_dir / "index.html", run_rows, warnings, len(figs), onboard_rows
+        out_dir,
+        out_dir / "index.html",
+        run_rows,
+        warnings,
+        len(figs),
+        onboard_rows,
+        events.summary(log_events, vibration),
     )
 
 

@@ -142,6 +142,8 @@ def run(args: argparse.Namespace) -> int:
         )
     for s in res.skipped:
         lines.append(f"  skipped {s.filter} / {s.scenario}: {s.reason}")
+    if res.report.log_account:
+        lines.append(f"  the log says: {res.report.log_account}")
     for note in res.notes:
         lines.append(f"  note: {note}")
     for w in res.report.warnings:

@@ -173,7 +173,7 @@ def test_dataflash_messages_modes_arming_events_and_errors(tmp_path: Path) -> No
         ("arming", "armed", "ARM"),
         ("mode", "LOITER", "MODE"),
         ("error", "GPS: error 2", "ERR"),
-        ("error", "GPS: cleared", "ERR"),
+        ("event", "GPS: cleared", "ERR"),  # the clearing of an error is no error
         ("event", "EKF yaw reset", "EV"),
         ("event", "event 200", "EV"),
         ("arming", "disarmed", "ARM"),

@@ -144,6 +144,15 @@ LOGS: dict[str, tuple[str, Expect]] = {
 }
 
 
+# what the summary says the log itself said (``report.events.summary``)
+LOG_SAYS = {
+    "ardupilot_copter_2015_timems": "the log says: modes LOITER > ACRO; 1 error (EKF check: "
+    "error 2)",
+    "ardupilot_copter_2023": "the log says: modes LOITER > RTL; vibration up to 51.6 m/s^2",
+    "sitl_vtol_tlog": "the log says: modes QLOITER > CIRCLE > GUIDED > QLAND; vibration up to",
+}
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(LOGS))
 def test_analyze_gives_each_real_log_its_outcome(name: str, tmp_path: Path) -> None:
@@ -160,6 +169,8 @@ def test_analyze_gives_each_real_log_its_outcome(name: str, tmp_path: Path) -> N
     text = done.stdout + done.stderr
     assert "Traceback" not in text, text
     assert done.returncode == want.rc, text
+    if name in LOG_SAYS:
+        assert LOG_SAYS[name] in done.stdout, done.stdout
     if want.rc == 2:
         assert want.reason in done.stderr
         assert not (tmp_path / "out").exists()  # nothing half-written

@@ -334,9 +334,11 @@ def _add_events(out: LogContext, name: str, t: I64, data: np.ndarray, firmware: 
         ev.add(
             t[arming], EventKind.ARMING, [n for n, a in zip(names, arming, strict=True) if a], name
         )
-    elif name == "ERR":
-        pairs = zip(data["Subsys"].astype(int), data["ECode"].astype(int), strict=True)
-        ev.add(t, EventKind.ERROR, [ardupilot_error_text(int(a), int(b)) for a, b in pairs], name)
+    elif name == "ERR":  # an error, or (code 0) its clearing: an event
+        sub, code = data["Subsys"].astype(int), data["ECode"].astype(int)
+        texts = [ardupilot_error_text(int(a), int(b)) for a, b in zip(sub, code, strict=True)]
+        for kind, pick in ((EventKind.ERROR, code != 0), (EventKind.EVENT, code == 0)):
+            ev.add(t[pick], kind, [x for x, p in zip(texts, pick, strict=True) if p], name)
 
 
 def _vibe_columns(t: I64, data: np.ndarray, fmt: DfFormat) -> dict[str, np.ndarray]:
