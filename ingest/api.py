@@ -335,9 +335,13 @@ def _write_context(
         name = o.detected.path.name
         try:
             found = o.reader.context()
-        except (IngestError, KeyError, ValueError) as err:
-            warnings.append(f"{name}: its messages, modes and vibration cannot be read: {err}")
-            log.warning("%s: context not read: %s", name, err)
+        except Exception as err:  # context only: said in the audit, never a failed ingest
+            what = f"{type(err).__name__}: {err}"
+            warnings.append(
+                f"{name}: its messages, modes and vibration cannot be read ({what}); the "
+                "sensor tables are not affected"
+            )
+            log.warning("%s: context not read: %s", name, what)
             continue
         if found is not None:
             out.append((name, found))

@@ -272,3 +272,23 @@ def test_ulog_messages_status_and_imu_vibration(tmp_path: Path) -> None:
     assert vib.loc[vib["imu"] == 0, "clip_count"].tolist() == [0.0, 1.0, 2.0]  # axes summed
     assert vib.loc[vib["imu"] == 1, "clip_count"].tolist() == [1.0, 2.0, 3.0]
     assert vib["vibe_x_mps2"].isna().all()  # PX4 logs a magnitude, not per-axis levels
+
+
+def test_a_context_that_cannot_be_read_is_a_warning_not_a_failed_ingest(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from navreplay.ingest.readers.mavlink.tlog import TlogReader
+
+    def broken(self: TlogReader) -> None:
+        raise IndexError("index 7 is out of bounds")
+
+    monkeypatch.setattr(TlogReader, "context", broken)
+    path = tlog_drive().write(tmp_path / "f.tlog")
+    result = ingest([path], tmp_path / "out")
+    assert {"imu", "gnss"} <= set(result.tables)
+    assert "events" not in result.tables
+    assert not (tmp_path / "out" / "events.parquet").exists()
+    assert any(
+        "f.tlog: its messages, modes and vibration cannot be read (IndexError: index 7" in w
+        for w in result.report["warnings"]
+    )
