@@ -203,26 +203,31 @@ def comparison_rows(data: DatasetInputs, diffs: dict[tuple[str, str], Difference
     return [{c: row.get(c) for c in COLUMNS} for row in rows]
 
 
+def _column_rows(
+    data: DatasetInputs, names: tuple[str, ...], key: str, prefix: str, stats: Any
+) -> list[Row]:
+    """A row per column of the onboard estimate that has finite values: its name without
+    ``prefix`` under ``key``, the sample count, and ``stats(values)``."""
+    if data.onboard is None:
+        return []
+    rows = []
+    for name in names:
+        v = column(data.onboard, name)
+        v = v[np.isfinite(v)]
+        if v.size:
+            rows.append({key: name.removeprefix(prefix), "samples": int(v.size), **stats(v)})
+    return rows
+
+
 def test_ratio_rows(data: DatasetInputs) -> list[Row]:
     """The onboard EKF's innovation test ratios where the log has them (``ingest.schema``
     ``ESTIMATOR_TEST_RATIOS``): per measurement kind, the samples, mean, maximum and the
     fraction above 1 (the onboard EKF rejected the measurement there)."""
-    if data.onboard is None:
-        return []
-    rows = []
-    for name in ESTIMATOR_TEST_RATIOS:
-        v = column(data.onboard, name)
-        v = v[np.isfinite(v)]
-        if not v.size:
-            continue
-        rows.append({
-            "measurement": name.removeprefix("test_ratio_"),
-            "samples": int(v.size),
-            "mean": float(v.mean()),
-            "max": float(v.max()),
-            "above_1_frac": float(np.mean(v > 1.0)),
-        })  # fmt: skip
-    return rows
+    return _column_rows(data, ESTIMATOR_TEST_RATIOS, "measurement", "test_ratio_", lambda v: {
+        "mean": float(v.mean()),
+        "max": float(v.max()),
+        "above_1_frac": float(np.mean(v > 1.0)),
+    })  # fmt: skip
 
 
 def innovation_rows(data: DatasetInputs) -> list[Row]:
@@ -231,20 +236,9 @@ def innovation_rows(data: DatasetInputs) -> list[Row]:
     deviation, RMS and largest magnitude. A mean far from zero against the deviation is a
     bias between the EKF's prediction and that measurement (a lever arm, a late fix, a
     height source drifting)."""
-    if data.onboard is None:
-        return []
-    rows = []
-    for name in ESTIMATOR_INNOVATIONS:
-        v = column(data.onboard, name)
-        v = v[np.isfinite(v)]
-        if not v.size:
-            continue
-        rows.append({
-            "component": name.removeprefix("innov_"),
-            "samples": int(v.size),
-            "mean": float(v.mean()),
-            "std": float(v.std()),
-            "rms": float(np.sqrt(np.mean(v * v))),
-            "max_abs": float(np.abs(v).max()),
-        })  # fmt: skip
-    return rows
+    return _column_rows(data, ESTIMATOR_INNOVATIONS, "component", "innov_", lambda v: {
+        "mean": float(v.mean()),
+        "std": float(v.std()),
+        "rms": float(np.sqrt(np.mean(v * v))),
+        "max_abs": float(np.abs(v).max()),
+    })  # fmt: skip

@@ -299,32 +299,32 @@ def onboard(
                 "note",
             )
         )
-    if ratios:
-        cols = (("measurement", "measurement"), ("samples", "samples"), ("mean", "mean"),
-                ("max", "max"), ("above_1_frac", "fraction above 1"))  # fmt: skip
-        parts.append("<h3>The onboard EKF's innovation test ratios</h3>" + h.table(ratios, cols))
-        parts.append(
-            h.para(
-                "As the log recorded them (ArduPilot XKF4/NKF4/EKF4: the square root of the "
-                "ratio; PX4 estimator_status: the ratio). Above 1 the onboard EKF rejected "
-                "that measurement.",
-                "note",
-            )
-        )
-    if innovations:
-        inn_cols = (("component", "innovation"), ("samples", "samples"), ("mean", "mean"),
+    ratio_cols = (("measurement", "measurement"), ("samples", "samples"), ("mean", "mean"),
+                  ("max", "max"), ("above_1_frac", "fraction above 1"))  # fmt: skip
+    parts.append(_titled_table(
+        "The onboard EKF's innovation test ratios", ratios, ratio_cols,
+        "As the log recorded them (ArduPilot XKF4/NKF4/EKF4: the square root of the ratio; PX4 "
+        "estimator_status: the ratio). Above 1 the onboard EKF rejected that measurement.",
+    ))  # fmt: skip
+    inn_cols = (("component", "innovation"), ("samples", "samples"), ("mean", "mean"),
                 ("std", "std"), ("rms", "RMS"), ("max_abs", "max |x|"))  # fmt: skip
-        parts.append("<h3>The onboard EKF's innovations</h3>" + h.table(innovations, inn_cols))
-        parts.append(
-            h.para(
-                "Prediction minus measurement as the log recorded them (ArduPilot XKF3/NKF3/"
-                "EKF3, PX4 estimator_innovations), m/s and m; the vertical position is the "
-                "EKF's height source, usually the barometer. A mean far from zero against "
-                "the spread is a bias between the EKF and that sensor.",
-                "note",
-            )
-        )
+    parts.append(_titled_table(
+        "The onboard EKF's innovations", innovations, inn_cols,
+        "Prediction minus measurement as the log recorded them (ArduPilot XKF3/NKF3/EKF3, PX4 "
+        "estimator_innovations), m/s and m; the vertical position is the EKF's height source, "
+        "usually the barometer. A mean far from zero against the spread is a bias between the "
+        "EKF and that sensor.",
+    ))  # fmt: skip
     return "".join(parts)
+
+
+def _titled_table(
+    title: str, rows: Sequence[Row], cols: Sequence[tuple[str, str]], note: str
+) -> str:
+    """``<h3>title</h3>``, the table and its note; nothing without rows."""
+    if not rows:
+        return ""
+    return f"<h3>{title}</h3>" + h.table(rows, cols) + h.para(note, "note")
 
 
 def _pair(text: str) -> tuple[str, ...]:
