@@ -5,7 +5,8 @@ numba's cache (``pipeline._numba_cache``) in about a second. ``warm`` pays that 
 front: it replays every filter over a short synthesized drive of its family, through the same
 path a real run takes (tables written and read back, ``estimation.families.run_tables``), so the
 argument types it compiles for are exactly those of a real run. Nothing but numba's public
-API is involved: each kernel is compiled by calling it.
+API is involved: each kernel is compiled by calling it. The INS filters are warmed smoothed,
+so that the backward pass (``kernels.smoother``) is compiled as well.
 
 Filters that share one compiled kernel (the EKFs, loose or tight, with or without NHC; the
 UKFs; the vehicle-model filters; the cascaded filters) are one *group* and are warmed one
@@ -105,6 +106,7 @@ def warm_here(names: Sequence[str], params: Params) -> None:
     """
     from navreplay.pipeline.errors import DivergenceError
     from navreplay.pipeline.estimation.families import run_tables
+    from navreplay.pipeline.estimation.ins.config import InsFilterParams
 
     with tempfile.TemporaryDirectory(prefix="navreplay-warm-") as tmp:
         drives: dict[str, Path] = {}
@@ -114,6 +116,8 @@ def warm_here(names: Sequence[str], params: Params) -> None:
                 drives[family] = _drive(family, params, Path(tmp) / family)
             try:
                 section = params.filters.section(name)
+                if isinstance(section, InsFilterParams):  # the backward pass too
+                    section = replace(section, smooth=True)
                 run_tables(drives[family], name, section, "numba")
             except DivergenceError:
                 pass  # the kernel compiled and ran; a short drive may end off its limits

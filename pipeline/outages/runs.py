@@ -5,9 +5,11 @@ The tables are read once; each scenario is applied to them (``scenarios.apply``:
 windows, satellites kept, faults), the filter's family runs on the result
 (``estimation.core.contract.Family.run``) and the outage windows are measured on the run's error
 track (``Family.track``, ``estimation.core.windows.window_metrics``) against the truth or the
-withheld fixes. A fault scenario of an INS filter is also checked against the catalogue's
-pass criteria (``scenarios.criteria``), which compares it with the nominal run of the same
-filter. The scenario (definition, windows, satellites chosen, faults injected) goes into
+withheld fixes; a smoothed INS filter on a log without truth measures them against its
+smoothed nominal run instead (``SMOOTHED_NOMINAL``), the withheld fixes' measure beside it.
+A fault scenario of an INS filter is also checked against the catalogue's pass criteria
+(``scenarios.criteria``), which compares it with the nominal run of the same filter. The
+scenario (definition, windows, satellites chosen, faults injected) goes into
 ``metrics.json`` and the Parquet provenance.
 """
 
@@ -20,8 +22,10 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Any
 
+import pyarrow as pa
+
 from navreplay.pipeline.estimation.core.contract import Backend, Family, RunInputs, RunOutput
-from navreplay.pipeline.estimation.core.windows import window_metrics
+from navreplay.pipeline.estimation.core.windows import ErrorTrack, window_metrics
 from navreplay.pipeline.estimation.families import family_of
 from navreplay.pipeline.estimation.ins.replay import RunResult
 from navreplay.pipeline.scenarios.apply import AppliedScenario, apply_scenario
@@ -32,28 +36,49 @@ from navreplay.pipeline.scenarios.faults import ScenarioError
 log = logging.getLogger(__name__)
 
 
+#: ``ErrorTrack.reference`` of windows measured against the smoothed nominal run
+SMOOTHED_NOMINAL = "smoothed_nominal"
+
+
 def scenario_metrics(
     inputs: RunInputs,
     family: Family,
     applied: AppliedScenario,
     run: RunOutput,
     scenarios: ScenariosParams,
+    reference: pa.Table | None = None,
 ) -> dict[str, Any]:
     """``metrics.json`` of a scenario run: the family's metrics plus the outage windows,
     measured against the unmodified ``inputs`` (the withheld fixes are the reference where
-    there is no truth)."""
+    there is no truth). ``reference``: the smoothed nominal run's estimate of a log without
+    truth; the windows are then measured against it (``reference`` ``smoothed_nominal``), and
+    against the withheld fixes under ``outage_windows_vs_fixes``."""
     m = dict(run.metrics)
     if applied.outage_windows:
-        track = family.track(run, inputs)
-        m["outage_windows"] = (
-            []
-            if track is None
-            else window_metrics(track, applied.outage_windows, applied.t0_ns, scenarios.metrics)
-        )
+        m["outage_windows"] = _windows(family.track(run, inputs), applied, scenarios)
+        if reference is not None:
+            m["outage_windows_vs_fixes"] = m["outage_windows"]
+            by_smoothed = replace(inputs, tables={**inputs.tables, "truth": reference})
+            track = family.track(run, by_smoothed)
+            track = None if track is None else replace(track, reference=SMOOTHED_NOMINAL)
+            m["outage_windows"] = _windows(track, applied, scenarios)
+        if run.smoothed is not None and "smoothed" in m:
+            smoothed = replace(run, result=run.smoothed[1], smoothed=None)
+            track = family.track(smoothed, inputs)
+            m["smoothed"] = dict(m["smoothed"], outage_windows=_windows(track, applied, scenarios))
     meta = applied.metadata()
     m["scenario_detail"] = meta
     m["windows"] = meta["windows"]
     return m
+
+
+def _windows(
+    track: ErrorTrack | None, applied: AppliedScenario, scenarios: ScenariosParams
+) -> list[dict[str, Any]]:
+    """The outage-window metrics of an error track ([] without one)."""
+    if track is None:
+        return []
+    return window_metrics(track, applied.outage_windows, applied.t0_ns, scenarios.metrics)
 
 
 def run_scenarios(
@@ -87,7 +112,12 @@ def run_scenarios(
             f"{name}: fault scenarios ({', '.join(faulty)}) are checked against pass criteria "
             f"on the INS state; {family.name} filters run the outage and satellite scenarios"
         )
-    if any(spec.faults for spec in specs.values()) and "nominal" not in specs:
+    smoothed_reference = (
+        getattr(params, "smooth", False) and not _has_truth(inputs)
+        and any(spec.windows for spec in specs.values())
+    )  # fmt: skip
+    needs_nominal = smoothed_reference or any(spec.faults for spec in specs.values())
+    if needs_nominal and "nominal" not in specs:
         specs = {"nominal": scenarios.get("nominal"), **specs}
     first: dict[tuple[Any, ...], str] = {}
     for sname, spec in specs.items():
@@ -103,10 +133,14 @@ def run_scenarios(
         results = [job.replay(s) for s in replays]
     by_key = {_transform_key(specs[s]): r for s, r in zip(replays, results, strict=True)}
     nominal = by_key.get(_transform_key(specs["nominal"])) if "nominal" in specs else None
+    reference = None
+    if smoothed_reference and nominal is not None and nominal.smoothed is not None:
+        reference = nominal.smoothed[0]
+        log.info("no truth: outage windows measured against the smoothed nominal run")
     for sname in names:
         applied = job.apply(sname)
         run = by_key[_transform_key(specs[sname])]
-        metrics = scenario_metrics(inputs, family, applied, run, scenarios)
+        metrics = scenario_metrics(inputs, family, applied, run, scenarios, reference)
         if applied.injected:
             assert nominal is not None
             result, reference = run.result, nominal.result
@@ -140,6 +174,11 @@ class _Job:
         tables = dict(self.apply(scenario).tables)
         inputs = replace(self.inputs, tables=tables, log_tables=self.inputs.tables)
         return self.family.run(inputs, self.name, self.params, self.backend)
+
+
+def _has_truth(inputs: RunInputs) -> bool:
+    truth = inputs.tables.get("truth")
+    return truth is not None and truth.num_rows > 0
 
 
 def _transform_key(spec: ScenarioSpec) -> tuple[Any, ...]:

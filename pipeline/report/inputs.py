@@ -9,7 +9,10 @@
 - every run under ``runs_dir``: any directory holding a ``metrics.json`` (layout free, e.g.
   ``runs/<filter>/<scenario>/``), with its ``estimate.parquet`` and ``innovations.parquet``
   (written by ``navreplay run``, ``estimation.core.contract.write_run``). The run's filter and
-  scenario come from ``metrics.json`` (``filter``, ``scenario``). A run whose ``status`` is
+  scenario come from ``metrics.json`` (``filter``, ``scenario``). A smoothed run's
+  ``smoothed.parquet`` appears as a run of its own, ``<filter> smoothed``, whose metrics are
+  ``metrics.json`` ``smoothed`` (``smoothed_run``), so that every figure and table shows it
+  beside the filter. A run whose ``status`` is
   ``skipped`` carries a ``reason`` and no tables. Outage windows come from
   ``metrics.json`` ``outage_windows`` (or ``windows``): a list of objects with either
   ``start_ns`` (or ``start_t_ns``, as the scenario engine writes it) and ``end_ns`` or
@@ -192,11 +195,36 @@ def load_run(run_dir: Path) -> Run:
     )
 
 
+#: what a smoothed run's name adds to its filter's
+SMOOTHED = " smoothed"
+
+
+def smoothed_run(run: Run) -> Run | None:
+    """The smoothed estimate of ``run`` (``smoothed.parquet``) as a run of its own, named
+    ``<filter> smoothed``: the forward run's metrics with those of ``metrics.json``
+    ``smoothed`` in their place (accuracy, consistency, outage windows); no innovations (they
+    are the forward filter's). None if the run was not smoothed."""
+    sm = run.metrics.get("smoothed")
+    path = run.path / "smoothed.parquet"
+    if not isinstance(sm, dict) or not path.is_file():
+        return None
+    estimate = _table(path, TableName.ESTIMATOR)
+    name = run.filter + SMOOTHED
+    metrics = {**run.metrics, **sm, "filter": name}
+    metrics.pop("smoothed", None)
+    if "outage_windows" not in sm:
+        metrics.pop("outage_windows", None)
+    t_first = int(estimate.column("t_ns")[0].as_py()) if estimate and estimate.num_rows else None
+    windows = _windows(run.path / "metrics.json", metrics, t_first)
+    return Run(run.path, name, run.scenario, metrics, estimate, None, windows)
+
+
 def load_runs(runs_dir: Path) -> list[Run]:
     """Every run under ``runs_dir``, sorted by (filter, scenario); none if it is absent."""
     if not runs_dir.is_dir():
         return []
     runs = [load_run(p.parent) for p in sorted(runs_dir.rglob("metrics.json"))]
+    runs += [s for s in map(smoothed_run, runs) if s is not None]
     seen: dict[tuple[str, str], Path] = {}
     for r in runs:
         key = (r.filter, r.scenario)

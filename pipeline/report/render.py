@@ -50,7 +50,7 @@ from navreplay.pipeline.report.experiments import (
     SAT_REDUCTION_NAME,
     find_outage_results,
 )
-from navreplay.pipeline.report.inputs import DatasetInputs
+from navreplay.pipeline.report.inputs import SMOOTHED, DatasetInputs
 from navreplay.pipeline.report.series import ErrorSeries
 
 log = logging.getLogger(__name__)
@@ -78,6 +78,20 @@ def _headline(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
         if vals:
             out.setdefault(str(r["filter"]), {})[str(r["scenario"])] = vals
     return out
+
+
+def _subtitle(data: DatasetInputs, version: str) -> str:
+    """What ran: the filters' runs (a smoothed run counts beside its filter's)."""
+    forward = [r for r in data.runs if not r.filter.endswith(SMOOTHED)]
+    ran = sum(r.ran for r in forward)
+    not_ran = f" ({len(forward) - ran} did not run)" if ran < len(forward) else ""
+    n_smoothed = len(data.runs) - len(forward)
+    smoothed = f", {n_smoothed} of them smoothed" if n_smoothed else ""
+    n_filters = len({r.filter for r in forward})
+    return (
+        f"{ran} runs{not_ran} of {n_filters} filters under {len(data.scenarios())} "
+        f"scenarios{smoothed}; navreplay {version}"
+    )
 
 
 def render_dataset(
@@ -216,12 +230,7 @@ def render_dataset(
         ("cost", "Run cost", sections.cost(run_rows)),
         ("provenance", "Provenance", sections.provenance(provenance)),
     ]
-    ran = sum(r.ran for r in data.runs)
-    not_ran = f" ({len(data.runs) - ran} did not run)" if ran < len(data.runs) else ""
-    subtitle = (
-        f"{ran} runs{not_ran} of {len(filters)} filters under {len(data.scenarios())} "
-        f"scenarios; navreplay {provenance['package_version']}"
-    )
+    subtitle = _subtitle(data, str(provenance["package_version"]))
     page = h.page(title or f"navreplay report: {data.dataset}", subtitle, body, opened=_OPENED)
     tables = {
         "runs.csv": tb.to_csv(run_rows),

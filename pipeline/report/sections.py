@@ -12,7 +12,7 @@ from navreplay.pipeline.outages.stats import mean_interval
 from navreplay.pipeline.report import html as h
 from navreplay.pipeline.report import markdown
 from navreplay.pipeline.report.experiments import CsvTable, Experiment
-from navreplay.pipeline.report.inputs import DatasetInputs, Run
+from navreplay.pipeline.report.inputs import SMOOTHED, DatasetInputs, Run
 from navreplay.pipeline.report.tables import PAPER_PAIR, PAPER_REDUCTION_PCT
 
 Row = dict[str, Any]
@@ -78,7 +78,8 @@ def verdict(rows: Sequence[Row]) -> str:
 def best_rows(windows: Sequence[Row], status: dict[tuple[str, str], str]) -> list[Row]:
     """Which filter held best in each outage condition (satellites kept, window length): the
     lowest mean error at the windows' ends, with its 95 % interval (BCa bootstrap over the
-    windows), and the runner-up. Only runs that finished (ok or inconsistent) compete."""
+    windows), and the runner-up. Only runs that finished (ok or inconsistent) compete, and
+    only the filters: a smoothed run (``inputs.SMOOTHED``) knew the fixes after each window."""
     groups: dict[tuple[int, float], dict[str, list[float]]] = {}
     refs: dict[tuple[int, float], set[str]] = {}
     for w in windows:
@@ -86,6 +87,8 @@ def best_rows(windows: Sequence[Row], status: dict[tuple[str, str], str]) -> lis
             "ok", "inconsistent"):  # fmt: skip
             continue
         if w.get("sats") is None and not str(w["scenario"]).startswith("outage"):
+            continue
+        if str(w["filter"]).endswith(SMOOTHED):
             continue
         key = (int(w.get("sats") or 0), round(float(w["duration_s"]), 1))
         groups.setdefault(key, {}).setdefault(str(w["filter"]), []).append(float(w["err_end_m"]))

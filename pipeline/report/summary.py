@@ -5,7 +5,8 @@ A *cell* is one (dataset, scenario) in which several filters ran; filters are co
 inside cells, on the same data (paired), and only on errors against a truth: a run of a log
 without one reports residuals to the fixes it fused (``reference`` ``fixes_residual``), which
 rank how closely a filter follows its inputs, not how accurate it is, so such runs are listed
-but never ranked (``not_ranked``):
+but never ranked (``not_ranked``). Smoothed runs (``<filter> smoothed``) are listed, never
+ranked: they saw the fixes after every outage.
 
 - rank: per cell, filters ranked by 3-D RMS position error, or by horizontal RMS in a cell
   where a filter has no 3-D error (the planar vehicle-model and cascaded filters) (1 = best,
@@ -45,6 +46,7 @@ from navreplay.pipeline.report import html as h
 from navreplay.pipeline.report import tables as tb
 from navreplay.pipeline.report.experiments import SAT_REDUCTION_NAME, read_csv
 from navreplay.pipeline.report.input_files import ReportInputError, read_json
+from navreplay.pipeline.report.inputs import SMOOTHED
 from navreplay.pipeline.report.onboard import CSV_NAME as ONBOARD_NAME
 from navreplay.pipeline.report.sections import paper_pct
 from navreplay.pipeline.report.tables import PAPER_PAIR, PAPER_REDUCTION_PCT
@@ -119,8 +121,8 @@ def _cells(results: Sequence[DatasetResult]) -> dict[tuple[str, str], dict[str, 
     runs: dict[tuple[str, str], dict[str, Row]] = {}
     for d in results:
         for r in d.runs:
-            if not _against_truth(r):
-                continue
+            if not _against_truth(r) or str(r["filter"]).endswith(SMOOTHED):
+                continue  # a smoothed run knew the fixes after each outage: not a filter
             if r.get("status") in FINISHED and (_finite(r.get(METRIC)) or _finite(r.get(METRIC_H))):
                 runs.setdefault((d.dataset, str(r["scenario"])), {})[str(r["filter"])] = r
     cells: dict[tuple[str, str], dict[str, float]] = {}
@@ -145,7 +147,7 @@ def onboard_cells(results: Sequence[DatasetResult]) -> dict[tuple[str, str], dic
                 end = float(w.get("pos_3d_end_m", ""))
             except ValueError:
                 continue
-            if math.isfinite(end):
+            if math.isfinite(end) and not str(w["filter"]).endswith(SMOOTHED):
                 by = ends.setdefault((d.dataset, str(w["scenario"])), {})
                 by.setdefault(str(w["filter"]), []).append(end)
     return {

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -81,6 +82,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--out", type=Path, required=True, metavar="DIR", help="output directory of the run"
+    )
+    parser.add_argument(
+        "--smooth",
+        action="store_true",
+        help="INS filters: also run the Rauch-Tung-Striebel backward pass and write "
+        "smoothed.parquet beside estimate.parquet, its metrics under metrics.json `smoothed` "
+        "(the same as filters.<name>.smooth: true)",
     )
     parser.add_argument(
         "--keep-going",
@@ -135,6 +143,13 @@ def _run(
             )
     single = len(asked) == 1 and asked != ["all"]
     section = params.filters.section(args.filter)
+    if args.smooth:
+        if family is not INS:
+            raise ParamsError(
+                "--smooth", f"smoothing is for the INS/GNSS filters; {args.filter} is a "
+                f"{family.name} filter", source=params_label(args.params),
+            )  # fmt: skip
+        section = replace(params.filters.get(args.filter), smooth=True)
     inputs = RunInputs.read(args.tables, family.inputs)
     if args.skip_unfit and family is INS:
         _, unfit = plan(args.tables, [args.filter])
@@ -164,6 +179,20 @@ def _run(
     return EXIT_NOTHING_USABLE if failed and not args.keep_going else 0
 
 
+def _smoothed_summary(sm: dict[str, Any]) -> str:
+    """What the summary line says of the smoothed run."""
+    if sm["smoothing"]["status"] != "ok":
+        return f"; smoothing failed: {sm['smoothing']['failure']}"
+    text = "; smoothed"
+    if sm.get("truth"):
+        text += f": horizontal RMS {sm['pos_err_h_rms_m']:.2f} m"
+    wins = [w for w in sm.get("outage_windows", []) if w["err_end_m"] is not None]
+    if wins:
+        mean = sum(w["err_mean_m"] for w in wins) / len(wins)
+        text += f", outage windows {mean:.1f} m on average"
+    return text
+
+
 def _summary(filt: str, backend: str, scenario: str, m: dict[str, Any], out: Path) -> None:
     text = f"{filt} ({backend}) {scenario}: {m['status']}, {m['epochs']} epochs"
     if m["status"] in ("not_aligned", "diverged"):
@@ -175,6 +204,9 @@ def _summary(filt: str, backend: str, scenario: str, m: dict[str, Any], out: Pat
     if wins:
         mean_end = sum(w["err_end_m"] for w in wins) / len(wins)
         text += f", {len(wins)} outage windows ending at {mean_end:.1f} m on average"
+    sm = m.get("smoothed")
+    if sm is not None:
+        text += _smoothed_summary(sm)
     if "fault_checks_passed" in m:
         text += f", fault criteria {'passed' if m['fault_checks_passed'] else 'FAILED'}"
     text += f", {m['realtime_factor']:.0f}x real time -> {out}"

@@ -10,7 +10,8 @@ that protocol, with ``track``: the run's position errors, on which the scenario 
 ``write_run`` writes every family's run directory the same way.
 
 A run directory holds ``estimate.parquet`` (a canonical ``estimator`` table with a sigma
-column per estimated column), ``innovations.parquet`` (one row per gated measurement block),
+column per estimated column), ``smoothed.parquet`` (the same for the smoothed run, when the
+filter was smoothed), ``innovations.parquet`` (one row per gated measurement block),
 ``events.parquet`` (rejections, resets, repairs, skipped inputs) and ``metrics.json``; all
 appear together or not at all.
 """
@@ -109,12 +110,15 @@ class RunOutput:
         result: the family's own result (``RunResult``, ``VehicleRunResult``,
             ``CascadedResult``), for the experiments and scenario checks that read it; what
             ran, on which backend, and how it ended are read from it.
+        smoothed: the smoothed run's estimate table and its family result, if the filter
+            was smoothed (``metrics["smoothed"]`` holds its metrics).
     """
 
     tables: RunTables
     metrics: dict[str, Any]
     sources: tuple[Path, ...]
     result: ResultLike
+    smoothed: tuple[pa.Table, ResultLike] | None = None
 
     @classmethod
     def decode(
@@ -341,5 +345,7 @@ def write_run(
         write_parquet(tmp / "innovations.parquet", run.tables.innovations, meta)
         write_parquet(tmp / "events.parquet", run.tables.events, meta)
         write_tum(tmp / "trajectory.tum", run.tables.estimate)
+        if run.smoothed is not None:
+            write_table(tmp / "smoothed.parquet", TableName.ESTIMATOR, run.smoothed[0], prov)
         atomic_write_json(tmp / "metrics.json", metrics)
     log.info("wrote %s (%s, %s)", out_dir, run.filter, run.status)

@@ -403,6 +403,8 @@ class InsFilterParams:
         iae: the innovation-based adaptive R (required by and only by ``iae_ekf``).
         integrity: the integrity monitor's tests (``core.integrity``).
         standstill: standstill detection and the ZUPT / ZARU updates at rest.
+        smooth: also run the Rauch-Tung-Striebel backward pass over the run
+            (``kernels.smoother``) and write ``smoothed.parquet`` beside the estimate.
     """
 
     imu_noise: ImuNoise
@@ -418,6 +420,7 @@ class InsFilterParams:
     iae: IaeParams | None = None
     integrity: IntegrityParams = field(default_factory=IntegrityParams)
     standstill: StandstillParams = field(default_factory=StandstillParams)
+    smooth: bool = False
 
 
 @dataclass(frozen=True)

@@ -30,12 +30,14 @@ from navreplay.pipeline.estimation.core import linalg as la
 from navreplay.pipeline.estimation.core import runlog as rl
 from navreplay.pipeline.estimation.core.runlog import GatedBlocks, RunLog
 from navreplay.pipeline.estimation.ins.kernels import common as cm
+from navreplay.pipeline.estimation.ins.kernels import smoother as sk
 from navreplay.pipeline.estimation.ins.kernels.ekf import ekf_prepare
 from navreplay.pipeline.estimation.ins.kernels.records import (
     Epoch,
     RowPrediction,
     Schedule,
     Settings,
+    SmoothLog,
 )
 from navreplay.pipeline.estimation.ins.kernels.unscented import sigma_h
 from navreplay.pipeline.estimation.ins.models import ins, ins_errors
@@ -52,6 +54,7 @@ class _Run:
     obs: F64 | None
     cfg: Settings
     log: RunLog
+    sm: SmoothLog
 
     def __post_init__(self) -> None:
         n, m_max = self.cfg.n, self.sched.m_max
@@ -65,6 +68,7 @@ class _Run:
         self.L = np.empty((n, n))
         self.Phi, self.Qd = np.empty((n, n)), np.empty((n, n))
         self.buf = cm.epoch_buffers(m_max, n, int(self.sched.t0))
+        self.prior = np.empty((n, n))  # the UKF's prior of the current stop, for smoothing
 
     def stops(self) -> Iterator[tuple[int, I64, int]]:
         """(index, row, time in ns) of every stop of the schedule, in order."""
@@ -100,11 +104,44 @@ class _Run:
         """The epoch at ``t`` of ``m`` rows in ``nb_`` blocks (after ``advance`` to ``t``)."""
         return Epoch(t, m, nb_, self.u[3:6].copy(), self.still.copy(), self.r_scale.copy())
 
-    def predict_nominal(self, X: F64, t: int) -> None:
+    def predict_nominal(self, X: F64, t: int, k: int) -> None:
         """Propagate the nominal state ``X`` to ``t`` (the cursor moves with it), and the
-        span's transition and process noise into ``Phi``, ``Qd`` (error-state filters)."""
+        span's transition and process noise into ``Phi``, ``Qd`` (error-state filters); for
+        smoothing, stop ``k``'s nominal state and span."""
         self.advance(self.span(X, t, True), t)
+        if sk.sm_on(self.sm):
+            sk.record_prior(self.sm, k + 1, X, self.acc)
         ins_errors.transition(X, self.acc, self.cfg.noise, self.cfg.n, self.Phi, self.Qd)
+
+    def record_start(self, X: F64, P: F64, scale: F64) -> None:
+        """The smoothing log's start row (before the start's output is recorded)."""
+        if sk.sm_on(self.sm):
+            sk.record_prior(self.sm, 0, X, self.acc)
+            sk.record_post(self.sm, 0, P, scale, self.log.counts[rl.CNT_OUT])
+
+    def record_cross(
+        self, k: int, sig: F64, x: F64, sc: F64, sig_f: F64, x_f: F64, sc_f: F64
+    ) -> None:
+        """The UKF's stop ``k`` opened for smoothing with the cross covariance of the sigma
+        points ``sig`` about ``x`` (scale ``sc``) and where they went, ``sig_f`` about the
+        prior ``x_f`` (scale ``sc_f``)."""
+        sk.record_prior(self.sm, k + 1, x, self.acc)
+        D = (sig - x).T @ (self.cfg.wc[:, None] * (sig_f - x_f))
+        self.sm.rows[k + 1, sk.SM_CROSS] = sk.pool_put_cross(self.sm, D, sc, sc_f)
+
+    def record_ukf_update(self, k: int, updated: bool, ds: F64, sc: F64) -> None:
+        """The UKF's prior of stop ``k`` (``self.prior``; its posterior where it made no
+        update) and the correction ``ds`` of its coordinates (scale ``sc``)."""
+        if updated:
+            self.record_prior_cov(k, self.prior, sc)
+        else:
+            self.sm.rows[k + 1, sk.SM_PRIOR] = sk.SM_AS_POSTERIOR
+        self.sm.dx[k + 1, :] = ds / sc
+
+    def record_prior_cov(self, k: int, P: F64, scale: F64) -> None:
+        """Pool the prior covariance of stop ``k`` (one the transition does not give)."""
+        if sk.sm_on(self.sm):
+            self.sm.rows[k + 1, sk.SM_PRIOR] = sk.pool_put(self.sm, P, scale)
 
     def prepare(self, kf: Any, t: int, stop: I64, X: F64) -> tuple[int, int]:
         """``ekf_prepare`` of the epoch at ``stop`` on the covariance of the error-state
@@ -118,17 +155,21 @@ class _Run:
         kf.P = P
         return m, ma
 
-    def inject(self, kf: Any, X: F64) -> None:
-        """Move the error estimate of ``kf`` into the nominal state ``X`` (error reset)."""
+    def inject(self, kf: Any, X: F64, k: int) -> None:
+        """Move the error estimate of ``kf`` into the nominal state ``X`` (error reset), and
+        keep it as stop ``k``'s correction for smoothing."""
         n = self.cfg.n
-        ins.inject(X, np.asarray(kf.x, dtype=float).reshape(n), n)
+        dx = np.asarray(kf.x, dtype=float).reshape(n)
+        ins.inject(X, dx, n)
+        if sk.sm_on(self.sm):
+            self.sm.dx[k + 1, :] = dx
         kf.x = np.zeros(n)
 
     def finish_kf(self, kf: Any, k: int, stop: I64, X: F64) -> int:
         """``finish`` of stop ``k`` for the error-state filter ``kf``, counted as done if
         it passed."""
         P = np.ascontiguousarray(kf.P)
-        status = self.finish(int(stop[me.ST_T]), stop, X, P, P, np.ones(self.cfg.n))
+        status = self.finish(k, stop, X, P, P, np.ones(self.cfg.n))
         kf.P = P
         if status == gt.STATUS_OK:
             self.log.counts[rl.CNT_STOP] = k + 1
@@ -144,40 +185,54 @@ class _Run:
         )  # fmt: skip
         return int(m), int(nb_)
 
-    def finish(self, t: int, stop: I64, X: F64, P: F64, P_err: F64, scale: F64) -> int:
-        """Positive definiteness, the NaN barrier and the output of one stop."""
-        log = self.log
+    def finish(self, k: int, stop: I64, X: F64, P: F64, P_err: F64, scale: F64) -> int:
+        """Positive definiteness, the NaN barrier and the output of stop ``k``."""
+        log, t = self.log, int(stop[me.ST_T])
         ok = gt.keep_pd(P, self.cfg.n, self.L, t, log.ev_i, log.ev_f, log.counts)
         status = int(cm.check_state(X, P, scale, self.cfg)) if ok else 3
         if status != gt.STATUS_OK:
             return int(gt.fail(t, status, log.ev_i, log.ev_f, log.counts))
+        if sk.sm_on(self.sm):
+            out_row = log.counts[rl.CNT_OUT] if stop[me.ST_OUT] > 0 else -1
+            sk.record_post(self.sm, k + 1, P, scale, out_row)
         if stop[me.ST_OUT] > 0:
             gt.record_output(t, X, P_err, log)
         return gt.STATUS_OK
 
 
 def run_ekf_filterpy(
-    x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
+    x0: F64,
+    P0: F64,
+    sched: Schedule,
+    fix: F64 | None,
+    obs: F64 | None,
+    cfg: Settings,
+    log: RunLog,
+    sm: SmoothLog,
 ) -> int:
     """``kernels.ekf.run_ekf`` with filterpy's ``ExtendedKalmanFilter`` doing predict/update."""
-    run = _Run(sched, fix, obs, cfg, log)
+    run = _Run(sched, fix, obs, cfg, log, sm)
     n, buf = cfg.n, run.buf
     ekf = run.error_filter(ExtendedKalmanFilter, P0)
     X = x0.copy()
+    run.record_start(X, ekf.P, np.ones(n))
     gt.record_output(sched.t0, X, ekf.P, log)
     for k, stop, t in run.stops():
-        run.predict_nominal(X, t)
+        run.predict_nominal(X, t, k)
         ekf.F, ekf.Q = run.Phi, run.Qd
         ekf.x = np.zeros(n)
         ekf.predict()
+        P_prop = np.array(ekf.P, dtype=float)
         _, ma = run.prepare(ekf, t, stop, X)
+        if not np.array_equal(P_prop, ekf.P):  # a stream reset: not the transition's
+            run.record_prior_cov(k, np.ascontiguousarray(ekf.P), np.ones(n))
         if ma > 0:
             a = buf.acc_rows[:ma]
             Ha, hx = buf.H[a, :n].copy(), buf.z[a] - buf.nu[a]
             ekf.update(
                 buf.z[a], HJacobian=lambda _x, h=Ha: h, Hx=lambda _x, v=hx: v, R=np.diag(buf.r[a])
             )
-            run.inject(ekf, X)
+            run.inject(ekf, X, k)
         status = run.finish_kf(ekf, k, stop, X)
         if status != gt.STATUS_OK:
             return status
@@ -185,10 +240,18 @@ def run_ekf_filterpy(
 
 
 def run_ukf_filterpy(
-    x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
+    x0: F64,
+    P0: F64,
+    sched: Schedule,
+    fix: F64 | None,
+    obs: F64 | None,
+    cfg: Settings,
+    log: RunLog,
+    sm: SmoothLog,
 ) -> int:
     """``kernels.ukf.run_ukf`` with filterpy's ``UnscentedKalmanFilter`` doing the UT."""
-    run = _Run(sched, fix, obs, cfg, log)
+    run = _Run(sched, fix, obs, cfg, log, sm)
+    smoothing = bool(sk.sm_on(sm))
     n = cfg.n
     points = MerweScaledSigmaPoints(n, alpha=cfg.ukf_alpha, beta=cfg.ukf_beta, kappa=cfg.ukf_kappa)
     if not (
@@ -202,9 +265,11 @@ def run_ukf_filterpy(
     sc = np.empty(n)
     ins.coords_scale(x0, n, sc)
     ukf.P = P0 * np.outer(sc, sc)
-    Phi, Qd = np.empty((n, n)), np.empty((n, n))
     X = np.empty(ins.FULL_DIM)
+    run.record_start(x0, P0, np.ones(n))
     gt.record_output(sched.t0, x0, P0, log)
+
+    propagated: list[F64] = []  # the sigma points of a predict, where fx took them
 
     def fx(s: F64, dt: float, t_end: int, q_old: F64, q_new: F64) -> F64:
         Xs = np.empty(ins.FULL_DIM)
@@ -212,22 +277,22 @@ def run_ukf_filterpy(
         run.span(Xs, t_end, False)
         out = np.empty(n)
         ins.from_full(Xs, q_new, n, out)
+        propagated.append(out)
         return out
 
     for k, stop, t in run.stops():
-        # the central sigma point carries the process-noise accumulation and the new reference
-        ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, X)
-        i_next = run.span(X, t, True)
-        ins_errors.transition(X, run.acc, cfg.noise, n, Phi, Qd)
-        ins.coords_scale(X, n, sc)
-        q_new = X[ins.X_Q : ins.X_Q + 4].copy()
-        ukf.Q = Qd * np.outer(sc, sc)
-        ukf.predict(dt=(t - run.t_cur) * 1e-9, fx=fx, t_end=t, q_old=q_ref.copy(), q_new=q_new)
-        q_ref = q_new
-        run.advance(i_next, t)
+        x_prev, sc_prev = np.array(ukf.x, dtype=float), sc.copy()
+        sig_prev = points.sigma_points(x_prev, ukf.P) if smoothing else None
+        propagated.clear()
+        q_ref = _ukf_predict(ukf, run, fx, q_ref, X, sc, t)
+        sc_prior, s_prior = sc.copy(), np.array(ukf.x, dtype=float)
+        if sig_prev is not None:  # (not ukf.sigmas_f: filterpy redraws those after predict)
+            prior_pts = (sig_prev, x_prev, sc_prev, np.array(propagated), s_prior, sc_prior)
+            run.record_cross(k, *prior_pts)
         P = np.ascontiguousarray(ukf.P)
         ok = gt.keep_pd(P, n, run.L, t, log.ev_i, log.ev_f, log.counts)
         ukf.P = P
+        run.prior = np.array(P)
         x = np.asarray(ukf.x, dtype=float)
         m, nb_ = run.layout(stop, x[ins.E_VEL : ins.E_VEL + 3], np.asarray(ukf.P, dtype=float))
         if ok and m > 0:
@@ -235,12 +300,30 @@ def run_ukf_filterpy(
         ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, X)
         ins.coords_scale(X, n, sc)
         P = np.ascontiguousarray(ukf.P)
-        status = run.finish(t, stop, X, P, P / np.outer(sc, sc), sc) if ok else 3
+        if smoothing and ok:
+            run.record_ukf_update(k, m > 0, np.asarray(ukf.x, dtype=float) - s_prior, sc_prior)
+        status = run.finish(k, stop, X, P, P / np.outer(sc, sc), sc) if ok else 3
         ukf.P = P
         if status != gt.STATUS_OK:
             return status if ok else int(gt.fail(t, status, log.ev_i, log.ev_f, log.counts))
         log.counts[rl.CNT_STOP] = k + 1
     return gt.STATUS_OK
+
+
+def _ukf_predict(ukf: Any, run: _Run, fx: Any, q_ref: F64, X: F64, sc: F64, t: int) -> F64:
+    """filterpy's predict to ``t`` (the cursor moves with it); ``X`` and ``sc`` become the
+    central sigma point's full state and coordinate scale, which carries the process-noise
+    accumulation and the new attitude reference (returned)."""
+    n, cfg = run.cfg.n, run.cfg
+    ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, X)
+    i_next = run.span(X, t, True)
+    ins_errors.transition(X, run.acc, cfg.noise, n, run.Phi, run.Qd)
+    ins.coords_scale(X, n, sc)
+    q_new = X[ins.X_Q : ins.X_Q + 4].copy()
+    ukf.Q = run.Qd * np.outer(sc, sc)
+    ukf.predict(dt=(t - run.t_cur) * 1e-9, fx=fx, t_end=t, q_old=q_ref.copy(), q_new=q_new)
+    run.advance(i_next, t)
+    return q_new
 
 
 def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb_: int) -> None:
@@ -279,6 +362,7 @@ def _ukf_update(ukf: Any, points: Any, run: _Run, t: int, q_ref: F64, m: int, nb
         ukf.P = P
         if not reset:
             break
+    run.prior = np.array(ukf.P)  # after any reset: the prior a smoother takes
     a = buf.acc_rows[: cm.close_gating(t, g, cfg, buf, run.log)].copy()
     if a.size == 0:
         return

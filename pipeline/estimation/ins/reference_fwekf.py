@@ -30,7 +30,12 @@ from navreplay.pipeline.estimation.ins.fuzzy import (
 )
 from navreplay.pipeline.estimation.ins.iae import N_KINDS, iae_scales, push_innovations
 from navreplay.pipeline.estimation.ins.kernels.fwekf import RING_COLS, push_residuals
-from navreplay.pipeline.estimation.ins.kernels.records import Fading, Schedule, Settings
+from navreplay.pipeline.estimation.ins.kernels.records import (
+    Fading,
+    Schedule,
+    Settings,
+    SmoothLog,
+)
 from navreplay.pipeline.estimation.ins.models import measurement as me
 from navreplay.pipeline.estimation.ins.reference import _Run
 from navreplay.pipeline.nav.earth import F64, I64
@@ -45,9 +50,10 @@ def run_fwekf_filterpy(
     cfg: Settings,
     fading: Fading,
     log: RunLog,
+    sm: SmoothLog,
 ) -> int:
     """``kernels.fwekf.run_fwekf`` with filterpy's fading-memory ``KalmanFilter``."""
-    run = _Run(sched, fix, obs, cfg, log)
+    run = _Run(sched, fix, obs, cfg, log, sm)
     n, buf, counts = cfg.n, run.buf, log.counts
     fz, out_alpha = fading.fz, fading.out_alpha
     kf = run.error_filter(KalmanFilter, P0)
@@ -56,20 +62,23 @@ def run_fwekf_filterpy(
     ring = np.full((int(fz[FZ_WINDOW]), 3 * N_KINDS if iae else RING_COLS), np.nan)
     n_ring, alpha = 0, 1.0
     out_alpha[0] = alpha
+    run.record_start(X, kf.P, np.ones(n))
     gt.record_output(sched.t0, X, kf.P, log)
     for k, stop, t in run.stops():
-        run.predict_nominal(X, t)
+        run.predict_nominal(X, t, k)
         a_k = alpha if stop[me.ST_FIX] >= 0 and not iae else 1.0  # once per GNSS cycle
         kf.F, kf.Q = a_k * run.Phi, run.Qd.copy()  # eq. 26: (a Phi) P (a Phi)^T + Q
         kf.x = np.zeros(n)
         kf.predict()
         m, ma = run.prepare(kf, t, stop, X)
+        if m > 0:
+            run.record_prior_cov(k, np.ascontiguousarray(kf.P), np.ones(n))
         if ma > 0:
             a = buf.acc_rows[:ma]
             kf.dim_z = ma
             R_w = np.diag(buf.r[a]) / (a_k * a_k)  # eq. 24: R / alpha^2 in gain and Joseph
             kf.update(buf.nu[a].copy(), R=R_w, H=buf.H[a, :n].copy())
-            run.inject(kf, X)
+            run.inject(kf, X, k)
         if m > 0 and stop[me.ST_FIX] >= 0 and iae:
             n_ring = int(
                 push_innovations(ring, n_ring, buf.rows, buf.nu, buf.S, buf.r, run.r_scale, m)

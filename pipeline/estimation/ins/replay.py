@@ -56,7 +56,13 @@ from navreplay.pipeline.estimation.ins.config import (
 )
 from navreplay.pipeline.estimation.ins.fixnoise import FixNoise, ObsNoise
 from navreplay.pipeline.estimation.ins.fuzzy import FZ_MODE, MODE_IAE
-from navreplay.pipeline.estimation.ins.kernels.records import Fading, Schedule, Settings
+from navreplay.pipeline.estimation.ins.kernels import smoother as sm_kernel
+from navreplay.pipeline.estimation.ins.kernels.records import (
+    Fading,
+    Schedule,
+    Settings,
+    SmoothLog,
+)
 from navreplay.pipeline.estimation.ins.models import ins, ins_errors
 from navreplay.pipeline.estimation.ins.models import measurement as me
 from navreplay.pipeline.nav.earth import F64, I64
@@ -103,6 +109,8 @@ class RunResult:
         imu_noise: the IMU noise densities used and their ``source`` (``resolve_imu_noise``).
         fix_noise: the fix-error model a loosely coupled run used (``fixnoise.FixNoise``).
         obs_noise: the pseudorange noise a tightly coupled run used (``fixnoise.ObsNoise``).
+        smoothed: the RTS-smoothed ``x`` and ``P`` at the same output rows, if the run was
+            smoothed (``filters.<name>.smooth``); smoothing: how (``Smoothing``).
     """
 
     filter: str
@@ -124,6 +132,43 @@ class RunResult:
     imu_noise: dict[str, Any] = field(default_factory=dict)
     fix_noise: dict[str, Any] = field(default_factory=dict)
     obs_noise: dict[str, Any] = field(default_factory=dict)
+    smoothed: tuple[F64, F64] | None = None
+    smoothing: Smoothing | None = None
+
+    def smoothed_run(self) -> RunResult | None:
+        """This run with its smoothed states and covariances as its outputs (what the
+        estimate table, the metrics and the error tracks read), or None if not smoothed."""
+        if self.smoothed is None:
+            return None
+        x, P = self.smoothed
+        return replace(self, x=x, P=P, smoothed=None)
+
+
+@dataclass(frozen=True)
+class Smoothing:
+    """What the backward pass of a run cost and how it ended.
+
+    Attributes:
+        status: ``ok``, or ``failed`` (a covariance of the backward pass not positive
+            definite: the segment's outputs are left as the forward filter's), with
+            ``failure``.
+        runtime_s: the backward passes' wall time; memory_bytes: what the forward pass kept
+            for them (``records.SmoothLog``, as allocated; of the longest segment), beside
+            the run's own outputs.
+    """
+
+    status: str = "ok"
+    failure: str | None = None
+    runtime_s: float = 0.0
+    memory_bytes: int = 0
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "status": self.status,
+            "failure": self.failure,
+            "runtime_s": self.runtime_s,
+            "memory_mb": self.memory_bytes / 1e6,
+        }
 
 
 def make_setup(
@@ -372,12 +417,10 @@ def run_filter(
     events = list(imu_data.events)
     events += list(fixes.events) if fixes is not None and kind.coupling == "loose" else []
     events += list(obs.events) if obs is not None and kind.coupling == "tight" else []
-    parts: list[tuple[I64, F64, F64, I64, F64]] = []
-    alphas: list[F64] = []
+    segment_runs: list[_Segment] = []
     alignments: list[Alignment] = []
     status, failure = "ok", None
     duration = 0.0
-    compile_s = 0.0
     meas = _measurements(kind.coupling, fixes, obs)
     course_is_heading = sensors is None or sensors.platform.kind in COURSE_IS_HEADING
     still = _standstill(imu_data, noise_model, fixes, params, sensors)
@@ -392,16 +435,13 @@ def run_filter(
             continue
         al = with_fix_error_states(al, gm)
         alignments.append(al)
-        out, code, t_fail, seg_events, seg_compile_s, alpha = _run_segment(
-            kernel, setup, params, kind, imu_data, seg, meas, al, still
-        )
-        compile_s += seg_compile_s
-        parts.append(out)
-        alphas.append(alpha)
-        events += seg_events
-        duration += (out[0][-1] - al.t_ns) * 1e-9 if out[0].size else 0.0
-        if code != gt.STATUS_OK:
-            failure = f"{gt.STATUS_TEXT[code]} at t_ns={t_fail}"
+        run = _run_segment(kernel, setup, params, kind, imu_data, seg, meas, al, still)
+        events += run.events
+        segment_runs.append(run)
+        out_t = run.out[0]
+        duration += (out_t[-1] - al.t_ns) * 1e-9 if out_t.size else 0.0
+        if run.code != gt.STATUS_OK:
+            failure = f"{gt.STATUS_TEXT[run.code]} at t_ns={run.t_fail}"
             status = "diverged"
             if params.divergence.on_divergence == "raise":
                 raise DivergenceError(
@@ -417,6 +457,8 @@ def run_filter(
         )
         log.warning("filter %s: %s", name, failure)
     events.sort(key=lambda e: e.t_ns)
+    parts = [r.out for r in segment_runs]
+    compile_s = sum(r.compile_s for r in segment_runs)
     return RunResult(
         filter=name,
         backend=backend,
@@ -433,7 +475,7 @@ def run_filter(
         runtime_s=time.perf_counter() - t_wall - compile_s,
         compile_s=compile_s,
         duration_s=duration,
-        extra=_adaptive_series(setup, alphas),
+        extra=_adaptive_series(setup, [r.alpha for r in segment_runs]),
         imu_noise={
             "source": noise_source,
             "accel_noise_mps2_rthz": noise_model.accel_noise_mps2_rthz,
@@ -449,6 +491,27 @@ def run_filter(
             if obs is not None and obs.noise is not None and kind.coupling == "tight"
             else {}
         ),
+        smoothed=_smoothed(segment_runs) if params.smooth and segment_runs else None,
+        smoothing=_smoothing(segment_runs) if params.smooth else None,
+    )
+
+
+def _smoothed(runs: list[_Segment]) -> tuple[F64, F64]:
+    """The smoothed states and covariances of a run's segments, in order (a segment whose
+    backward pass failed keeps its forward outputs)."""
+    parts = [r.smoothed if r.smoothed is not None else (r.out[1], r.out[2]) for r in runs]
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+def _smoothing(runs: list[_Segment]) -> Smoothing:
+    """A run's smoothing from its segments': failed if any failed."""
+    segments = [r.smoothing for r in runs if r.smoothing is not None]
+    failed = [s for s in segments if s.status != "ok"]
+    return Smoothing(
+        "failed" if failed else "ok",
+        failed[0].failure if failed else None,
+        sum(s.runtime_s for s in segments),
+        max((s.memory_bytes for s in segments), default=0),
     )
 
 
@@ -534,6 +597,19 @@ def _measurements(
     return _Measurements(no_fix, None, np.ascontiguousarray(obs.obs), obs.start, obs.epoch_t_ns)
 
 
+class _Segment(NamedTuple):
+    """What one segment's run gave ``run_filter``."""
+
+    out: tuple[I64, F64, F64, I64, F64]
+    code: int
+    t_fail: int
+    events: list[tb.Event]
+    compile_s: float
+    alpha: F64
+    smoothed: tuple[F64, F64] | None
+    smoothing: Smoothing | None
+
+
 def _run_segment(
     kernel: KernelFn,
     setup: FilterSetup,
@@ -544,9 +620,10 @@ def _run_segment(
     meas: _Measurements,
     al: Alignment,
     still: I64,
-) -> tuple[tuple[I64, F64, F64, I64, F64], int, int, list[tb.Event], float, F64]:
+) -> _Segment:
     """Run ``kernel`` over the IMU samples ``seg`` of ``imu`` from the alignment ``al``
-    (``still``: the standstill intervals, ``standstill.detect``)."""
+    (``still``: the standstill intervals, ``standstill.detect``), and its backward pass if the
+    params say ``smooth``."""
     lo, hi = seg
     imu_t = imu.t_ns[lo:hi]
     imu_d = imu.data[lo:hi]
@@ -563,28 +640,35 @@ def _run_segment(
     n_ev = n_inn + 2 * len(stops) + 16
     sched = Schedule(int(al.t_ns), int(i0), u0, imu_t, imu_d, stops, obs_start, int(m_max))
 
-    def kernel_args(log_: RunLog) -> tuple[tuple[object, ...], F64]:
-        """The kernel's arguments writing into ``log_``, and fwekf's alpha per output row."""
+    def kernel_args(log_: RunLog, sm: SmoothLog) -> tuple[tuple[object, ...], F64]:
+        """The kernel's arguments writing into ``log_`` and ``sm``, and fwekf's alpha per
+        output row."""
         out_alpha = np.ones(log_.capacity()[0])
         args: tuple[object, ...] = (al.x0, al.P0, sched, fix_arr, obs_arr, setup.settings)
         if setup.adaptive is not None:
             from navreplay.pipeline.estimation.ins.fuzzy import RULES
 
             args = (*args, Fading(setup.adaptive, RULES, out_alpha))
-        return (*args, log_), out_alpha
-
-    def run(log_: RunLog) -> tuple[int, F64]:
-        args, out_alpha = kernel_args(log_)
-        return kernel(*args), out_alpha
+        return (*args, log_, sm), out_alpha
 
     first = RunLog.allocate(n_out, n_inn, n_ev, n, ins.FULL_DIM)
+    sm = _smooth_log(params.smooth, kind, stops, n_out, n)
     compile_s = 0.0
     if hasattr(kernel, "compile"):  # a numba dispatcher: compile or load it outside the timing
         t0 = time.perf_counter()
         with fewer_gc_passes():
-            kernel.compile(tuple(_typeof(a) for a in kernel_args(first)[0]))
+            kernel.compile(tuple(_typeof(a) for a in kernel_args(first, sm)[0]))
         compile_s = time.perf_counter() - t0
-    (code, out_alpha), log_ = first.run_growing(run)
+    log_ = first
+    while True:
+        args, out_alpha = kernel_args(log_, sm)
+        code = kernel(*args)
+        bigger, bigger_sm = log_.grown(), sm_kernel.grown(sm)
+        if bigger is None and bigger_sm is None:
+            break
+        log.info("run log full (%s wanted, %s held): growing it", log_.wanted(), log_.capacity())
+        log_ = bigger if bigger is not None else RunLog.allocate(*log_.capacity(), n, ins.FULL_DIM)
+        sm = bigger_sm if bigger_sm is not None else sm_kernel.empty_like(sm)
     out_t, out_x, out_P, inn_i, inn_f, ev_i, ev_f, counts = log_
     k_out, k_inn, k_ev = log_.wanted()
     seg_events = [
@@ -598,4 +682,57 @@ def _run_segment(
         for j in range(k_ev)
     ]
     out = (out_t[:k_out], out_x[:k_out], out_P[:k_out], inn_i[:k_inn], inn_f[:k_inn])
-    return out, int(code), int(counts[rl.CNT_T_FAIL]), seg_events, compile_s, out_alpha[:k_out]
+    smoothed, smoothing = None, None
+    if sm_kernel.sm_on(sm):
+        backward = sm_kernel.smooth if hasattr(kernel, "compile") else _smooth_filterpy()
+        smoothed, smoothing = _backward(backward, sm, out[1], out[2], setup.settings)
+    return _Segment(
+        out, int(code), int(counts[rl.CNT_T_FAIL]), seg_events, compile_s, out_alpha[:k_out],
+        smoothed, smoothing,
+    )  # fmt: skip
+
+
+def _smooth_log(smooth: bool, kind: FilterKind, stops: I64, n_out: int, n: int) -> SmoothLog:
+    """The smoothing log of a run over ``stops``, ``n_out`` of them outputs (the start
+    included), sized for what its estimator pools (``records.SmoothLog``): the UKF a cross
+    covariance per stop and a prior per update epoch, the EKFs the posteriors between output
+    times (and fwekf its faded priors); no rows if the run is not smoothed. A pool found too
+    small is grown (``smoother.grown``)."""
+    if not smooth:
+        return sm_kernel.allocate(0, 0, n)
+    n_stops = len(stops)
+    between = n_stops + 1 - n_out
+    updates = int(
+        ((stops[:, me.ST_FIX] >= 0) | (stops[:, me.ST_OBS] >= 0) | (stops[:, me.ST_NHC] > 0)
+         | (stops[:, me.ST_STILL] > 0)).sum()
+    )  # fmt: skip
+    ukf = kind.estimator == "ukf"
+    pool = (
+        n_stops + updates + between if ukf
+        else updates + between if kind.adaptive
+        else between + 16
+    )  # fmt: skip
+    return sm_kernel.allocate(n_stops + 1, pool, n, nominal=not ukf)
+
+
+def _smooth_filterpy() -> KernelFn:
+    from navreplay.pipeline.estimation.ins.reference_smoother import smooth_filterpy
+
+    return smooth_filterpy
+
+
+def _backward(
+    backward: KernelFn, sm: SmoothLog, out_x: F64, out_P: F64, cfg: Settings
+) -> tuple[tuple[F64, F64] | None, Smoothing]:
+    """The backward pass (``smoother.smooth``, or filterpy's for the reference backend) over a
+    segment's smoothing log: its smoothed outputs (None if it failed) and how it went."""
+    t0 = time.perf_counter()
+    xs, Ps = out_x.copy(), out_P.copy()
+    code = backward(sm, out_x, out_P, cfg, xs, Ps)
+    memory = sum(a.nbytes for a in sm)
+    runtime = time.perf_counter() - t0
+    if code != sm_kernel.SMOOTH_OK:
+        failure = f"the backward pass stopped: {sm_kernel.SMOOTH_FAILURES[int(code)]}"
+        log.warning("smoothing failed: %s; the segment keeps the forward estimate", failure)
+        return None, Smoothing("failed", failure, runtime, memory)
+    return (xs, Ps), Smoothing("ok", None, runtime, memory)

@@ -33,7 +33,7 @@ from navreplay.pipeline.estimation.core.linalg import (
     joseph_update,
     propagate_cov,
 )
-from navreplay.pipeline.estimation.core.runlog import CNT_STOP, GatedBlocks, RunLog
+from navreplay.pipeline.estimation.core.runlog import CNT_OUT, CNT_STOP, GatedBlocks, RunLog
 from navreplay.pipeline.estimation.ins.kernels.common import (
     check_state,
     close_gating,
@@ -47,6 +47,15 @@ from navreplay.pipeline.estimation.ins.kernels.records import (
     EpochBuffers,
     Schedule,
     Settings,
+    SmoothLog,
+)
+from navreplay.pipeline.estimation.ins.kernels.smoother import (
+    SM_PRIOR,
+    changed,
+    pool_put,
+    record_post,
+    record_prior,
+    sm_on,
 )
 from navreplay.pipeline.estimation.ins.models.ins import (
     X_VEL,
@@ -124,7 +133,14 @@ def ekf_prepare(
 
 @njit(cache=True, error_model="numpy")
 def run_ekf(
-    x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
+    x0: F64,
+    P0: F64,
+    sched: Schedule,
+    fix: F64 | None,
+    obs: F64 | None,
+    cfg: Settings,
+    log: RunLog,
+    sm: SmoothLog,
 ) -> int:
     """Replay the error-state EKF from ``x0, P0`` at ``sched.t0`` over every stop.
 
@@ -134,6 +150,7 @@ def run_ekf(
         fix, obs: the measurements (``models.measurement``); the one the filter does not read
             is None, and the kernel compiled for it carries no code for it.
         cfg: the settings (``records.Settings``); log: what the run writes (``records.RunLog``).
+        sm: what the backward pass needs (``records.SmoothLog``; no rows: not recorded).
 
     Returns:
         a ``common.STATUS_*`` code (``log.counts[CNT_T_FAIL]`` holds the time of a failure).
@@ -152,6 +169,11 @@ def run_ekf(
     buf = epoch_buffers(m_max, n, sched.t0)
     still = np.zeros(STILL_COLS)
     unit = np.ones(K_PR)
+    smoothing = sm_on(sm)
+    P_prop = np.empty((n, n)) if smoothing else np.empty((0, 0))
+    if smoothing:
+        record_prior(sm, 0, X, sw.acc)
+        record_post(sm, 0, P, ones, log.counts[CNT_OUT])
     record_output(sched.t0, X, P, log)
     t_cur = sched.t0
     i = sched.i0
@@ -166,8 +188,12 @@ def run_ekf(
         if stop[ST_STILL] > 0:
             fill_still(still, sched.imu, i_prev, i, u[3:6], (t - t_cur) * 1e-9, cfg)
         t_cur = t
+        if smoothing:
+            record_prior(sm, k + 1, X, sw.acc)
         transition(X, sw.acc, cfg.noise, n, Phi, Qd)
         propagate_cov(P, Phi, Qd, n, tmp)
+        if smoothing:
+            P_prop[:, :] = P
         at_rest = rest_plausible(stop, X[X_VEL : X_VEL + 3], P, cfg)
         m, nb_ = epoch_layout(
             stop, fix, obs, sched.obs_start, cfg.nhc_on, at_rest, buf.rows, buf.blocks
@@ -175,14 +201,20 @@ def run_ekf(
         if m > 0:
             ep = Epoch(t, m, nb_, u[3:6], still, unit)
             ma = ekf_prepare(ep, X, P, fix, obs, cfg, buf, log)
+            if smoothing and changed(P, P_prop, n):  # a stream reset: not the transition's
+                sm.rows[k + 1, SM_PRIOR] = pool_put(sm, P, ones)
             if ma > 0:
                 dx, ok = joseph_update(P, n, buf.H, buf.S, buf.r, buf.nu, buf.acc_rows, ma)
                 if ok:
                     inject(X, dx, n)
+                    if smoothing:
+                        sm.dx[k + 1, :] = dx[:n]
         ok = keep_pd(P, n, L, t, log.ev_i, log.ev_f, log.counts)
         status = check_state(X, P, ones, cfg) if ok else STATUS_INDEFINITE
         if status != STATUS_OK:
             return fail(t, status, log.ev_i, log.ev_f, log.counts)
+        if smoothing:
+            record_post(sm, k + 1, P, ones, log.counts[CNT_OUT] if stop[ST_OUT] > 0 else -1)
         if stop[ST_OUT] > 0:
             record_output(t, X, P, log)
         log.counts[CNT_STOP] = k + 1

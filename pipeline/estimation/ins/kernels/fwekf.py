@@ -80,6 +80,14 @@ from navreplay.pipeline.estimation.ins.kernels.records import (
     Fading,
     Schedule,
     Settings,
+    SmoothLog,
+)
+from navreplay.pipeline.estimation.ins.kernels.smoother import (
+    SM_PRIOR,
+    pool_put,
+    record_post,
+    record_prior,
+    sm_on,
 )
 from navreplay.pipeline.estimation.ins.models.ins import (
     X_VEL,
@@ -164,10 +172,12 @@ def run_fwekf(
     cfg: Settings,
     fading: Fading,
     log: RunLog,
+    sm: SmoothLog,
 ) -> int:
     """Replay the FWEKF: ``kernels.ekf.run_ekf``'s arguments plus the fuzzy system
     (``records.Fading``: its parameters, rules, and the alpha in force at each output row),
-    or with ``fading.fz`` of ``iae.IaeParams`` the IAE (module docstring).
+    or with ``fading.fz`` of ``iae.IaeParams`` the IAE (module docstring). For smoothing
+    (``sm``) the prior of every update epoch is kept: the fading changes it.
 
     Returns:
         a ``common.STATUS_*`` code.
@@ -192,6 +202,10 @@ def run_fwekf(
     alpha = 1.0
     r_scale = np.ones(K_PR)
     out_alpha[0] = alpha
+    smoothing = sm_on(sm)
+    if smoothing:
+        record_prior(sm, 0, X, sw.acc)
+        record_post(sm, 0, P, ones, counts[CNT_OUT])
     record_output(sched.t0, X, P, log)
     t_cur = sched.t0
     i = sched.i0
@@ -205,6 +219,8 @@ def run_fwekf(
         if stop[ST_STILL] > 0:
             fill_still(still, sched.imu, i_prev, i, u[3:6], (t - t_cur) * 1e-9, cfg)
         t_cur = t
+        if smoothing:
+            record_prior(sm, k + 1, X, sw.acc)
         transition(X, sw.acc, cfg.noise, n, Phi, Qd)
         a_k = alpha if stop[ST_FIX] >= 0 and not iae else 1.0  # once per GNSS cycle
         fade_prior(P, Phi, Qd, a_k)
@@ -215,10 +231,14 @@ def run_fwekf(
         if m > 0:
             ep = Epoch(t, m, nb_, u[3:6], still, r_scale)
             ma = ekf_prepare(ep, X, P, fix, obs, cfg, buf, log)
+            if smoothing:
+                sm.rows[k + 1, SM_PRIOR] = pool_put(sm, P, ones)
             if ma > 0:
                 dx, ok = weighted_update(P, n, buf, ma, a_k)
                 if ok:
                     inject(X, dx, n)
+                    if smoothing:
+                        sm.dx[k + 1, :] = dx[:n]
             if stop[ST_FIX] >= 0 and iae:
                 n_ring = push_innovations(ring, n_ring, buf.rows, buf.nu, buf.S, buf.r, r_scale, m)
                 iae_scales(ring, n_ring, fz, r_scale)
@@ -231,6 +251,8 @@ def run_fwekf(
         status = check_state(X, P, ones, cfg) if ok else STATUS_INDEFINITE
         if status != STATUS_OK:
             return fail(t, status, ev_i, ev_f, counts)
+        if smoothing:
+            record_post(sm, k + 1, P, ones, counts[CNT_OUT] if stop[ST_OUT] > 0 else -1)
         if stop[ST_OUT] > 0:
             j = counts[CNT_OUT]
             if j < out_alpha.shape[0]:

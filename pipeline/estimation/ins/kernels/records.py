@@ -199,3 +199,32 @@ class RowPrediction(NamedTuple):
     ref: F64
     w_ib_b: F64
     lever_b: F64
+
+
+class SmoothLog(NamedTuple):
+    """What the forward pass keeps for the backward (RTS) pass (``kernels.smoother``), one row
+    per stop of the schedule and row 0 for the start; zero rows: no smoothing.
+
+    The EKFs keep no covariance per stop: the prior of a stop is recomputed from the previous
+    posterior and the transition (``ins_errors.transition`` of ``x`` and ``acc``), and the
+    posterior of an output stop is the run log's. Only what cannot be recomputed goes to the
+    ``pool``: the posterior of a stop that is not an output (an update epoch between output
+    times), a prior the kernel changed beyond the transition (a stream reset, paper 004's
+    fading), and the UKF's prior and sigma-point cross covariance at every stop.
+
+    Attributes:
+        x: the nominal state at the stop before its update, (S, 18).
+        acc: the span accumulator that ended at the stop (``ins.SpanWork.acc``), (S, ACC_DIM).
+        dx: the correction the update applied, error coordinates (S, n).
+        rows: pool rows of the stop's posterior, prior and cross covariance (-1: not pooled)
+            and its output row (-1: not an output), ``SM_*`` (S, 4).
+        pool: covariances in error coordinates (M, n, n).
+        counts: stops recorded (``SM_C_STOPS``) and pool rows wanted (``SM_C_POOL``), (2,).
+    """
+
+    x: F64
+    acc: F64
+    dx: F64
+    rows: I64
+    pool: F64
+    counts: I64

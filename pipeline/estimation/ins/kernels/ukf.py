@@ -51,7 +51,7 @@ from navreplay.pipeline.estimation.core.gating import (
     record_output,
 )
 from navreplay.pipeline.estimation.core.linalg import cho_solve, cholesky
-from navreplay.pipeline.estimation.core.runlog import CNT_STOP, GatedBlocks, RunLog
+from navreplay.pipeline.estimation.core.runlog import CNT_OUT, CNT_STOP, GatedBlocks, RunLog
 from navreplay.pipeline.estimation.core.unscented import cross_cov, draw_sigmas, unscented_mean_cov
 from navreplay.pipeline.estimation.ins.kernels.common import (
     check_state,
@@ -68,7 +68,18 @@ from navreplay.pipeline.estimation.ins.kernels.records import (
     Schedule,
     Settings,
     SigmaWork,
+    SmoothLog,
     UkfState,
+)
+from navreplay.pipeline.estimation.ins.kernels.smoother import (
+    SM_AS_POSTERIOR,
+    SM_CROSS,
+    SM_PRIOR,
+    pool_put,
+    pool_put_cross,
+    record_post,
+    record_prior,
+    sm_on,
 )
 from navreplay.pipeline.estimation.ins.kernels.unscented import sigma_h
 from navreplay.pipeline.estimation.ins.models.ins import (
@@ -168,9 +179,11 @@ def ukf_update(
     buf: EpochBuffers,
     ws: SigmaWork,
     log: RunLog,
+    prior: F64,
 ) -> bool:
     """Step 4 of the module docstring at epoch ``ep``, ``st`` updated in place; False if
-    ``P`` was not positive definite."""
+    ``P`` was not positive definite. ``prior`` (n, n), if it has rows: the covariance the
+    update starts from, after any stream reset (what a smoother takes as the prior)."""
     n, wm, wc, gamma, gate = cfg.n, cfg.wm, cfg.wc, cfg.ukf_gamma, cfg.gate
     t_ns, m, nb_, w_ib_b, still, r_scale = ep
     s, P, q_ref = st
@@ -215,6 +228,8 @@ def ukf_update(
         if attempt == 1 or not reset_timed_out(t_ns, P, g, buf, sc, cfg, log):
             break
     cross_cov(sig, s, Z, zp, wc, n, m, Pxz)
+    if prior.shape[0] > 0:
+        prior[:, :] = P
     ma = close_gating(t_ns, g, cfg, buf, log)
     if ma > 0:
         _apply_gain(s, P, n, Pxz, S, nu, buf.acc_rows, ma)
@@ -258,6 +273,22 @@ def _error_cov(P: F64, sc: F64, n: int, out: F64) -> None:
 
 
 @njit(cache=True, error_model="numpy")
+def _sigma_cross(ws: SigmaWork, s: F64, cfg: Settings, D: F64) -> None:
+    """The cross covariance of the sigma points a ``ukf_predict`` drew (``s +/- gamma L``,
+    ``ws.L`` still their factor) and where they went (``ws.sig``, about the prior mean
+    ``s``): what the unscented RTS smoother's gain is made of."""
+    n, wc, gamma, L, sig = cfg.n, cfg.wc, cfg.ukf_gamma, ws.L, ws.sig
+    for r in range(n):
+        for c in range(n):
+            a = 0.0
+            for j in range(n):
+                plus = wc[1 + j] * (sig[1 + j, c] - s[c])
+                minus = wc[1 + n + j] * (sig[1 + n + j, c] - s[c])
+                a += gamma * L[r, j] * (plus - minus)
+            D[r, c] = a
+
+
+@njit(cache=True, error_model="numpy")
 def sigma_work(n: int) -> SigmaWork:
     """The UKF workspace for ``n`` error states."""
     ns = 2 * n + 1
@@ -276,7 +307,14 @@ def sigma_work(n: int) -> SigmaWork:
 
 @njit(cache=True, error_model="numpy")
 def run_ukf(
-    x0: F64, P0: F64, sched: Schedule, fix: F64 | None, obs: F64 | None, cfg: Settings, log: RunLog
+    x0: F64,
+    P0: F64,
+    sched: Schedule,
+    fix: F64 | None,
+    obs: F64 | None,
+    cfg: Settings,
+    log: RunLog,
+    sm: SmoothLog,
 ) -> int:
     """Replay the total-state UKF from ``x0`` (full state) and ``P0`` (error coordinates).
 
@@ -303,6 +341,12 @@ def run_ukf(
     still = np.zeros(STILL_COLS)
     unit = np.ones(K_PR)
     ev_i, ev_f, counts = log.ev_i, log.ev_f, log.counts
+    smoothing = sm_on(sm)
+    n_sm = n if smoothing else 0
+    prior, D, s_prior, sc_prev = np.empty((n_sm, n_sm)), np.empty((n, n)), np.empty(n), sc.copy()
+    if smoothing:
+        record_prior(sm, 0, x0, ws.prop.acc)
+        record_post(sm, 0, P0, np.ones(n), counts[CNT_OUT])
     record_output(sched.t0, x0, P0, log)
     t_cur = sched.t0
     i = sched.i0
@@ -319,14 +363,21 @@ def run_ukf(
                 fill_still(still, sched.imu, i, i_next, u[3:6], (t - t_cur) * 1e-9, cfg)
             i = i_next
             t_cur = t
+            if smoothing:
+                record_prior(sm, k + 1, ws.sigX[0], ws.prop.acc)
+                _sigma_cross(ws, s, cfg, D)
+                sm.rows[k + 1, SM_CROSS] = pool_put_cross(sm, D, sc_prev, ws.sc)
+                s_prior[:] = s
             ok = keep_pd(P, n, ws.L, t, ev_i, ev_f, counts)
         at_rest = rest_plausible(stop, s[E_VEL : E_VEL + 3], P, cfg)  # UKF velocity: scale 1
         m, nb_ = epoch_layout(
             stop, fix, obs, sched.obs_start, cfg.nhc_on, at_rest, buf.rows, buf.blocks
         )
+        if smoothing and ok:
+            prior[:, :] = P  # the update's, after any reset, if there is one
         if ok and m > 0:
             ep = Epoch(t, m, nb_, u[3:6], still, unit)
-            ok = ukf_update(ep, st, fix, obs, cfg, buf, ws, log) and keep_pd(
+            ok = ukf_update(ep, st, fix, obs, cfg, buf, ws, log, prior) and keep_pd(
                 P, n, ws.L, t, ev_i, ev_f, counts
             )
         to_full(s, q_ref, n, X)
@@ -334,6 +385,13 @@ def run_ukf(
         status = check_state(X, P, sc, cfg) if ok else STATUS_INDEFINITE
         if status != STATUS_OK:
             return fail(t, status, ev_i, ev_f, counts)
+        if smoothing:
+            updated = m > 0
+            sm.rows[k + 1, SM_PRIOR] = pool_put(sm, prior, ws.sc) if updated else SM_AS_POSTERIOR
+            for j in range(n):
+                sm.dx[k + 1, j] = (s[j] - s_prior[j]) / ws.sc[j]
+            record_post(sm, k + 1, P, sc, counts[CNT_OUT] if stop[ST_OUT] > 0 else -1)
+            sc_prev[:] = sc
         if stop[ST_OUT] > 0:
             _error_cov(P, sc, n, Pe)
             record_output(t, X, Pe, log)
