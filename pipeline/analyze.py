@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -151,12 +151,14 @@ def analyze(
     filters: Sequence[str] | None = None,
     scenarios: Sequence[str] | None = None,
     outages: Sequence[str] = (),
+    smooth: bool = False,
     config: DatasetConfig | None = None,
     config_dir: Path | None = None,
     progress: Progress = lambda _: None,
 ) -> AnalysisResult:
     """Ingest, run and report one log (see the module docstring); ``outages`` are
-    ``--outage`` texts (``pipeline.scenarios.fit.parse_outage``)."""
+    ``--outage`` texts (``pipeline.scenarios.fit.parse_outage``); ``smooth``: every INS
+    filter smoothed as well (``filters.<name>.smooth``)."""
     from navreplay.pipeline.estimation.core.contract import RunInputs, write_run
     from navreplay.pipeline.estimation.ins.run import INPUTS
     from navreplay.pipeline.outages.runs import run_scenarios
@@ -190,7 +192,7 @@ def analyze(
         run_dir = runs_dir / f / sc
         progress(f"run {i}/{len(todo)}: {f} under {sc}")
         t0 = time.perf_counter()
-        section = params.filters.get(f)
+        section = replace(params.filters.get(f), smooth=True) if smooth else params.filters.get(f)
         try:
             ((_, out, applied),) = run_scenarios(
                 inputs, f, section, named, [sc], params.run.backend

@@ -25,6 +25,7 @@ examples:
   navreplay analyze flight.bin --out analysis/flight
   navreplay analyze drive.mcap --filters lc_ekf,tc_ukf_nhc --scenarios nominal,outage_60s --out a/
   navreplay analyze flight.bin --outage 30s --outage 20s@45s --out a/
+  navreplay analyze drive.mcap --smooth --out a/
 """
 
 from __future__ import annotations
@@ -65,6 +66,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "for several",
     )
     parser.add_argument(
+        "--smooth",
+        action="store_true",
+        help="also smooth every INS filter's runs (Rauch-Tung-Striebel: the best trajectory the "
+        "log allows, shown beside each filter; on a log without truth the outage drift is then "
+        "measured against the smoothed nominal run)",
+    )
+    parser.add_argument(
         "--dataset-config",
         type=Path,
         metavar="YAML",
@@ -90,12 +98,41 @@ def _window_drift(rows: list[dict[str, Any]]) -> dict[tuple[str, str], float]:
     return {k: sum(v) / len(v) for k, v in ends.items()}
 
 
+def _finished(
+    r: dict[str, Any],
+    width: int,
+    onboard: dict[tuple[str, str], dict[str, Any]],
+    drift: dict[tuple[str, str], float],
+) -> str:
+    """The summary line of a run that finished (``r``: its row of the report's runs)."""
+    from navreplay.pipeline.report.inputs import SMOOTHED
+    from navreplay.pipeline.report.tables import fmt
+
+    status = "" if r["status"] == "ok" else f" ({r['status'].upper()}: {r.get('reason')})"
+    h, m3 = fmt(r.get("pos_err_h_rms_m")) or "-", fmt(r.get("pos_err_3d_max_m")) or "-"
+    if r.get("reference") == "truth":
+        text = f"horizontal RMS {h:>8} m vs truth, 3-D max {m3:>8} m"
+    else:  # a residual to the fixes the filter fused: never an accuracy
+        text = f"residual to its fixes: horizontal RMS {h} m, 3-D max {m3} m"
+    ob = onboard.get((r["filter"], r["scenario"]))
+    if ob is not None:
+        text += (
+            f"; vs the onboard estimate: horizontal RMS {fmt(ob['pos_h_rms_m'])} m, "
+            f"yaw RMS {fmt(ob['yaw_rms_deg']) or '-'} deg"
+        )
+    end = drift.get((r["filter"], r["scenario"]))
+    if end is not None:
+        text += f", drift at the outages' ends {fmt(end)} m (mean)"
+    if not str(r["filter"]).endswith(SMOOTHED):  # a smoothed run's cost is its filter's
+        text += f", {fmt(r.get('realtime_factor')) or '-'}x real time"
+    return f"  {r['filter']:<{width}} {r['scenario']:<18} {text}{status}"
+
+
 def run(args: argparse.Namespace) -> int:
     from navreplay.ingest.config import load_dataset_config
     from navreplay.pipeline.analyze import analyze
     from navreplay.pipeline.estimation.core.integrity import FINISHED
     from navreplay.pipeline.params import load_params
-    from navreplay.pipeline.report.tables import fmt
 
     params = load_params(args.params)
     config = load_dataset_config(args.dataset_config) if args.dataset_config else None
@@ -106,6 +143,7 @@ def run(args: argparse.Namespace) -> int:
         filters=_split(args.filters),
         scenarios=_split(args.scenarios),
         outages=args.outage,
+        smooth=args.smooth,
         config=config,
         config_dir=args.dataset_config.parent if args.dataset_config else None,
         progress=_progress,
@@ -114,32 +152,14 @@ def run(args: argparse.Namespace) -> int:
     ran = [r for r in res.report.runs if r["status"] in FINISHED]
     if not ran:
         lines.append("  no filter could run on this log:")
+    width = max((len(str(r["filter"])) for r in res.report.runs), default=12)
     for r in res.report.runs:
         if r["status"] not in (*FINISHED, "skipped"):
             state = str(r["status"]).replace("_", " ")
-            lines.append(f"  {r['filter']:<12} {r['scenario']:<18} {state}: {r.get('reason')}")
+            lines.append(f"  {r['filter']:<{width}} {r['scenario']:<18} {state}: {r.get('reason')}")
     onboard = {(o["filter"], o["scenario"]): o for o in res.report.onboard if o["scope"] == "run"}
     drift = _window_drift(res.report.onboard)
-    for r in ran:
-        status = "" if r["status"] == "ok" else f" ({r['status'].upper()}: {r.get('reason')})"
-        h, m3 = fmt(r.get("pos_err_h_rms_m")) or "-", fmt(r.get("pos_err_3d_max_m")) or "-"
-        if r.get("reference") == "truth":
-            text = f"horizontal RMS {h:>8} m vs truth, 3-D max {m3:>8} m"
-        else:  # a residual to the fixes the filter fused: never an accuracy
-            text = f"residual to its fixes: horizontal RMS {h} m, 3-D max {m3} m"
-        ob = onboard.get((r["filter"], r["scenario"]))
-        if ob is not None:
-            text += (
-                f"; vs the onboard estimate: horizontal RMS {fmt(ob['pos_h_rms_m'])} m, "
-                f"yaw RMS {fmt(ob['yaw_rms_deg']) or '-'} deg"
-            )
-        end = drift.get((r["filter"], r["scenario"]))
-        if end is not None:
-            text += f", drift at the outages' ends {fmt(end)} m (mean)"
-        realtime = fmt(r.get("realtime_factor")) or "-"
-        lines.append(
-            f"  {r['filter']:<12} {r['scenario']:<18} {text}, {realtime}x real time{status}"
-        )
+    lines += [_finished(r, width, onboard, drift) for r in ran]
     for s in res.skipped:
         lines.append(f"  skipped {s.filter} / {s.scenario}: {s.reason}")
     if res.report.log_account:
