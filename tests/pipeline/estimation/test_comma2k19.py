@@ -44,3 +44,21 @@ def test_loosely_coupled_filter_within_3_m_of_the_reference(
     vel = m["nis"]["gnss_vel"]
     assert vel["dof_mean"] == 2.0  # the u-blox gives speed and course: horizontal velocity
     assert vel["nis_mean"] < vel["nis_bounds_95"][1]  # not overconfident
+
+
+def test_smoothed_run_keeps_to_the_reference_and_cuts_the_worst_error(
+    tables: Path, tmp_path: Path
+) -> None:
+    """``--smooth`` on the real drive: the backward pass ends ok, the smoothed run stays
+    within 3 m horizontal RMS of the reference and its largest 3-D error is below the forward
+    filter's (4.8 m -> 2.8 m). Its RMS is not below the forward filter's (2.08 m against
+    2.06 m): both sit on the fixes' 2 m along-track offset from the camera reference (0.12 s
+    at 17 m/s), which no smoother of those fixes removes."""
+    out = tmp_path / "smoothed"
+    argv = ["-q", "run", str(tables), "--filter", "lc_ekf", "--smooth", "--out", str(out)]
+    assert main(argv) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    sm = m["smoothed"]
+    assert sm["smoothing"]["status"] == "ok"
+    assert sm["pos_err_h_rms_m"] < 3.0
+    assert sm["pos_err_3d_max_m"] < 0.8 * m["pos_err_3d_max_m"]
