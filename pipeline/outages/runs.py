@@ -55,21 +55,38 @@ def scenario_metrics(
     against the withheld fixes under ``outage_windows_vs_fixes``."""
     m = dict(run.metrics)
     if applied.outage_windows:
-        m["outage_windows"] = _windows(family.track(run, inputs), applied, scenarios)
-        if reference is not None:
-            m["outage_windows_vs_fixes"] = m["outage_windows"]
-            by_smoothed = replace(inputs, tables={**inputs.tables, "truth": reference})
-            track = family.track(run, by_smoothed)
-            track = None if track is None else replace(track, reference=SMOOTHED_NOMINAL)
-            m["outage_windows"] = _windows(track, applied, scenarios)
+        m.update(_outage_metrics(inputs, family, applied, run, scenarios, reference))
         if run.smoothed is not None and "smoothed" in m:
             smoothed = replace(run, result=run.smoothed[1], smoothed=None)
-            track = family.track(smoothed, inputs)
-            m["smoothed"] = dict(m["smoothed"], outage_windows=_windows(track, applied, scenarios))
+            windows = _outage_metrics(inputs, family, applied, smoothed, scenarios, reference)
+            m["smoothed"] = dict(m["smoothed"], **windows)
     meta = applied.metadata()
     m["scenario_detail"] = meta
     m["windows"] = meta["windows"]
     return m
+
+
+def _outage_metrics(
+    inputs: RunInputs,
+    family: Family,
+    applied: AppliedScenario,
+    run: RunOutput,
+    scenarios: ScenariosParams,
+    reference: pa.Table | None,
+) -> dict[str, list[dict[str, Any]]]:
+    """``outage_windows`` of ``run`` against the truth or the withheld fixes, or against the
+    smoothed nominal run ``reference`` (``outage_windows_vs_fixes`` then holds the withheld
+    fixes' measure)."""
+    by_inputs = _windows(family.track(run, inputs), applied, scenarios)
+    if reference is None:
+        return {"outage_windows": by_inputs}
+    by_smoothed = replace(inputs, tables={**inputs.tables, "truth": reference})
+    track = family.track(run, by_smoothed)
+    track = None if track is None else replace(track, reference=SMOOTHED_NOMINAL)
+    return {
+        "outage_windows": _windows(track, applied, scenarios),
+        "outage_windows_vs_fixes": by_inputs,
+    }
 
 
 def _windows(

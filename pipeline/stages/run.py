@@ -181,8 +181,9 @@ def _run(
 
 def _smoothed_summary(sm: dict[str, Any]) -> str:
     """What the summary line says of the smoothed run."""
-    if sm["smoothing"]["status"] != "ok":
-        return f"; smoothing failed: {sm['smoothing']['failure']}"
+    how = sm["smoothing"]
+    if how["status"] != "ok":
+        return f"; smoothing {how['status'].replace('_', ' ')}: {how['failure']}"
     text = "; smoothed"
     if sm.get("truth"):
         text += f": horizontal RMS {sm['pos_err_h_rms_m']:.2f} m"

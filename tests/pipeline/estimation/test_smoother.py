@@ -178,6 +178,15 @@ def test_a_pool_too_small_is_grown_and_the_run_is_the_same(
     assert np.array_equal(whole.smoothed[1], grown.smoothed[1])
 
 
+def test_a_run_that_never_aligned_says_its_smoothing_did_not_run(filters: FiltersParams) -> None:
+    tables, sensors = seoul(20.0, seed=5, stationary_s=30.0)  # parked: no heading
+    run = run_filter(tables, sensors, "lc_ekf", smoothed(filters, "lc_ekf"))  # type: ignore[arg-type]
+    assert run.status == "not_aligned"
+    assert run.smoothing is not None
+    assert run.smoothing.status == "not_run"
+    assert run.smoothed_run() is None
+
+
 def test_an_unsmoothed_run_records_nothing_for_smoothing(
     filters: FiltersParams, drive30: tuple[Tables, SensorMeta]
 ) -> None:
@@ -256,6 +265,11 @@ def test_without_truth_the_smoothed_nominal_run_is_the_outage_reference(
     assert len(windows) == len(by_fixes)
     assert {w["reference"] for w in windows} == {"smoothed_nominal"}
     assert {w["reference"] for w in by_fixes} == {"withheld_fixes"}
+    smoothed_windows = metrics["smoothed"]["outage_windows"]  # measured the same way
+    assert {w["reference"] for w in smoothed_windows} == {"smoothed_nominal"}
+    assert {w["reference"] for w in metrics["smoothed"]["outage_windows_vs_fixes"]} == {
+        "withheld_fixes"
+    }
     # the smoothed nominal run is a reference of decimetres: the drift it measures is the
     # filter's, which the withheld fixes' metre-level noise blurs
     for w, f in zip(windows, by_fixes, strict=True):
