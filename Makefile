@@ -75,11 +75,12 @@ browser:
 
 # The suite runs on PYTEST_WORKERS processes (pytest-xdist), each taking whole test files so
 # that a module's cached drives and runs are built once; PYTEST_WORKERS=0 runs it in one.
+# The 15 slowest tests are listed at the end (where the time goes).
 PYTEST_WORKERS ?= 2
 
 pytest: dev browser
 	NAVREPLAY_REQUIRE_BROWSER=$$(test -x $(CHROMIUM) && test -x $(CHROMEDRIVER) && echo 1) \
-	  $(BIN)/pytest -n $(PYTEST_WORKERS) --dist loadfile
+	  $(BIN)/pytest -n $(PYTEST_WORKERS) --dist loadfile --durations=15
 
 bench: dev
 	$(BIN)/python -m benchmarks

@@ -33,10 +33,11 @@ R = TypeVar("R")
 
 
 def filter_params(filters: FiltersParams, name: str) -> InsFilterParams:
-    """``filters.<name>`` of params.yaml, divergence flagged instead of raised."""
+    """``filters.<name>`` of params.yaml, divergence flagged instead of raised, not smoothed
+    (the sweeps measure the filter)."""
     p = filters.get(name)
     return dataclasses.replace(
-        p, divergence=dataclasses.replace(p.divergence, on_divergence="flag")
+        p, divergence=dataclasses.replace(p.divergence, on_divergence="flag"), smooth=False
     )
 
 

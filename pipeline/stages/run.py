@@ -187,11 +187,17 @@ def _smoothed_summary(sm: dict[str, Any]) -> str:
     text = "; smoothed"
     if sm.get("truth"):
         text += f": horizontal RMS {sm['pos_err_h_rms_m']:.2f} m"
-    wins = [w for w in sm.get("outage_windows", []) if w["err_end_m"] is not None]
-    if wins:
-        mean = sum(w["err_mean_m"] for w in wins) / len(wins)
+    mean, _ = _window_mean(sm, "err_mean_m")
+    if mean is not None:
         text += f", outage windows {mean:.1f} m on average"
     return text
+
+
+def _window_mean(m: dict[str, Any], key: str) -> tuple[float | None, int]:
+    """The mean of ``key`` over the outage windows of metrics ``m`` that have one, and their
+    number."""
+    values = [w[key] for w in m.get("outage_windows", []) if w["err_end_m"] is not None]
+    return (sum(values) / len(values) if values else None), len(values)
 
 
 def _summary(filt: str, backend: str, scenario: str, m: dict[str, Any], out: Path) -> None:
@@ -201,10 +207,9 @@ def _summary(filt: str, backend: str, scenario: str, m: dict[str, Any], out: Pat
         return
     if m.get("truth"):
         text += f", horizontal RMS {m['pos_err_h_rms_m']:.2f} m"
-    wins = [w for w in m.get("outage_windows", []) if w["err_end_m"] is not None]
-    if wins:
-        mean_end = sum(w["err_end_m"] for w in wins) / len(wins)
-        text += f", {len(wins)} outage windows ending at {mean_end:.1f} m on average"
+    mean_end, n_windows = _window_mean(m, "err_end_m")
+    if mean_end is not None:
+        text += f", {n_windows} outage windows ending at {mean_end:.1f} m on average"
     sm = m.get("smoothed")
     if sm is not None:
         text += _smoothed_summary(sm)

@@ -173,6 +173,7 @@ def smooth(sm: SmoothLog, out_x: F64, out_P: F64, cfg: Settings, xs: F64, Ps: F6
     tmp = np.empty((n, n))
     L = np.empty((n, n))
     Ct = np.empty((n, n))  # C^T = Pp^-1 D^T
+    Cm = np.empty((n, n))  # C
     W = np.empty((n, n))
     sc = np.empty(n)
     Xw = np.empty(FULL_DIM)
@@ -210,6 +211,7 @@ def smooth(sm: SmoothLog, out_x: F64, out_P: F64, cfg: Settings, xs: F64, Ps: F6
                     Ct[r, c] = a
         if not _scaled_solve(Pp, n, Ct, L, sc):
             return SMOOTH_PRIOR_INDEFINITE
+        Cm[:, :] = Ct.T
         for r in range(n):  # d = C e
             a = 0.0
             for q in range(n):
@@ -219,7 +221,7 @@ def smooth(sm: SmoothLog, out_x: F64, out_P: F64, cfg: Settings, xs: F64, Ps: F6
             for r in range(n):
                 for c in range(n):
                     Psm[r, c] -= Pp[r, c]
-            _add_sandwich(Psm, Ct, Pk, n, W)
+            _add_sandwich(Psm, Cm, Pk, n, W)
             Psm[:, :] = Pk
         else:  # the EKFs, in Joseph form: (I - C Phi) P_k (I - C Phi)^T + C (Q + P_(k+1)|N) C^T
             for r in range(n):
@@ -232,8 +234,8 @@ def smooth(sm: SmoothLog, out_x: F64, out_P: F64, cfg: Settings, xs: F64, Ps: F6
                         a -= Ct[q, r] * Phi[q, c]
                     tmp[r, c] = a
             Pp[:, :] = 0.0  # the sum, built in Pp (the prior is not needed any more)
-            _add_sandwich(Psm, Ct, Pp, n, W)
-            _add_sandwich_rows(Pk, tmp, Pp, n, W)
+            _add_sandwich(Psm, Cm, Pp, n, W)
+            _add_sandwich(Pk, tmp, Pp, n, W)
             Psm[:, :] = Pp
         if not _scaled_cholesky(Psm, n, L, sc):
             return SMOOTH_INDEFINITE
@@ -301,26 +303,7 @@ def _scaled_solve(A: F64, n: int, B: F64, L: F64, sc: F64) -> bool:
 
 
 @njit(cache=True, error_model="numpy")
-def _add_sandwich(M: F64, Ct: F64, out: F64, n: int, W: F64) -> None:
-    """``out += C M C^T`` for ``Ct = C^T`` (symmetric; ``W`` scratch)."""
-    for r in range(n):  # W = M C^T
-        for c in range(n):
-            a = 0.0
-            for q in range(n):
-                a += M[r, q] * Ct[q, c]
-            W[r, c] = a
-    for r in range(n):
-        for c in range(r, n):
-            a = 0.0
-            for q in range(n):
-                a += Ct[q, r] * W[q, c]
-            out[r, c] += a
-            if c != r:
-                out[c, r] += a
-
-
-@njit(cache=True, error_model="numpy")
-def _add_sandwich_rows(M: F64, A: F64, out: F64, n: int, W: F64) -> None:
+def _add_sandwich(M: F64, A: F64, out: F64, n: int, W: F64) -> None:
     """``out += A M A^T`` (symmetric; ``W`` scratch)."""
     for r in range(n):  # W = M A^T
         for c in range(n):
