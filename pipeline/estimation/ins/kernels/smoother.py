@@ -87,22 +87,9 @@ def sm_on(sm: SmoothLog) -> bool:
 
 
 @njit(cache=True, error_model="numpy")
-def pool_put(sm: SmoothLog, M: F64, scale: F64) -> int:
-    """Store ``M / (scale scale^T)`` (error coordinates) in the pool; its row (a row past the
-    pool is only counted: the run is repeated with a larger pool)."""
-    j = sm.counts[SM_C_POOL]
-    sm.counts[SM_C_POOL] = j + 1
-    if j < sm.pool.shape[0]:
-        n = sm.pool.shape[1]
-        for r in range(n):
-            for c in range(n):
-                sm.pool[j, r, c] = M[r, c] / (scale[r] * scale[c])
-    return int(j)
-
-
-@njit(cache=True, error_model="numpy")
 def pool_put_cross(sm: SmoothLog, M: F64, sc_from: F64, sc_to: F64) -> int:
-    """``pool_put`` of a cross covariance between two coordinate scales."""
+    """Store ``M / (sc_from sc_to^T)`` (error coordinates) in the pool; its row (a row past
+    the pool is only counted: the run is repeated with a larger pool)."""
     j = sm.counts[SM_C_POOL]
     sm.counts[SM_C_POOL] = j + 1
     if j < sm.pool.shape[0]:
@@ -111,6 +98,12 @@ def pool_put_cross(sm: SmoothLog, M: F64, sc_from: F64, sc_to: F64) -> int:
             for c in range(n):
                 sm.pool[j, r, c] = M[r, c] / (sc_from[r] * sc_to[c])
     return int(j)
+
+
+@njit(cache=True, error_model="numpy")
+def pool_put(sm: SmoothLog, M: F64, scale: F64) -> int:
+    """``pool_put_cross`` of a covariance (one coordinate scale)."""
+    return pool_put_cross(sm, M, scale, scale)
 
 
 @njit(cache=True, error_model="numpy")
