@@ -16,8 +16,10 @@ from navreplay.pipeline.warm import groups
 
 REPO = Path(__file__).resolve().parents[3]
 
-# A fresh process runs lc_ekf on a short drive with the given cache and prints numba's cache
-# statistics (Dispatcher.stats) of the loop it ran: hits are loads, misses are compiles.
+# A fresh process runs vehicle_kinematic on a short drive with the given cache and prints numba's
+# cache statistics (Dispatcher.stats) of the loop it ran: hits are loads, misses are compiles.
+# (The vehicle-model kernel is the cheapest group to compile cold: the test's cost is that
+# compile, and the mechanism is the same for every group.)
 PROBE = """
 import json, sys, tempfile
 from dataclasses import replace
@@ -25,12 +27,12 @@ from pathlib import Path
 from navreplay.pipeline.params import load_params
 from navreplay.pipeline.warm import _drive
 from navreplay.pipeline.estimation.families import run_tables
-from navreplay.pipeline.estimation.ins.kernels.ekf import run_ekf
+from navreplay.pipeline.estimation.vehicle.kernel import run_vehicle
 params = load_params(Path(sys.argv[1]))
 with tempfile.TemporaryDirectory() as tmp:
-    tables = _drive("ins", params, Path(tmp) / "t")
-    run_tables(tables, "lc_ekf", params.filters.get("lc_ekf"), "numba")
-st = run_ekf.stats
+    tables = _drive("vehicle", params, Path(tmp) / "t")
+    run_tables(tables, "vehicle_kinematic", params.filters.section("vehicle_kinematic"), "numba")
+st = run_vehicle.stats
 print(json.dumps({"hits": sum(st.cache_hits.values()), "misses": sum(st.cache_misses.values())}))
 """
 
@@ -64,15 +66,15 @@ def test_after_warm_the_first_run_loads_the_kernel_and_compiles_nothing(tmp_path
     stamp = tmp_path / "warm.json"
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
     done = subprocess.run(
-        [sys.executable, "-m", "navreplay.pipeline.cli", "warm", "--filter", "tc_ekf",
-         "--filter", "lc_ekf_nhc", "--stamp", str(stamp)],
+        [sys.executable, "-m", "navreplay.pipeline.cli", "warm", "--filter", "vehicle_imm",
+         "--filter", "vehicle_kinematic", "--stamp", str(stamp)],
         env=env, capture_output=True, text=True, check=False, cwd=REPO,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
-    assert "[1/1] tc_ekf, lc_ekf_nhc: compiled" in done.stdout
+    assert "[1/1] vehicle_kinematic, vehicle_imm: compiled" in done.stdout
     assert json.loads(stamp.read_text()) == {
         "numba_source_digest": installed_digest(),
-        "filters": [["tc_ekf", "lc_ekf_nhc"]],
+        "filters": [["vehicle_kinematic", "vehicle_imm"]],
     }
     assert _stats(cache) == {"hits": 1, "misses": 0}
 
