@@ -11,7 +11,7 @@ export DVC_NO_ANALYTICS := 1
 export PATH := $(CURDIR)/$(VENV)/bin:$(PATH)
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
-.PHONY: demo test venv dev lint typecheck pytest bench clean-venv browser
+.PHONY: demo test venv dev lint typecheck kernels pytest bench clean-venv browser
 
 venv: $(STAMP)
 
@@ -34,7 +34,15 @@ demo: venv
 	$(BIN)/dvc repro
 	@$(BIN)/python -m navreplay.pipeline.cli where-reports
 
-test: lint typecheck pytest
+# mypy runs on one core beside `navreplay warm` on the other (every filter's kernel compiled into
+# numba's cache, as `dvc repro` does first), so that the suite's workers load the kernels rather
+# than each compiling them; the tests of cold compiles use caches of their own
+test: lint
+	@$(MAKE) --no-print-directory -j2 --output-sync=target typecheck kernels
+	@$(MAKE) --no-print-directory pytest
+
+kernels: venv
+	$(BIN)/navreplay warm --jobs 1
 
 # lint-imports: the import contracts of pyproject.toml [tool.importlinter] (layers, no cycles);
 # --no-cache: the import graph is rebuilt every time (well under a second), never read stale
