@@ -11,7 +11,7 @@ export DVC_NO_ANALYTICS := 1
 export PATH := $(CURDIR)/$(VENV)/bin:$(PATH)
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
-.PHONY: demo test venv dev lint typecheck kernels pytest bench clean-venv browser
+.PHONY: demo test venv dev lint typecheck pytest bench clean-venv browser
 
 venv: $(STAMP)
 
@@ -34,15 +34,9 @@ demo: venv
 	$(BIN)/dvc repro
 	@$(BIN)/python -m navreplay.pipeline.cli where-reports
 
-# mypy runs on one core beside `navreplay warm` on the other (every filter's kernel compiled into
-# numba's cache, as `dvc repro` does first), so that the suite's workers load the kernels rather
-# than each compiling them; the tests of cold compiles use caches of their own
+# mypy (one core, about 90 s cold) runs beside the suite rather than before it
 test: lint
-	@$(MAKE) --no-print-directory -j2 --output-sync=target typecheck kernels
-	@$(MAKE) --no-print-directory pytest
-
-kernels: venv
-	$(BIN)/navreplay warm --jobs 1
+	@$(MAKE) --no-print-directory -j2 typecheck pytest
 
 # lint-imports: the import contracts of pyproject.toml [tool.importlinter] (layers, no cycles);
 # --no-cache: the import graph is rebuilt every time (well under a second), never read stale
@@ -82,13 +76,15 @@ browser:
 	fi
 
 # The suite runs on PYTEST_WORKERS processes (pytest-xdist), each taking whole test files so
-# that a module's cached drives and runs are built once; PYTEST_WORKERS=0 runs it in one.
+# that a module's cached drives and runs are built once; PYTEST_WORKERS=0 runs it in one. Files
+# are handed out in the suite's order (tests/conftest.py: the slow ones first), not xdist's
+# default of the most tests first.
 # The 15 slowest tests are listed at the end (where the time goes).
 PYTEST_WORKERS ?= 2
 
 pytest: dev browser
 	NAVREPLAY_REQUIRE_BROWSER=$$(test -x $(CHROMIUM) && test -x $(CHROMEDRIVER) && echo 1) \
-	  $(BIN)/pytest -n $(PYTEST_WORKERS) --dist loadfile --durations=15
+	  $(BIN)/pytest -n $(PYTEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=15
 
 bench: dev
 	$(BIN)/python -m benchmarks

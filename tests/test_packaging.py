@@ -157,7 +157,7 @@ def test_analyze_runs_from_any_directory_with_the_wheel_installed(
     assert f"built-in defaults ({Path(purelib) / 'navreplay' / 'pipeline'}" in where.stdout
     # the log is made by the checkout's navreplay, whose kernels are compiled already: the
     # installed one compiles its own from nothing (another path is another cache entry), and
-    # a second cold compile, of the synthesizer, would only add minutes
+    # a second cold compile, of the synthesizer, would add tens of seconds and test nothing new
     made = subprocess.run(
         [sys.executable, "-m", "navreplay.pipeline.cli", "-q", "synth", "fwekf_reference",
          "--out", str(work / "raw")],

@@ -103,6 +103,7 @@ def _cases() -> list[object]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("cell", "name"), _cases())
 def test_the_filter_aligns_soon_after_motion_and_holds_its_heading(
     cell: sw.Cell, name: str

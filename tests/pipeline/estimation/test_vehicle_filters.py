@@ -68,6 +68,7 @@ def test_numba_and_filterpy_backends_agree_within_1e_6_sigma(
         assert a.aux.min() < 0.5 < a.aux.max()  # each model dominates somewhere
 
 
+@pytest.mark.slow
 def test_switching_and_imm_are_as_good_as_the_better_model_in_every_band_over_seeds(
     params_all: tuple[FiltersParams, car.CarSpeedRampParams, int],
 ) -> None:
