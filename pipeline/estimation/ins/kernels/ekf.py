@@ -52,6 +52,8 @@ from navreplay.pipeline.estimation.ins.kernels.records import (
 from navreplay.pipeline.estimation.ins.kernels.smoother import (
     SM_PRIOR,
     changed,
+    copy_mat,
+    copy_vec,
     pool_put,
     record_post,
     record_prior,
@@ -193,7 +195,7 @@ def run_ekf(
         transition(X, sw.acc, cfg.noise, n, Phi, Qd)
         propagate_cov(P, Phi, Qd, n, tmp)
         if smoothing:
-            P_prop[:, :] = P
+            copy_mat(P_prop, P)
         at_rest = rest_plausible(stop, X[X_VEL : X_VEL + 3], P, cfg)
         m, nb_ = epoch_layout(
             stop, fix, obs, sched.obs_start, cfg.nhc_on, at_rest, buf.rows, buf.blocks
@@ -208,7 +210,7 @@ def run_ekf(
                 if ok:
                     inject(X, dx, n)
                     if smoothing:
-                        sm.dx[k + 1, :] = dx[:n]
+                        copy_vec(sm.dx[k + 1], dx, n)
         ok = keep_pd(P, n, L, t, log.ev_i, log.ev_f, log.counts)
         status = check_state(X, P, ones, cfg) if ok else STATUS_INDEFINITE
         if status != STATUS_OK:

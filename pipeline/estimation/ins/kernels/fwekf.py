@@ -84,6 +84,7 @@ from navreplay.pipeline.estimation.ins.kernels.records import (
 )
 from navreplay.pipeline.estimation.ins.kernels.smoother import (
     SM_PRIOR,
+    copy_vec,
     pool_put,
     record_post,
     record_prior,
@@ -238,7 +239,7 @@ def run_fwekf(
                 if ok:
                     inject(X, dx, n)
                     if smoothing:
-                        sm.dx[k + 1, :] = dx[:n]
+                        copy_vec(sm.dx[k + 1], dx, n)
             if stop[ST_FIX] >= 0 and iae:
                 n_ring = push_innovations(ring, n_ring, buf.rows, buf.nu, buf.S, buf.r, r_scale, m)
                 iae_scales(ring, n_ring, fz, r_scale)

@@ -81,6 +81,22 @@ def empty_like(sm: SmoothLog) -> SmoothLog:
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def copy_vec(dst: F64, src: F64, n: int) -> None:
+    """``dst[:n] = src[:n]`` as a loop: numba's slice assignment compiles a shape check whose
+    error message (string formatting) took ~5 s of a cold filter compile."""
+    for j in range(n):
+        dst[j] = src[j]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def copy_mat(dst: F64, src: F64) -> None:
+    """``dst[:, :] = src`` as a loop (see ``copy_vec``)."""
+    for r in range(src.shape[0]):
+        for c in range(src.shape[1]):
+            dst[r, c] = src[r, c]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def sm_on(sm: SmoothLog) -> bool:
     """The run records for smoothing."""
     return bool(sm.x.shape[0] > 0)

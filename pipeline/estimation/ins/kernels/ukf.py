@@ -75,6 +75,8 @@ from navreplay.pipeline.estimation.ins.kernels.smoother import (
     SM_AS_POSTERIOR,
     SM_CROSS,
     SM_PRIOR,
+    copy_mat,
+    copy_vec,
     pool_put,
     pool_put_cross,
     record_post,
@@ -229,7 +231,7 @@ def ukf_update(
             break
     cross_cov(sig, s, Z, zp, wc, n, m, Pxz)
     if prior.shape[0] > 0:
-        prior[:, :] = P
+        copy_mat(prior, P)
     ma = close_gating(t_ns, g, cfg, buf, log)
     if ma > 0:
         _apply_gain(s, P, n, Pxz, S, nu, buf.acc_rows, ma)
@@ -367,14 +369,14 @@ def run_ukf(
                 record_prior(sm, k + 1, ws.sigX[0], ws.prop.acc)
                 _sigma_cross(ws, s, cfg, D)
                 sm.rows[k + 1, SM_CROSS] = pool_put_cross(sm, D, sc_prev, ws.sc)
-                s_prior[:] = s
+                copy_vec(s_prior, s, s.shape[0])
             ok = keep_pd(P, n, ws.L, t, ev_i, ev_f, counts)
         at_rest = rest_plausible(stop, s[E_VEL : E_VEL + 3], P, cfg)  # UKF velocity: scale 1
         m, nb_ = epoch_layout(
             stop, fix, obs, sched.obs_start, cfg.nhc_on, at_rest, buf.rows, buf.blocks
         )
         if smoothing and ok:
-            prior[:, :] = P  # the update's, after any reset, if there is one
+            copy_mat(prior, P)  # the update's, after any reset, if there is one
         if ok and m > 0:
             ep = Epoch(t, m, nb_, u[3:6], still, unit)
             ok = ukf_update(ep, st, fix, obs, cfg, buf, ws, log, prior) and keep_pd(
@@ -391,7 +393,7 @@ def run_ukf(
             for j in range(n):
                 sm.dx[k + 1, j] = (s[j] - s_prior[j]) / ws.sc[j]
             record_post(sm, k + 1, P, sc, counts[CNT_OUT] if stop[ST_OUT] > 0 else -1)
-            sc_prev[:] = sc
+            copy_vec(sc_prev, sc, sc.shape[0])
         if stop[ST_OUT] > 0:
             _error_cov(P, sc, n, Pe)
             record_output(t, X, Pe, log)
