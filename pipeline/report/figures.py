@@ -25,6 +25,7 @@ from navreplay.pipeline.report.svg import (
     colour,
     decimate_minmax,
     figure_svg,
+    fixed_layout,
     shade_windows,
     style,
 )
@@ -70,9 +71,8 @@ def _origin(data: DatasetInputs) -> tuple[float, float] | None:
 def _stacked(plt: Any, rows: int, height_in: float) -> tuple[Any, Any]:
     """A figure of ``rows`` full-width panels, one above the other, over a shared time axis:
     the figure and its panels, top to bottom."""
-    fig, axes = plt.subplots(
-        rows, 1, figsize=(9.0, height_in), sharex=True, squeeze=False, layout="constrained"
-    )
+    fig, axes = plt.subplots(rows, 1, figsize=(9.0, height_in), sharex=True, squeeze=False)
+    fixed_layout(fig, top=0.6, hgap=0.35)
     return fig, axes[:, 0]
 
 
@@ -84,7 +84,8 @@ def track(data: DatasetInputs, key: str) -> str | None:
         return None
     filters = data.filters()
     with style() as plt:
-        fig, ax = plt.subplots(figsize=(7.5, 6.0), layout="constrained")
+        fig, ax = plt.subplots(figsize=(7.5, 6.0))
+        fixed_layout(fig)
         ref = data.truth if data.truth is not None and data.truth.num_rows else None
         if ref is not None:
             e, n = local_en(column(ref, "lat_deg"), column(ref, "lon_deg"), *origin)
@@ -216,7 +217,8 @@ def biases(data: DatasetInputs, key: str, runs: Sequence[Run] | None = None) -> 
     t0 = data.t0_ns()
     filters = data.filters()
     with style() as plt:
-        fig, axes = plt.subplots(2, 3, figsize=(10.0, 5.6), sharex=True, layout="constrained")
+        fig, axes = plt.subplots(2, 3, figsize=(10.0, 5.6), sharex=True)
+        fixed_layout(fig, top=0.6, hgap=0.35)
         for ax, (col, label) in zip(axes.ravel(), _BIASES, strict=True):
             for r in runs:
                 est = r.estimate

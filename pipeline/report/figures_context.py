@@ -32,6 +32,8 @@ from navreplay.pipeline.report.svg import (
     colour,
     decimate_minmax,
     figure_svg,
+    fixed_layout,
+    label_width_in,
     shade_windows,
     style,
 )
@@ -92,9 +94,12 @@ def context(data: DatasetInputs, key: str) -> str | None:
     windows = _windows_s(data, t0)
     with style() as plt:
         fig, axes = plt.subplots(
-            len(panels), 1, figsize=(9.0, 0.8 + 1.6 * len(panels)), sharex=True, squeeze=False,
-            layout="constrained",
-        )  # fmt: skip
+            len(panels), 1, figsize=(9.0, 0.8 + 1.6 * len(panels)), sharex=True, squeeze=False
+        )
+        names = [*(_LANES if "events" in panels else ()),
+                 *(filters if "rejections" in panels else ())]  # fmt: skip
+        # category tick labels (lanes, filter names) are wider than numbers
+        fixed_layout(fig, top=0.6, hgap=0.35, left=max(0.75, label_width_in(fig, names) + 0.45))
         for ax, panel in zip(axes[:, 0], panels, strict=True):
             shade_windows(ax, windows, "outage window" if panel == panels[0] else None)
             _draw(panel, ax, data, gnss, nominal, rejections, filters, t0)

@@ -1,9 +1,10 @@
 """Outage figures: a detail panel per outage window, and drift against outage length.
 
-``windows_detail`` draws, for one scenario, the 3-D error of every filter from
-``PRE_S`` before each window to ``POST_S`` after it (x: seconds from the window's start),
-one panel per window (the first ``MAX_PANELS``), so an engineer can read each outage of a
-long drive at full detail. ``drift_by_length`` plots the rows of ``tables.drift_by_length``.
+``windows_detail`` draws, for one scenario, the 3-D error of every filter (horizontal where
+the reference has no heights) from ``PRE_S`` before each window to ``POST_S`` after it (x:
+seconds from the window's start), one panel per window (the first ``MAX_PANELS``), so an
+engineer can read each outage of a long drive at full detail. ``drift_by_length`` plots the
+rows of ``tables.drift_by_length``.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from navreplay.pipeline.report.svg import (
     colour,
     decimate_minmax,
     figure_svg,
+    fixed_layout,
     style,
 )
 
@@ -43,19 +45,24 @@ def windows_detail(
     rows = (len(windows) + cols - 1) // cols
     with style() as plt:
         fig, axes = plt.subplots(
-            rows, cols, figsize=(3.4 * cols, 0.6 + 2.3 * rows), squeeze=False, layout="constrained"
-        )
+            rows, cols, figsize=(max(3.4 * cols, 6.8), 0.6 + 2.3 * rows), squeeze=False
+        )  # at least the width of its title
+        fixed_layout(fig, top=0.6, hgap=0.75, wgap=0.7)
         for i, w in enumerate(windows):
             ax = axes[i // cols, i % cols]
             ax.axvspan(0.0, w.duration_s, color=OUTAGE_COLOUR, alpha=0.25, lw=0)
+            what = "3-D"
             for r in runs:
                 s = series[(r.filter, scenario)]
                 a = w.start_ns - round(PRE_S * 1e9)
                 b = w.end_ns + round(POST_S * 1e9)
                 sel = (s.t_ns >= a) & (s.t_ns <= b)
                 t = (s.t_ns[sel] - w.start_ns) / 1e9
+                err = s.err_3d_m[sel]
+                if not np.isfinite(err).any():  # a reference without heights (SITL's SIMSTATE)
+                    err, what = s.err_h_m[sel], "horizontal"
                 ax.plot(
-                    *decimate_minmax(t, s.err_3d_m[sel], PANEL_POINTS),
+                    *decimate_minmax(t, err, PANEL_POINTS),
                     color=colour(filters.index(r.filter)),
                     label=r.filter,
                 )
@@ -63,7 +70,7 @@ def windows_detail(
             extra = f", {sats} sats" if sats is not None else ""
             ax.set_title(f"window {i + 1}{extra}", loc="left")
             ax.set_xlabel("s from outage start")
-            ax.set_ylabel("3-D error, m")
+            ax.set_ylabel(f"{what} error, m")
         for j in range(len(windows), rows * cols):
             axes[j // cols, j % cols].set_visible(False)
         axes[0, 0].legend(loc="upper left")

@@ -158,8 +158,9 @@ def render_dataset(
         figures_outage.windows_detail,
         "win",
         lambda sc: (
-            f"{sc}: 3-D error from {figures_outage.PRE_S:g} s before to "
-            f"{figures_outage.POST_S:g} s after each outage window."
+            f"{sc}: 3-D error (horizontal where the reference has no heights) from "
+            f"{figures_outage.PRE_S:g} s before to {figures_outage.POST_S:g} s after each "
+            "outage window."
         ),
     )
     drift_fig = fig(

@@ -333,3 +333,33 @@ def test_logs_without_truth_rank_by_their_drift_against_the_onboard_estimate(
         not (tmp_path / "summary" / "tables" / "ranking.csv").read_text().strip("\n").count("\n")
     )  # nothing ranked on residuals
     assert "drift against the onboard estimate" in index.read_text()
+
+
+def test_window_detail_draws_horizontal_error_where_the_reference_has_no_heights(
+    tmp_path: Path,
+) -> None:
+    """SITL's SIMSTATE truth has no altitude: the 3-D error is NaN throughout, and the panel
+    must show the horizontal error (labelled so) rather than an empty plot."""
+    import re
+
+    import pyarrow as pa
+
+    from navreplay.pipeline.report.figures_outage import windows_detail
+    from navreplay.pipeline.report.inputs import DatasetInputs, Run, Window
+    from navreplay.pipeline.report.series import ErrorSeries
+
+    t = np.arange(0, 120, 0.5)
+    t_ns = (t * 1e9).astype(np.int64)
+    err = np.column_stack([0.1 * t, 0.05 * t, np.full(t.size, np.nan)])
+    series = {("lc_ekf", "outage_60s"): ErrorSeries(t_ns, "truth", err, np.ones_like(err))}
+    estimate = pa.table({"t_ns": t_ns})
+    win = Window(int(30e9), int(90e9), {"sats": 0})
+    run = Run(tmp_path, "lc_ekf", "outage_60s", {}, estimate, None, [win])
+    data = DatasetInputs("sitl", tmp_path, None, None, None, None, [run])
+    svg = windows_detail(data, "outage_60s", series, "win")
+    assert svg is not None
+    assert "horizontal error, m" in svg
+    assert "3-D error" not in svg
+    # the line is drawn in the filter's colour: a path of many vertices, not an empty axes
+    lines = re.findall(r'<path d="M([^"]+)"[^>]*stroke: #0072b2', svg)
+    assert max(len(d.split()) for d in lines) > 100
