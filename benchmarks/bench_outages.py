@@ -55,7 +55,7 @@ def run(options: argparse.Namespace) -> None:
     run_filter(tables, sensors, name, section)  # compile (or load the cache) outside the timing
 
     wall = time.perf_counter()
-    rows, timing = run_montecarlo(
+    rows, timing, failed = run_montecarlo(
         tables,
         sensors,
         sensors.lever_arm_m,
@@ -70,6 +70,8 @@ def run(options: argparse.Namespace) -> None:
         workers=options.outages_workers,
     )
     ours_s = time.perf_counter() - wall
+    if failed:
+        raise RuntimeError(f"{len(failed)} Monte Carlo windows failed: {failed[0].error}")
 
     n_ref = min(options.outages_reference, len(starts))
     diffs = []

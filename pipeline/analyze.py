@@ -155,10 +155,12 @@ def analyze(
     config: DatasetConfig | None = None,
     config_dir: Path | None = None,
     progress: Progress = lambda _: None,
+    name: str | None = None,
 ) -> AnalysisResult:
     """Ingest, run and report one log (see the module docstring); ``outages`` are
     ``--outage`` texts (``pipeline.scenarios.fit.parse_outage``); ``smooth``: every INS
-    filter smoothed as well (``filters.<name>.smooth``)."""
+    filter smoothed as well (``filters.<name>.smooth``); ``name``: the dataset's name in the
+    report (default: the dataset config's id, else the first log's stem)."""
     from navreplay.pipeline.estimation.core.contract import RunInputs, write_run
     from navreplay.pipeline.estimation.ins.run import INPUTS
     from navreplay.pipeline.outages.runs import run_scenarios
@@ -215,7 +217,7 @@ def analyze(
         if s.scenario == "*":
             write_skip(runs_dir / s.filter / "nominal", Skipped(s.filter, "nominal", s.reason))
     progress("report")
-    dataset = config.id if config is not None else logs[0].stem
+    dataset = name or (config.id if config is not None else logs[0].stem)
     data = load_dataset(dataset, tables_dir, runs_dir, out_dir / "experiments")
     report = render_dataset(
         data,

@@ -50,6 +50,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "navreplay.pipeline.stages.analyze",
         "one-off post-mission analysis of a log: ingest + filters + report",
     ),
+    "fleet": (
+        "navreplay.pipeline.stages.fleet",
+        "analyze many logs (a report each) and summarize the fleet, locally or on a Dask cluster",
+    ),
     "synth": ("navreplay.pipeline.stages.synth", "generate a synthesized dataset with exact truth"),
     "experiment": (
         "navreplay.pipeline.stages.experiment",

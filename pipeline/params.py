@@ -24,6 +24,7 @@ from typing import Any, Literal
 import yaml
 
 from navreplay.ingest.typed import FieldError, load_dataclass, to_plain
+from navreplay.pipeline.compute import ComputeParams
 from navreplay.pipeline.errors import ParamsError
 from navreplay.pipeline.estimation.cascaded.config import CASCADED_KINDS
 from navreplay.pipeline.estimation.config import FiltersParams
@@ -139,7 +140,8 @@ class Params:
     """The whole of ``params.yaml``; ``filters`` holds one section per filter
     (``pipeline.estimation.config``), ``scenarios`` the named scenarios
     (``pipeline.scenarios.config``) and ``outages`` the outage experiments
-    (``pipeline.outages.config``). ``datasets`` are the built-in, synthesized datasets;
+    (``pipeline.outages.config``); ``compute`` where sweeps run (``pipeline.compute``).
+    ``datasets`` are the built-in, synthesized datasets;
     ``recorded`` the datasets whose logs the user put under ``datasets/<id>/raw/``."""
 
     datasets: tuple[str, ...]
@@ -152,6 +154,7 @@ class Params:
     scenarios: ScenariosParams
     outages: OutagesParams
     recorded: tuple[str, ...] = ()
+    compute: ComputeParams = field(default_factory=ComputeParams)
 
     def __post_init__(self) -> None:
         for i, ds in enumerate(self.run.datasets):

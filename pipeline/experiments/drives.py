@@ -2,8 +2,9 @@
 
 The campus car's drives as tables, the transformations a sweep applies to them before the
 replay (a constant IMU bias in the IMU and in the truth, receiver columns made null), the
-filters' parameter sections with a divergence flagged instead of raised, and the pool of at
-most two spawned workers the sweeps run on (the machine's two cores are shared).
+filters' parameter sections with a divergence flagged instead of raised, and where the
+sweeps run (``pool_map``: at most two forked workers, the machine's two cores being shared,
+or a Dask cluster).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from typing import TypeVar
 import numpy as np
 import pyarrow as pa
 
+from navreplay.pipeline.compute import ComputeParams, TaskError, run_tasks
 from navreplay.pipeline.estimation.config import FiltersParams
 from navreplay.pipeline.estimation.ins.config import InsFilterParams
 
@@ -83,19 +85,44 @@ def add_imu_bias(
     return dict(tables, imu=imu, truth=truth)
 
 
-def quiet() -> None:
-    """The filters' own warnings (a divergence, no alignment) are in the outcomes already: a
-    worker process leaves them out (the calling process's logging is left alone)."""
-    logging.getLogger("navreplay").setLevel(logging.ERROR)
+def _quietly(task: Callable[[T], list[R]], item: T) -> list[R]:
+    """``task(item)``; in a worker process without the filters' own warnings (a divergence,
+    no alignment), which are in the outcomes already (this process's logging is left
+    alone)."""
+    if multiprocessing.parent_process() is not None:
+        logging.getLogger("navreplay").setLevel(logging.ERROR)
+    return task(item)
 
 
-def pool_map(task: Callable[[T], list[R]], tasks: Sequence[T], workers: int) -> list[R]:
-    """``task`` over ``tasks``, flattened, in order: in this process with ``workers <= 1``,
-    else on at most two spawned processes (``task`` must be a module-level function)."""
-    if workers <= 1:
-        return [o for t in tasks for o in task(t)]
-    with multiprocessing.get_context("spawn").Pool(min(workers, 2), initializer=quiet) as pool:
-        return [o for part in pool.imap(task, tasks) for o in part]
+def pool_map(
+    task: Callable[[T], list[R]],
+    tasks: Sequence[T],
+    workers: int,
+    *,
+    scheduler: str = "processes",
+    compute: ComputeParams | None = None,
+    failed: list[TaskError] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> list[R]:
+    """``task`` over ``tasks``, flattened, in order, as tasks of ``compute.run_tasks``: in
+    this process with ``workers <= 1``, else on at most two forked processes (the machine's
+    two cores are shared), or on a Dask cluster (``scheduler``; ``task`` must be a
+    module-level function). A task that raised is appended to ``failed`` and the others
+    still run; without ``failed``, the first is raised once all have run."""
+    results = run_tasks(
+        _quietly, task, tasks, scheduler=scheduler, workers=min(workers, 2), params=compute,
+        label="sweep", progress=progress,
+    )  # fmt: skip
+    out: list[R] = []
+    for r in results:
+        if isinstance(r, TaskError):
+            if failed is None:
+                r.reraise()
+            else:
+                failed.append(r)
+        else:
+            out += r
+    return out
 
 
 def write_csv(path: Path, rows: Sequence[Mapping[str, object]]) -> None:

@@ -10,18 +10,16 @@ after it, instead of from the start of the log. The replay is the same ``run_fil
 errors before the checkpoint are the nominal run's, so the window metrics equal those of a
 full replay of that scenario (a test checks this to 1e-6 m) at a fraction of the cost.
 
-Starts are spread over ``workers`` processes (``concurrent.futures``; forked where the
-platform allows, so the workers share the loaded kernels and tables; spawned elsewhere, when
-numba's cache on disk means each worker loads, not recompiles, the kernels).
+Each start is a task of ``pipeline.compute.run_tasks``: on forked workers of this process by
+default (they share the loaded kernels and tables), or on a Dask cluster; the rows do not
+depend on where they ran.
 """
 
 from __future__ import annotations
 
 import logging
-import multiprocessing
 import time
-from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -29,6 +27,7 @@ import numpy as np
 import pyarrow as pa
 
 from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.compute import ComputeParams, TaskError, TaskStore, run_tasks
 from navreplay.pipeline.estimation.core.contract import Backend
 from navreplay.pipeline.estimation.core.windows import (
     NS,
@@ -207,19 +206,6 @@ def replay_start(job: Job, start: Start) -> list[dict[str, Any]]:
     return rows
 
 
-_JOB: Job | None = None
-
-
-def _init(job: Job) -> None:
-    global _JOB  # noqa: PLW0603 -- one job per worker process, set once by the pool
-    _JOB = job
-
-
-def _work(start: Start) -> list[dict[str, Any]]:
-    assert _JOB is not None
-    return replay_start(_JOB, start)
-
-
 def run_montecarlo(
     tables: dict[str, pa.Table],
     sensors: SensorMeta | None,
@@ -236,12 +222,20 @@ def run_montecarlo(
     backend: Backend = "numba",
     workers: int = 1,
     nominal: RunResult | None = None,
-) -> tuple[list[dict[str, Any]], dict[str, float]]:
+    scheduler: str = "processes",
+    compute: ComputeParams | None = None,
+    store: TaskStore[list[dict[str, Any]]] | None = None,
+    progress: Callable[[str], None] | None = None,
+    progress_every_s: float = 5.0,
+) -> tuple[list[dict[str, Any]], dict[str, float], list[TaskError]]:
     """The window metrics of every (start, case) for filter ``name``.
 
     Divergence is flagged, not raised, so one diverging window is recorded (``status``) and
-    the others still run. Returns (one row per start and case, sorted by seed, window,
-    length and sats; timing: nominal_s, replay_wall_s, replayed_s, replays).
+    the others still run. The starts are tasks of ``pipeline.compute.run_tasks`` on
+    ``scheduler`` (``workers``: processes of the default engine); a start whose replay raised
+    is returned as a ``TaskError`` and the others still run. Returns (one row per start and
+    case, sorted by seed, window, length and sats; timing: nominal_s, replay_wall_s,
+    replayed_s, replays; the failed starts).
     """
     # divergence flagged; not smoothed: the Monte Carlo measures the filter's drift
     flagged = replace(
@@ -277,20 +271,17 @@ def run_montecarlo(
     )
     t_wall = time.perf_counter()
     rows: list[dict[str, Any]] = []
-    if workers <= 1 or len(starts) < 2:
-        for s in starts:
-            rows += replay_start(job, s)
-    else:
-        # fork shares the compiled kernels and the tables with the workers (copy on write);
-        # a spawned worker re-imports and re-loads every numba kernel, measured 4-8 s each,
-        # more than a default-size Monte Carlo of a loosely coupled filter takes
-        methods = multiprocessing.get_all_start_methods()
-        ctx = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
-        with ProcessPoolExecutor(
-            workers, mp_context=ctx, initializer=_init, initargs=(job,)
-        ) as pool:
-            for part in pool.map(_work, starts):
-                rows += part
+    errors: list[TaskError] = []
+    results = run_tasks(
+        replay_start, job, starts, scheduler=scheduler, workers=workers, params=compute,
+        label=f"montecarlo {name}", keys=[start_key(s) for s in starts], store=store,
+        progress=progress, progress_every_s=progress_every_s,
+    )  # fmt: skip
+    for part in results:
+        if isinstance(part, TaskError):
+            errors.append(part)
+        else:
+            rows += part
     timing = {
         "nominal_s": t_nominal,
         "replay_wall_s": time.perf_counter() - t_wall,
@@ -299,7 +290,12 @@ def run_montecarlo(
         "replays": float(len(rows)),
     }
     rows.sort(key=lambda r: (r["seed"], r["window"], r["length_s"], r["sats"]))
-    return rows, timing
+    return rows, timing, errors
+
+
+def start_key(start: Start) -> str:
+    """The task key of one window start (``compute.TaskStore``)."""
+    return f"{start.seed}/{start.window}/{start.start_ns}"
 
 
 def cases_for(sats: Sequence[int], sats_window_s: float, lengths_s: Sequence[float]) -> list[Case]:

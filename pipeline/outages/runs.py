@@ -16,14 +16,13 @@ scenario (definition, windows, satellites chosen, faults injected) goes into
 from __future__ import annotations
 
 import logging
-import multiprocessing
 from collections.abc import Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Any
 
 import pyarrow as pa
 
+from navreplay.pipeline.compute import ComputeParams, TaskError, run_tasks
 from navreplay.pipeline.estimation.core.contract import Backend, Family, RunInputs, RunOutput
 from navreplay.pipeline.estimation.core.windows import ErrorTrack, window_metrics
 from navreplay.pipeline.estimation.families import family_of
@@ -106,13 +105,16 @@ def run_scenarios(
     names: Sequence[str],
     backend: Backend,
     workers: int = 1,
+    scheduler: str = "processes",
+    compute: ComputeParams | None = None,
 ) -> Iterator[tuple[str, RunOutput, AppliedScenario]]:
     """Replay filter ``name`` (of any family; ``params`` its section) under each scenario of
     ``names``; yields them in order.
 
     Scenarios that transform the tables alike (``sats_0`` and a complete outage of the same
-    windows) are replayed once. The replays run on ``workers`` processes (forked, so they
-    share the tables and compiled kernels) when there are several. The nominal run is made
+    windows) are replayed once. The replays are tasks of ``compute.run_tasks`` on
+    ``scheduler``: by default ``workers`` forked processes when there are several (they
+    share the tables and compiled kernels), or a Dask cluster. The nominal run is made
     when a fault scenario needs it for its checks (and yielded only if ``names`` asks).
 
     Raises:
@@ -141,13 +143,13 @@ def run_scenarios(
         first.setdefault(_transform_key(spec), sname)
     job = _Job(inputs, family, name, params, scenarios, backend)
     replays = list(first.values())
-    if workers > 1 and len(replays) > 1 and "fork" in multiprocessing.get_all_start_methods():
-        ctx = multiprocessing.get_context("fork")
-        n = min(workers, len(replays))
-        with ProcessPoolExecutor(n, mp_context=ctx, initializer=_init, initargs=(job,)) as pool:
-            results = list(pool.map(_replay, replays))
-    else:
-        results = [job.replay(s) for s in replays]
+    results: list[RunOutput] = []
+    for r in run_tasks(_replay, job, replays, scheduler=scheduler, workers=workers,
+                       params=compute, label=f"run {name}"):  # fmt: skip
+        if isinstance(r, TaskError):
+            r.reraise()  # a replay that failed fails the run, as it would in one process
+        else:
+            results.append(r)
     by_key = {_transform_key(specs[s]): r for s, r in zip(replays, results, strict=True)}
     nominal = by_key.get(_transform_key(specs["nominal"])) if "nominal" in specs else None
     reference = None
@@ -207,14 +209,6 @@ def _transform_key(spec: ScenarioSpec) -> tuple[Any, ...]:
     return (spec.windows, sats, spec.faults)
 
 
-_JOB: _Job | None = None
-
-
-def _init(job: _Job) -> None:
-    global _JOB  # noqa: PLW0603 -- one job per (forked) worker process, set once by the pool
-    _JOB = job
-
-
-def _replay(scenario: str) -> RunOutput:
-    assert _JOB is not None
-    return _JOB.replay(scenario)
+def _replay(job: _Job, scenario: str) -> RunOutput:
+    """One scenario's replay (a ``compute.run_tasks`` task)."""
+    return job.replay(scenario)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -265,7 +266,7 @@ def render_summary(report_dirs: Sequence[Path], out_dir: Path) -> Path:
             "runs": len(d.runs),
             "ok": sum(r.get("status") in FINISHED for r in d.runs),
             "filters": len({r["filter"] for r in d.runs}),
-            "report": f"../{d.path.name}/index.html",
+            "report": Path(os.path.relpath(d.path / "index.html", out_dir)).as_posix(),
         }
         for d in results
     ]

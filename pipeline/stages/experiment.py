@@ -41,11 +41,12 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from navreplay.pipeline.errors import ParamsError
-from navreplay.pipeline.stages.options import add_dir, add_out, add_params
+from navreplay.pipeline.stages.options import add_dir, add_out, add_params, add_scheduler
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -54,6 +55,9 @@ if TYPE_CHECKING:
     from navreplay.pipeline.params import Params
 
 log = logging.getLogger(__name__)
+
+#: The exit status when some of a sweep's simulations failed (the others are written).
+EXIT_TASKS_FAILED = 4
 
 EXPERIMENTS = (
     "vehicle_bands",
@@ -88,6 +92,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )  # fmt: skip
     robust.add_argument("--workers", type=int, default=2, metavar="N",
                         help="processes, at most 2 (default 2)")  # fmt: skip
+    add_scheduler(robust)
 
 
 def _read(tables_dir: Path) -> tuple[dict[str, pa.Table], SensorMeta]:
@@ -124,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
     if args.name == "vehicle_switch_speed":
         return _vehicle_switch_speed(params, out)
     if args.name == "robustness":
-        return _robustness(params, out, args.seeds, args.cells, args.workers)
+        return _robustness(params, out, args.seeds, args.cells, args.workers, args.scheduler)
     if args.tables is None:
         raise ParamsError("--tables", f"experiment {args.name} needs --tables DIR")
     tables, sensors = _read(args.tables)
@@ -196,10 +201,13 @@ def _vehicle_switch_speed(params: Params, out: Path) -> int:
     return 0
 
 
-def _robustness(params: Params, out: Path, seeds: int, subsets: list[str], workers: int) -> int:
+def _robustness(
+    params: Params, out: Path, seeds: int, subsets: list[str], workers: int, scheduler: str | None
+) -> int:
     import time
 
-    from navreplay.ingest.atomic import atomic_write_text
+    from navreplay.ingest.atomic import atomic_write_text, dumps_json
+    from navreplay.pipeline.compute import TaskError, resolve_scheduler, stderr_progress
     from navreplay.pipeline.experiments.outputs import write_rows
     from navreplay.pipeline.experiments.robustness import grid as gr
     from navreplay.pipeline.experiments.robustness import sweep as sw
@@ -216,7 +224,12 @@ def _robustness(params: Params, out: Path, seeds: int, subsets: list[str], worke
     t0 = time.perf_counter()
     print(f"robustness: {len(cells)} cells x {seeds} seeds x {len(sw.FILTERS)} filters ...",
           flush=True)  # fmt: skip
-    outcomes = sw.sweep(sweep_params, cells, range(1, seeds + 1), workers=workers)
+    failed: list[TaskError] = []
+    outcomes = sw.sweep(
+        sweep_params, cells, range(1, seeds + 1), workers=workers,
+        scheduler=resolve_scheduler(scheduler, params.compute), compute=params.compute,
+        failed=failed, progress=stderr_progress,
+    )  # fmt: skip
     filters = list(sw.FILTERS)
     write_rows(out, "runs", [o.row() for o in outcomes])
     per_cell = [dict(zip(("cell", *filters), r, strict=True))
@@ -229,6 +242,13 @@ def _robustness(params: Params, out: Path, seeds: int, subsets: list[str], worke
     print(f"robustness: {len(outcomes)} runs in {time.perf_counter() - t0:.0f} s -> {out}")
     for row in counts:
         print(f"  {row[0]}: {row[-1]}")
+    if failed:
+        atomic_write_text(out / "failed.json", dumps_json([f.to_json() for f in failed]))
+        for f in failed:
+            print(f"error: simulation {f.item} failed: {f.error}", file=sys.stderr)
+        print(f"error: {len(failed)} simulations failed (failed.json); the tables hold the "
+              "others", file=sys.stderr)  # fmt: skip
+        return EXIT_TASKS_FAILED
     return 0
 
 

@@ -27,3 +27,16 @@ def add_dir(
 def add_out(parser: argparse.ArgumentParser, help: str, *, required: bool = True) -> None:
     """``--out DIR``: the stage's output directory (``args.out``)."""
     add_dir(parser, "--out", help, required=required)
+
+
+def add_scheduler(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--scheduler WHERE``: where the stage's tasks run (``args.scheduler``; None: the
+    ``NAVREPLAY_SCHEDULER`` environment variable, else ``compute.scheduler`` in the params)."""
+    parser.add_argument(
+        "--scheduler",
+        metavar="WHERE",
+        help="where the tasks run: processes (forked workers of this process), local (a Dask "
+        "cluster on this machine) or a Dask scheduler's address, tcp://HOST:PORT or "
+        "tls://HOST:PORT (default: $NAVREPLAY_SCHEDULER, else compute.scheduler in the "
+        "params: processes)",
+    )

@@ -20,7 +20,8 @@ not_aligned and the reason. A run that is diverged or not_aligned exits with sta
 
 With one --scenario, DIR is the run directory. With several, or `--scenario all` (the
 scenarios of params.yaml `run.scenarios`), DIR holds one run directory per scenario,
-DIR/<scenario>/, and appears as a whole or not at all.
+DIR/<scenario>/, and appears as a whole or not at all. The scenarios replay on run.workers
+forked processes, or on a Dask cluster with --scheduler (`compute` in params.yaml).
 
 The first run after installing or changing navreplay compiles the filter (numba, 10-30 s;
 cached for later runs); `navreplay warm` compiles every filter ahead of time.
@@ -40,7 +41,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from navreplay.pipeline.errors import ParamsError
-from navreplay.pipeline.stages.options import add_params
+from navreplay.pipeline.stages.options import add_params, add_scheduler
 
 #: The exit status when a run never aligned or diverged (it is written, with the status and
 #: the reason).
@@ -104,6 +105,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "observables), write a run marked skipped with the reason and exit 0 instead of failing "
         "(the dvc run matrix uses this, so a recorded log without raw GNSS still gets its report)",
     )
+    add_scheduler(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -121,6 +123,7 @@ def _run(
 ) -> int:
     from navreplay.ingest.atomic import atomic_directory
     from navreplay.pipeline.analyze import Skipped, plan, write_skip
+    from navreplay.pipeline.compute import resolve_scheduler
     from navreplay.pipeline.estimation.core.contract import RunInputs, write_run
     from navreplay.pipeline.estimation.families import family_of
     from navreplay.pipeline.estimation.ins.run import INS
@@ -161,8 +164,9 @@ def _run(
             print(f"{args.filter}: skipped ({reason}) -> {args.out}")
             return 0
     runs = run_scenarios(
-        inputs, args.filter, section, params.scenarios, names, backend, params.run.workers
-    )
+        inputs, args.filter, section, params.scenarios, names, backend, params.run.workers,
+        scheduler=resolve_scheduler(args.scheduler, params.compute), compute=params.compute,
+    )  # fmt: skip
     statuses = []
     if single:
         for name, out, applied in runs:

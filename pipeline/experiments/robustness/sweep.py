@@ -52,12 +52,13 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from navreplay.ingest.meta import SensorMeta
+from navreplay.pipeline.compute import ComputeParams, TaskError
 from navreplay.pipeline.estimation.ins.config import FILTER_KINDS
 from navreplay.pipeline.estimation.ins.inputs import prepare_fixes, prepare_obs
 from navreplay.pipeline.estimation.ins.metrics import compute_metrics
@@ -298,15 +299,21 @@ def sweep(
     filters: Sequence[str] = FILTERS,
     *,
     workers: int = 2,
+    scheduler: str = "processes",
+    compute: ComputeParams | None = None,
+    failed: list[TaskError] | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> list[Outcome]:
-    """Run ``cells`` x ``seeds`` x ``filters`` on at most ``workers`` processes, one task per
-    simulation (the biggest first, so that the pool ends together)."""
+    """Run ``cells`` x ``seeds`` x ``filters`` on at most ``workers`` processes or on a Dask
+    cluster (``drives.pool_map``), one task per simulation (the biggest first, so that the
+    pool ends together); a simulation that raised goes to ``failed``."""
     groups: dict[tuple[str, float, int, int], list[Cell]] = {}
     for c in cells:
         groups.setdefault(c.sim_key, []).append(c)
     tasks = [(params, tuple(g), s, tuple(filters)) for g in groups.values() for s in seeds]
     tasks.sort(key=lambda t: -len(t[1]) * t[1][0].imu_hz)
-    return pool_map(_task, tasks, workers)
+    return pool_map(_task, tasks, workers, scheduler=scheduler, compute=compute, failed=failed,
+                    progress=progress)  # fmt: skip
 
 
 STATUS_LETTER = {"ok": "o", "inconsistent": "i", "diverged": "d", "not_aligned": "n"}

@@ -83,13 +83,15 @@ def montecarlo_rows(
     policy: Policy = "highest_elevation",
     mask_deg: float | None = None,
     workers: int = 1,
+    **engine: Any,
 ) -> list[dict[str, Any]]:
     """The Monte Carlo rows of filter ``name`` on ``drive(duration_s)``: windows (seed 1,
     numbered in order) at ``starts_s`` seconds after the first IMU sample, each under every
-    case; ``mask_deg`` defaults to params.yaml's selection mask."""
+    case; ``mask_deg`` defaults to params.yaml's selection mask; ``engine``: where the starts
+    run (``run_montecarlo``'s ``scheduler``, ``compute``, ``progress``)."""
     tables, sensors = drive(duration_s)
     t0 = int(tables["imu"].column("t_ns")[0].as_py())
-    rows, _ = run_montecarlo(
+    rows, _, failed = run_montecarlo(
         tables,
         sensors,
         sensors.lever_arm_m,
@@ -102,5 +104,7 @@ def montecarlo_rows(
         mask_deg=params().scenarios.selection_mask_deg if mask_deg is None else mask_deg,
         metrics=params().scenarios.metrics,
         workers=workers,
+        **engine,
     )
+    assert not failed, [f.error for f in failed]
     return rows
