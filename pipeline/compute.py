@@ -313,8 +313,7 @@ def run_tasks(
     taken instead of running its task, and each new result is stored as it arrives (errors
     are not, so a rerun tries them again). ``progress`` is given a line of counts and an ETA
     at most every ``progress_every_s`` seconds and at the end. ``fn`` must be importable by
-    name on the workers
-    (a module-level function), and ``shared`` and the items picklable.
+    name on the workers (a module-level function), and ``shared`` and the items picklable.
     """
     params = params or ComputeParams()
     keys = list(keys) if keys is not None else [repr(i) for i in items]
@@ -339,11 +338,9 @@ def run_tasks(
             log.warning("%s: task %s failed: %s", label, keys[i], result.error)
         bar.add(failed=isinstance(result, TaskError))
 
-    if not todo:
-        pass
-    elif scheduler == "processes":
+    if todo and scheduler == "processes":
         _run_processes(fn, shared, items, todo, workers, finish)
-    else:
+    elif todo:
         with dask_client(check_scheduler(scheduler), params) as client:
             _run_dask(client, fn, shared, items, todo, label, finish)
     missing = [keys[i] for i, r in enumerate(out) if r is None]

@@ -29,11 +29,13 @@ from __future__ import annotations
 import csv
 import io
 import json
+import logging
 import math
 import tarfile
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -66,10 +68,16 @@ class FleetJob:
 
 @dataclass(frozen=True)
 class LogTask:
-    """One log to analyze, and the name of its folder and dataset."""
+    """One log to analyze (its files: a log, or a log and its companions, e.g. RINEX
+    observations and navigation), and the name of its folder and dataset."""
 
     name: str
-    path: str
+    paths: tuple[str, ...]
+
+    @property
+    def path(self) -> str:
+        """The log's files as one text (absolute paths, ``+`` between them)."""
+        return " + ".join(self.paths)
 
 
 @dataclass(frozen=True)
@@ -88,6 +96,7 @@ class FleetResult:
     out_dir: Path
     rows: list[dict[str, Any]]
     failed: list[dict[str, str]]
+    not_logs: list[dict[str, str]] = field(default_factory=list)
     reduction: list[dict[str, Any]] = field(default_factory=list)
     seconds: float = 0.0
 
@@ -96,39 +105,66 @@ class FleetResult:
         return self.out_dir / "index.html"
 
 
-def log_tasks(paths: Sequence[Path]) -> list[LogTask]:
-    """The logs of ``paths``, each a log or a folder of logs (a folder that is itself a log,
-    a rosbag2 bag, is one), named by their stems, made unique in order (``a``, ``a_2``).
+_CSV_REASON = (
+    "delimited text: a CSV log needs its columns mapped in a dataset.yaml (`csv:`), so it is "
+    "analyzed with `navreplay analyze --dataset-config`, not in a folder of logs"
+)
+
+
+def log_tasks(paths: Sequence[Path]) -> tuple[list[LogTask], list[dict[str, str]]]:
+    """The logs of ``paths`` and the files of their folders that are not logs.
+
+    Each path is a log (taken as it is, whatever it holds), or a folder: a folder that is
+    itself a log (a rosbag2 bag) is one; otherwise each of its files whose format is
+    recognized is a log, files sharing a stem (``drive.obs`` and ``drive.nav``) being one log,
+    and the others (``README.md``, and delimited text, which needs a dataset.yaml) are listed
+    with the reason. Logs are named by their stems,
+    made unique in order (``a``, ``a_2``).
 
     Raises:
         FileNotFoundError: a path does not exist.
     """
-    from navreplay.ingest.detect import detect
-    from navreplay.ingest.errors import IngestError
+    from navreplay.ingest.detect import Format, detect
+    from navreplay.ingest.errors import IngestError, UnsupportedFormatError
 
-    found: list[Path] = []
+    groups: list[list[Path]] = []
+    not_logs: list[dict[str, str]] = []
     for p in paths:
         if not p.exists():
             raise FileNotFoundError(f"{p}: no such log or folder")
-        if p.is_dir():
+        if not p.is_dir():
+            groups.append([p])
+            continue
+        try:
+            detect(p)
+            groups.append([p])
+            continue
+        except IngestError:
+            pass  # a folder of logs
+        by_stem: dict[str, list[Path]] = {}
+        for c in sorted(p.iterdir()):
+            if c.name.startswith("."):
+                continue
             try:
-                detect(p)
-                found.append(p)
+                if detect(c).format is Format.CSV:
+                    not_logs.append({"file": str(c), "reason": _CSV_REASON})
+                    continue
+            except UnsupportedFormatError as err:
+                not_logs.append({"file": str(c), "reason": err.reason})
                 continue
             except IngestError:
-                pass  # a folder of logs
-            found += sorted(c for c in p.iterdir() if not c.name.startswith("."))
-        else:
-            found.append(p)
+                pass  # a damaged log is still a log: its analysis says what is wrong
+            by_stem.setdefault(c.name.split(".")[0], []).append(c)
+        groups += by_stem.values()
     tasks, seen = [], set()
-    for p in found:
-        base = p.name.split(".")[0] or p.name
+    for files in groups:
+        base = files[0].name.split(".")[0] or files[0].name
         name, k = base, 2
         while name in seen:
             name, k = f"{base}_{k}", k + 1
         seen.add(name)
-        tasks.append(LogTask(name, str(p.resolve())))
-    return tasks
+        tasks.append(LogTask(name, tuple(str(f.resolve()) for f in files)))
+    return tasks, not_logs
 
 
 def analyze_log(job: FleetJob, task: LogTask) -> LogDone:
@@ -136,10 +172,10 @@ def analyze_log(job: FleetJob, task: LogTask) -> LogDone:
     from navreplay.pipeline.analyze import analyze
 
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="navreplay-fleet-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="navreplay-fleet-") as tmp, _quiet():
         out = Path(tmp) / task.name
         analyze(
-            [Path(task.path)],
+            [Path(f) for f in task.paths],
             out,
             job.params,
             filters=job.filters,
@@ -154,6 +190,19 @@ def analyze_log(job: FleetJob, task: LogTask) -> LogDone:
                 if path.is_file():
                     tar.add(path, arcname=path.relative_to(out).as_posix(), recursive=False)
     return LogDone(task.name, buf.getvalue(), time.perf_counter() - t0)
+
+
+@contextmanager
+def _quiet() -> Iterator[None]:
+    """navreplay's warnings off while a log is analyzed: each log's report holds them, and
+    from many logs at once they would bury the progress."""
+    logger = logging.getLogger("navreplay")
+    level = logger.level
+    logger.setLevel(max(logging.ERROR, logger.getEffectiveLevel()))
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 def _unpack(done: LogDone, target: Path) -> None:
@@ -176,10 +225,17 @@ def fleet(
     progress: Callable[[str], None] | None = None,
 ) -> FleetResult:
     """Analyze every log of ``paths`` and summarize the fleet (see the module docstring)."""
+    from navreplay.ingest.errors import OutputPathError
     from navreplay.pipeline.report.summary import render_summary
 
     t0 = time.perf_counter()
-    tasks = log_tasks(paths)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise OutputPathError(
+            "the output path is a file; the fleet writes a folder there",
+            path=out_dir,
+            hint="give --out a new folder or a previous fleet's; nothing was written",
+        )
+    tasks, not_logs = log_tasks(paths)
     if not tasks:
         raise FileNotFoundError(f"no logs in {', '.join(str(p) for p in paths)}")
     job = FleetJob(
@@ -191,7 +247,7 @@ def fleet(
     )
     fingerprint = str(params_hash({"job": to_plain(job)}))
     store: TaskStore[LogDone] = TaskStore(out_dir / ".tasks", fingerprint)
-    keys = [f"{t.name}:{t.path}:{_stamp(Path(t.path))}" for t in tasks]
+    keys = [f"{t.name}:{t.path}:{','.join(_stamp(Path(f)) for f in t.paths)}" for t in tasks]
     results = run_tasks(
         analyze_log, job, tasks, scheduler=scheduler, workers=workers, params=params.compute,
         label="fleet", keys=keys, store=store, progress=progress,
@@ -211,7 +267,7 @@ def fleet(
     reduction = pooled_reduction(reports, params)
     if reports:
         render_summary(reports, out_dir / "summary")
-    result = FleetResult(out_dir, rows, failed, reduction, time.perf_counter() - t0)
+    result = FleetResult(out_dir, rows, failed, not_logs, reduction, time.perf_counter() - t0)
     _write(result, params)
     import shutil
 
@@ -381,6 +437,13 @@ def _write(result: FleetResult, params: Params) -> None:
         ("logs", "Logs", h.table(result.rows, _ROW_COLS) + f"<ul>{links}</ul>"),
         ("failed", "Logs that could not be analyzed", f"<ul>{failed}</ul>" if failed else ""),
         (
+            "not_logs",
+            "Files in the folders that are not logs",
+            h.table(result.not_logs, (("file", "file"), ("reason", "why")))
+            if result.not_logs
+            else "",
+        ),
+        (
             "gnss",
             "GNSS trouble",
             h.table(troubled, (("name", "log"), ("gnss_trouble", "why")))
@@ -432,6 +495,7 @@ def _write(result: FleetResult, params: Params) -> None:
         {
             "logs": result.rows,
             "failed": result.failed,
+            "not_logs": result.not_logs,
             "sat_reduction": result.reduction,
             "seconds": result.seconds,
             "params": params_hash(to_plain(params)),

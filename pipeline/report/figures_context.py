@@ -103,7 +103,8 @@ def context(data: DatasetInputs, key: str) -> str | None:
         for ax, panel in zip(axes[:, 0], panels, strict=True):
             shade_windows(ax, windows, "outage window" if panel == panels[0] else None)
             _draw(panel, ax, data, gnss, nominal, rejections, filters, t0)
-            ax.legend(loc="upper right", ncols=4, fontsize=7.0)
+            if ax.get_legend_handles_labels()[0]:  # a panel may have nothing labelled
+                ax.legend(loc="upper right", ncols=4, fontsize=7.0)
         axes[-1, 0].set_xlabel("time since start, s")
         fig.suptitle(f"{data.dataset}: the log's context")
         return figure_svg(fig, key)

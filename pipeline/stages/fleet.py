@@ -1,6 +1,8 @@
 """Analyze a fleet of logs: a report per log and a summary across them.
 
-Each LOG is a log file or a folder of logs (a rosbag2 bag folder is one log). Every log is
+Each LOG is a log file or a folder of logs (a rosbag2 bag folder is one log; in a folder, files
+sharing a stem, such as drive.obs and drive.nav, are one log, and files whose format is not
+recognized, such as a README, are listed and left out). Every log is
 analyzed as `navreplay analyze` would (ingest, the filters that fit, the scenarios, a report)
 into DIR/logs/<name>/, one task per log: on forked workers of this process (--workers,
 default run.workers) or on a Dask cluster (--scheduler local: one started on this machine;
@@ -88,6 +90,8 @@ def run(args: argparse.Namespace) -> int:
     for r in res.rows:
         trouble = f"; GNSS trouble: {r['gnss_trouble']}" if r["gnss_trouble"] else ""
         print(f"  {r['name']}: {r['statuses']}{trouble}")
+    if res.not_logs:
+        print(f"  {len(res.not_logs)} files of the folders are not logs (listed in the index)")
     for f in res.failed:
         print(f"  {f['name']}: FAILED: {f['error']}", file=sys.stderr)
     return EXIT_LOGS_FAILED if res.failed else 0

@@ -166,7 +166,7 @@ def test_a_fleet_on_the_cluster_equals_the_embedded_default(cluster: str, tmp_pa
 
     logs = _fleet_logs(tmp_path)
     params = load_params(None)
-    kw: dict[str, Any] = {"filters": ["lc_ekf"], "scenarios": ["nominal", "sats_0"]}
+    kw: dict[str, Any] = {"filters": ["lc_ekf"], "scenarios": ["nominal"]}
     here = fleet(logs, tmp_path / "here", params, workers=2, **kw)
     there = fleet(logs, tmp_path / "there", params, scheduler=cluster, **kw)
     assert [r["name"] for r in here.rows] == [

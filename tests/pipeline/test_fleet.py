@@ -29,11 +29,22 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     return [first, second, bad]
 
 
-def test_logs_are_found_in_folders_and_named_uniquely(logs: list[Path]) -> None:
+def test_logs_are_found_in_folders_and_named_uniquely(logs: list[Path], tmp_path: Path) -> None:
     root = logs[0].parent
-    tasks = fl.log_tasks([root / "rig.tlog", root / "b", root / "notes.txt"])
-    assert [t.name for t in tasks] == ["rig", "rig_2", "notes"]
-    assert tasks[1].path == str((root / "b" / "rig.tlog").resolve())
+    tasks, not_logs = fl.log_tasks([root / "rig.tlog", root / "b", root / "notes.txt"])
+    assert [t.name for t in tasks] == ["rig", "rig_2", "notes"]  # a file named is taken
+    assert tasks[1].paths == (str((root / "b" / "rig.tlog").resolve()),)
+    assert not_logs == []
+    # in a folder: files sharing a stem are one log, a file that is no log is listed
+    folder = tmp_path / "flights"
+    folder.mkdir()
+    (folder / "README.md").write_text("# my flights\n")
+    for suffix in ("tlog", "bin"):
+        (folder / f"f1.{suffix}").write_bytes(logs[0].read_bytes())
+    tasks, not_logs = fl.log_tasks([folder])
+    assert [(t.name, len(t.paths)) for t in tasks] == [("f1", 2)]
+    assert [Path(n["file"]).name for n in not_logs] == ["README.md"]
+    assert not_logs[0]["reason"]
     with pytest.raises(FileNotFoundError, match="no such log or folder"):
         fl.log_tasks([root / "missing.bin"])
 
@@ -105,3 +116,42 @@ def test_gnss_trouble_is_flagged_from_the_fixes(tmp_path: Path) -> None:
     pq.write_table(gnss, tmp_path / "gnss.parquet")  # the columns gnss_trouble reads
     assert fl.gnss_trouble(tmp_path) == ["fixes stop for 13.0 s", "as few as 4 satellites used"]
     assert fl.gnss_trouble(tmp_path / "none") == ["no GNSS fixes"]
+
+
+def test_an_output_path_that_is_a_file_is_refused(
+    logs: list[Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "fleet.txt"
+    out.write_text("mine\n")
+    assert main(["fleet", str(logs[0]), "--out", str(out)]) == 2
+    assert "the output path is a file" in capsys.readouterr().err
+    assert out.read_text() == "mine\n"
+    assert main(["fleet", str(tmp_path / "nothing_here"), "--out", str(tmp_path / "o")]) == 2
+    assert "no such log or folder" in capsys.readouterr().err
+
+
+def test_the_reduction_per_k_is_pooled_over_the_windows_of_every_log(tmp_path: Path) -> None:
+    """Paired per (log, scenario, window): two logs' sats_4 windows form one sample."""
+    from navreplay.pipeline.params import load_params
+
+    params = load_params(None)
+    a, b = params.outages.pairs[0]
+    errs = {"one": [(10.0, 5.0), (20.0, 8.0)], "two": [(30.0, 12.0)]}
+    reports = []
+    for log, pairs in errs.items():
+        rep = tmp_path / log / "report"
+        (rep / "tables").mkdir(parents=True)
+        lines = ["filter,scenario,window,sats,err_mean_m,reference"]
+        for i, (ea, eb) in enumerate(pairs):
+            lines += [f"{a},sats_4,{i},4,{ea},truth", f"{b},sats_4,{i},4,{eb},truth"]
+        lines.append(f"{a},sats_3,0,3,1.0,truth")  # a k without its pair: no row
+        (rep / "tables" / "windows.csv").write_text("\n".join(lines) + "\n")
+        reports.append(rep)
+    (row,) = fl.pooled_reduction(reports, params)
+    assert row["pair"] == f"{a} -> {b}"
+    assert row["sats"] == 4
+    assert row["windows"] == 3
+    assert row["logs"] == 2
+    assert row["reduction_pct"] == pytest.approx(100 * (1 - 25.0 / 60.0))
+    assert row["ci_low_pct"] <= row["reduction_pct"] <= row["ci_high_pct"]
+    assert row["reference"] == "truth"
