@@ -2,15 +2,16 @@
 
 The workload is the outage Monte Carlo of params.yaml (tc_ukf on a 10-minute seoul_campus
 drive; per window start every case: k = 0..4 satellites for 60 s and complete outages of
-10-120 s, each with its tail) with ``--dask-starts`` window starts, one task each. It runs on a
-``distributed.LocalCluster`` (processes, one thread each) of one and of two workers, reached
-through its address as a remote cluster would be (``run_montecarlo(scheduler=ADDRESS)``: a
-client, the job scattered to every worker, a task per start), after every worker has loaded
-the kernel; and, in the same run, on the embedded default (two forked workers). Printed:
+10-120 s, each with its tail) with ``--dask-starts`` window starts, one task each. It runs in
+this process (the tasks' own time), on a Dask ``LocalCluster`` (``compute.dask_client``:
+processes, one thread each) of one and of two workers, reached through its address as a
+remote cluster would be (``run_montecarlo(scheduler=ADDRESS)``: a client, the job scattered
+to every worker, a task per start) after every worker has loaded the kernel, and on the
+default engine (two forked workers). Printed:
 
-- wall time, tasks per second, the tasks' own time (their replays, measured inside them);
-- overhead per task: ``(wall x workers - the tasks' own time) / tasks``, what scheduling,
-  sending and collecting cost per task on this machine;
+- wall time, tasks per second, wall x workers per task;
+- overhead per task: ``(wall x workers - serial) / tasks``, what scheduling, sending and
+  collecting cost per task on this machine, and the efficiency ``serial / (wall x workers)``;
 - the 1 -> 2 worker scaling efficiency ``T1 / (2 T2)`` (target >= 85 %);
 - the scheduler's throughput on empty tasks, and from it and the measured task time, the
   extrapolation to 100 workers: the task rate 100 workers would ask of the scheduler
@@ -70,9 +71,7 @@ def _row(engine: str, workers: int, wall: float, serial: float, tasks: int) -> l
 
 
 def run(options: argparse.Namespace) -> None:
-    from distributed import Client, LocalCluster
-
-    from navreplay.pipeline.compute import run_tasks
+    from navreplay.pipeline.compute import ComputeParams, dask_client, run_tasks
 
     tables, sensors = drive(600.0, seed=21)
     t = tables["imu"].column("t_ns").to_numpy()
@@ -102,25 +101,17 @@ def run(options: argparse.Namespace) -> None:
     walls: dict[int, float] = {}
     rate = 0.0
     for n in (1, 2):
-        with (
-            LocalCluster(
-                n_workers=n,
-                threads_per_worker=1,
-                processes=True,
-                host="127.0.0.1",
-                dashboard_address=None,
-            ) as cluster,
-            Client(cluster) as client,
-        ):
+        with dask_client("local", ComputeParams(workers=n)) as client:
+            address = client.scheduler.address
             client.run(_load_kernel, tables, sensors)
-            wall, _ = montecarlo(scheduler=cluster.scheduler_address)
+            wall, _ = montecarlo(scheduler=address)
             walls[n] = wall
             table.append(_row(f"Dask, {n} worker{'s' if n > 1 else ''}", n, wall, serial,
                               len(starts)))  # fmt: skip
             if n == 2:
                 w = time.perf_counter()
                 run_tasks(_nothing, 0, list(range(options.dask_empty)),
-                          scheduler=cluster.scheduler_address)  # fmt: skip
+                          scheduler=address)  # fmt: skip
                 rate = options.dask_empty / (time.perf_counter() - w)
     wall, _ = montecarlo(workers=2)
     table.append(_row("forked (the default)", 2, wall, serial, len(starts)))

@@ -35,7 +35,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from navreplay.pipeline.stages.options import add_out, add_params
+from navreplay.pipeline.stages.options import (
+    add_analysis_options,
+    add_out,
+    add_params,
+    split_names,
+)
 
 #: The exit status when no filter could run on the log.
 EXIT_NOTHING_RAN = 3
@@ -46,32 +51,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "logs", nargs="+", type=Path, metavar="LOG", help="log file(s) of one drive or flight"
     )
     add_out(parser, "output directory (tables, runs and the report)")
-    parser.add_argument(
-        "--filters",
-        metavar="A,B",
-        help="comma-separated filter names (default: run.filters in params.yaml)",
-    )
-    parser.add_argument(
-        "--scenarios",
-        metavar="X,Y",
-        help="comma-separated scenario names (default: run.scenarios in params.yaml)",
-    )
-    parser.add_argument(
-        "--outage",
-        action="append",
-        default=[],
-        metavar="LEN[@START]",
-        help="also run a complete GNSS outage: LEN (as many windows as fit, e.g. 30s) or "
-        "LEN@START (one window, START seconds after the first IMU sample, e.g. 30s@45s); repeat "
-        "for several",
-    )
-    parser.add_argument(
-        "--smooth",
-        action="store_true",
-        help="also smooth every INS filter's runs (Rauch-Tung-Striebel: the best trajectory the "
-        "log allows, shown beside each filter; on a log without truth the outage drift is then "
-        "measured against the smoothed nominal run)",
-    )
+    add_analysis_options(parser)
     parser.add_argument(
         "--dataset-config",
         type=Path,
@@ -79,10 +59,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="dataset descriptor for the log (see `navreplay ingest --help`)",
     )
     add_params(parser)
-
-
-def _split(text: str | None) -> list[str] | None:
-    return [t.strip() for t in text.split(",") if t.strip()] if text else None
 
 
 def _progress(line: str) -> None:
@@ -140,8 +116,8 @@ def run(args: argparse.Namespace) -> int:
         args.logs,
         args.out,
         params,
-        filters=_split(args.filters),
-        scenarios=_split(args.scenarios),
+        filters=split_names(args.filters),
+        scenarios=split_names(args.scenarios),
         outages=args.outage,
         smooth=args.smooth,
         config=config,

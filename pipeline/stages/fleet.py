@@ -27,7 +27,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from navreplay.pipeline.stages.options import add_out, add_params, add_scheduler
+from navreplay.pipeline.stages.options import (
+    add_analysis_options,
+    add_out,
+    add_params,
+    add_scheduler,
+    split_names,
+)
 
 #: The exit status when some logs could not be analyzed.
 EXIT_LOGS_FAILED = 4
@@ -38,29 +44,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "logs", nargs="+", type=Path, metavar="LOG", help="log files or folders of logs"
     )
     add_out(parser, "output directory (a folder per log, the fleet summary)")
-    parser.add_argument(
-        "--filters", metavar="A,B", help="comma-separated filters (default: run.filters)"
-    )
-    parser.add_argument(
-        "--scenarios", metavar="X,Y", help="comma-separated scenarios (default: run.scenarios)"
-    )
-    parser.add_argument(
-        "--outage",
-        action="append",
-        default=[],
-        metavar="LEN[@START]",
-        help="also run a complete GNSS outage on every log (as `navreplay analyze --outage`)",
-    )
-    parser.add_argument("--smooth", action="store_true", help="also smooth every INS filter")
+    add_analysis_options(parser, what=" on every log")
     parser.add_argument(
         "--workers", type=int, metavar="N", help="processes of the default engine (run.workers)"
     )
     add_scheduler(parser)
     add_params(parser)
-
-
-def _split(text: str | None) -> list[str] | None:
-    return [t.strip() for t in text.split(",") if t.strip()] if text else None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -75,8 +64,8 @@ def run(args: argparse.Namespace) -> int:
             args.logs,
             args.out,
             params,
-            filters=_split(args.filters),
-            scenarios=_split(args.scenarios),
+            filters=split_names(args.filters),
+            scenarios=split_names(args.scenarios),
             outages=args.outage,
             smooth=args.smooth,
             scheduler=scheduler,

@@ -40,3 +40,40 @@ def add_scheduler(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> 
         "tls://HOST:PORT (default: $NAVREPLAY_SCHEDULER, else compute.scheduler in the "
         "params: processes)",
     )
+
+
+def add_analysis_options(parser: argparse.ArgumentParser, *, what: str = "") -> None:
+    """What `analyze` and `fleet` run on a log: ``--filters``, ``--scenarios``, ``--outage``
+    (repeatable) and ``--smooth`` (``args.filters``, ``args.scenarios``: comma-separated text,
+    see ``split_names``); ``what``: to whom the outages apply (e.g. " on every log")."""
+    parser.add_argument(
+        "--filters",
+        metavar="A,B",
+        help="comma-separated filter names (default: run.filters in params.yaml)",
+    )
+    parser.add_argument(
+        "--scenarios",
+        metavar="X,Y",
+        help="comma-separated scenario names (default: run.scenarios in params.yaml)",
+    )
+    parser.add_argument(
+        "--outage",
+        action="append",
+        default=[],
+        metavar="LEN[@START]",
+        help=f"also run a complete GNSS outage{what}: LEN (as many windows as fit, e.g. 30s) or "
+        "LEN@START (one window, START seconds after the first IMU sample, e.g. 30s@45s); repeat "
+        "for several",
+    )
+    parser.add_argument(
+        "--smooth",
+        action="store_true",
+        help="also smooth every INS filter's runs (Rauch-Tung-Striebel: the best trajectory the "
+        "log allows, shown beside each filter; on a log without truth the outage drift is then "
+        "measured against the smoothed nominal run)",
+    )
+
+
+def split_names(text: str | None) -> list[str] | None:
+    """``a, b`` -> ``["a", "b"]``; None (the params' default) for no text."""
+    return [t.strip() for t in text.split(",") if t.strip()] if text else None
