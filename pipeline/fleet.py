@@ -31,6 +31,7 @@ import io
 import json
 import logging
 import math
+import shutil
 import tarfile
 import tempfile
 import time
@@ -269,8 +270,6 @@ def fleet(
         render_summary(reports, out_dir / "summary")
     result = FleetResult(out_dir, rows, failed, not_logs, reduction, time.perf_counter() - t0)
     _write(result, params)
-    import shutil
-
     shutil.rmtree(out_dir / ".tasks", ignore_errors=True)  # ours; the logs' folders hold it all
     return result
 
