@@ -15,19 +15,22 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
 venv: $(STAMP)
 
-# The package and its runtime dependencies: all that `make demo` needs.
+# The package and its runtime dependencies: all that `make demo` needs. uv (from PyPI, into
+# the venv) installs them: the same releases as pip, in seconds rather than minutes.
+UV := $(BIN)/uv pip install --quiet --python $(BIN)/python
+
 $(STAMP): pyproject.toml Makefile
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "navreplay needs Python >= 3.11; found " + sys.version.split()[0] + " at $(PYTHON)")'
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade "pip>=25.1"
-	$(BIN)/python -m pip install --quiet --editable .
+	$(BIN)/python -m pip install --quiet "uv>=0.9"
+	$(UV) --editable .
 	@touch $(STAMP)
 
 # The development tools on top (pytest, ruff, mypy and stubs, import-linter, selenium): `make test`.
 dev: $(DEV_STAMP)
 
 $(DEV_STAMP): $(STAMP)
-	$(BIN)/python -m pip install --quiet --group dev
+	$(UV) --group dev
 	@touch $(DEV_STAMP)
 
 demo: venv
