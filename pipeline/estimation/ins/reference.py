@@ -116,8 +116,7 @@ class _Run:
     def record_start(self, X: F64, P: F64, scale: F64) -> None:
         """The smoothing log's start row (before the start's output is recorded)."""
         if sk.sm_on(self.sm):
-            sk.record_prior(self.sm, 0, X, self.acc)
-            sk.record_post(self.sm, 0, P, scale, self.log.counts[rl.CNT_OUT])
+            sk.record_start(self.sm, X, self.acc, P, scale, self.log.counts[rl.CNT_OUT])
 
     def record_cross(
         self, k: int, sig: F64, x: F64, sc: F64, sig_f: F64, x_f: F64, sc_f: F64

@@ -57,6 +57,7 @@ from navreplay.pipeline.estimation.ins.kernels.smoother import (
     pool_put,
     record_post,
     record_prior,
+    record_start,
     sm_on,
 )
 from navreplay.pipeline.estimation.ins.models.ins import (
@@ -174,8 +175,7 @@ def run_ekf(
     smoothing = sm_on(sm)
     P_prop = np.empty((n, n)) if smoothing else np.empty((0, 0))
     if smoothing:
-        record_prior(sm, 0, X, sw.acc)
-        record_post(sm, 0, P, ones, log.counts[CNT_OUT])
+        record_start(sm, X, sw.acc, P, ones, log.counts[CNT_OUT])
     record_output(sched.t0, X, P, log)
     t_cur = sched.t0
     i = sched.i0

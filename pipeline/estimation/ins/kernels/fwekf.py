@@ -88,6 +88,7 @@ from navreplay.pipeline.estimation.ins.kernels.smoother import (
     pool_put,
     record_post,
     record_prior,
+    record_start,
     sm_on,
 )
 from navreplay.pipeline.estimation.ins.models.ins import (
@@ -205,8 +206,7 @@ def run_fwekf(
     out_alpha[0] = alpha
     smoothing = sm_on(sm)
     if smoothing:
-        record_prior(sm, 0, X, sw.acc)
-        record_post(sm, 0, P, ones, counts[CNT_OUT])
+        record_start(sm, X, sw.acc, P, ones, counts[CNT_OUT])
     record_output(sched.t0, X, P, log)
     t_cur = sched.t0
     i = sched.i0

@@ -147,6 +147,15 @@ def record_post(sm: SmoothLog, k: int, P: F64, scale: F64, out_row: int) -> None
 
 
 @njit(cache=True, error_model="numpy")
+def record_start(sm: SmoothLog, X: F64, acc: F64, P: F64, scale: F64, out_row: int) -> None:
+    """Row 0, the start: ``record_prior`` and ``record_post`` (its index typed int64, as
+    every other row's: called with a literal 0 they would each compile a second time)."""
+    first = int(np.int64(0))
+    record_prior(sm, first, X, acc)
+    record_post(sm, first, P, scale, out_row)
+
+
+@njit(cache=True, error_model="numpy")
 def changed(A: F64, B: F64, n: int) -> bool:
     """``A`` and ``B`` differ in any of their first ``n`` x ``n`` entries."""
     for r in range(n):

@@ -81,6 +81,7 @@ from navreplay.pipeline.estimation.ins.kernels.smoother import (
     pool_put_cross,
     record_post,
     record_prior,
+    record_start,
     sm_on,
 )
 from navreplay.pipeline.estimation.ins.kernels.unscented import sigma_h
@@ -347,8 +348,7 @@ def run_ukf(
     n_sm = n if smoothing else 0
     prior, D, s_prior, sc_prev = np.empty((n_sm, n_sm)), np.empty((n, n)), np.empty(n), sc.copy()
     if smoothing:
-        record_prior(sm, 0, x0, ws.prop.acc)
-        record_post(sm, 0, P0, np.ones(n), counts[CNT_OUT])
+        record_start(sm, x0, ws.prop.acc, P0, np.ones(n), counts[CNT_OUT])
     record_output(sched.t0, x0, P0, log)
     t_cur = sched.t0
     i = sched.i0
