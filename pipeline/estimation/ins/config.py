@@ -249,6 +249,9 @@ class StepParams:
         gap_accel_psd_m2ps3: white acceleration noise density during a gap, m^2/s^3.
         gap_gyro_psd_rad2ps: white angular-rate noise density during a gap, rad^2/s.
         tumble_rate_radps, tumble_rotation_rad, tumble_settle_s: a tumble, see above.
+        second_order_corr_s: correlation time given the term the linearised velocity error
+            leaves out, the attitude error times the accelerometer-bias error
+            (``ins_errors.second_order_noise``), s; 0 leaves it out.
     """
 
     step_s: float = 0.1
@@ -261,9 +264,11 @@ class StepParams:
     tumble_rate_radps: float = 10.0
     tumble_rotation_rad: float = 0.2
     tumble_settle_s: float = 1.0
+    second_order_corr_s: float = 0.0
 
     def __post_init__(self) -> None:
         positive(self, "step_s", "max_rk4_step_s", "imu_gap_s", "imu_gap_max_s")
+        positive(self, "second_order_corr_s", allow_zero=True)
         positive(self, "tumble_rate_radps", "tumble_rotation_rad", "tumble_settle_s")
         positive(self, "gap_accel_psd_m2ps3", "gap_gyro_psd_rad2ps", allow_zero=True)
         if not 1 <= self.substeps <= 100:

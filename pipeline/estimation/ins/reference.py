@@ -104,11 +104,12 @@ class _Run:
         """The epoch at ``t`` of ``m`` rows in ``nb_`` blocks (after ``advance`` to ``t``)."""
         return Epoch(t, m, nb_, self.u[3:6].copy(), self.still.copy(), self.r_scale.copy())
 
-    def predict_nominal(self, X: F64, t: int, k: int) -> None:
+    def predict_nominal(self, X: F64, P: F64, t: int, k: int) -> None:
         """Propagate the nominal state ``X`` to ``t`` (the cursor moves with it), and the
-        span's transition and process noise into ``Phi``, ``Qd`` (error-state filters); for
-        smoothing, stop ``k``'s nominal state and span."""
+        span's transition and process noise (for covariance ``P`` at its start) into ``Phi``,
+        ``Qd`` (error-state filters); for smoothing, stop ``k``'s nominal state and span."""
         self.advance(self.span(X, t, True), t)
+        ins_errors.second_order_noise(P, self.acc, self.cfg.noise)
         if sk.sm_on(self.sm):
             sk.record_prior(self.sm, k + 1, X, self.acc)
         ins_errors.transition(X, self.acc, self.cfg.noise, self.cfg.n, self.Phi, self.Qd)
@@ -217,7 +218,7 @@ def run_ekf_filterpy(
     run.record_start(X, ekf.P, np.ones(n))
     gt.record_output(sched.t0, X, ekf.P, log)
     for k, stop, t in run.stops():
-        run.predict_nominal(X, t, k)
+        run.predict_nominal(X, np.asarray(ekf.P, dtype=float), t, k)
         ekf.F, ekf.Q = run.Phi, run.Qd
         ekf.x = np.zeros(n)
         ekf.predict()
@@ -316,6 +317,7 @@ def _ukf_predict(ukf: Any, run: _Run, fx: Any, q_ref: F64, X: F64, sc: F64, t: i
     n, cfg = run.cfg.n, run.cfg
     ins.to_full(np.asarray(ukf.x, dtype=float), q_ref, n, X)
     i_next = run.span(X, t, True)
+    ins_errors.second_order_noise(np.asarray(ukf.P, dtype=float), run.acc, cfg.noise)
     ins_errors.transition(X, run.acc, cfg.noise, n, run.Phi, run.Qd)
     ins.coords_scale(X, n, sc)
     q_new = X[ins.X_Q : ins.X_Q + 4].copy()

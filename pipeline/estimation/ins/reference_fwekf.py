@@ -65,7 +65,7 @@ def run_fwekf_filterpy(
     run.record_start(X, kf.P, np.ones(n))
     gt.record_output(sched.t0, X, kf.P, log)
     for k, stop, t in run.stops():
-        run.predict_nominal(X, t, k)
+        run.predict_nominal(X, np.asarray(kf.P, dtype=float), t, k)
         a_k = alpha if stop[me.ST_FIX] >= 0 and not iae else 1.0  # once per GNSS cycle
         kf.F, kf.Q = a_k * run.Phi, run.Qd.copy()  # eq. 26: (a Phi) P (a Phi)^T + Q
         kf.x = np.zeros(n)

@@ -211,6 +211,7 @@ def make_setup(
         st.gap_accel_psd_m2ps3,
         st.gap_gyro_psd_rad2ps,
         fix_error,
+        st.second_order_corr_s,
     )
     nhc = params.nhc
     nhc_sigma = np.array(

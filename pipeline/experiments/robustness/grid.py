@@ -88,7 +88,7 @@ class Grade:
 #: ============  ==========  ==========  ==========  ============  ========  =========
 #:
 #: For comparison, params.yaml's fallback prior (``filters.<name>.imu_noise``): gyro bias
-#: 0.005 rad/s (0.29 deg/s), accel bias 0.1 m/s^2.
+#: 0.0087 rad/s (0.5 deg/s), accel bias 0.25 m/s^2 (the consumer turn-on at two sigma).
 GRADES = {
     "tactical": Grade(
         5e-4, 3.6e-5, 5e-5, 5e-7, 0.01, 1.0 / 3600 * DPS,

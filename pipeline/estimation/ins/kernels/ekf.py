@@ -68,7 +68,7 @@ from navreplay.pipeline.estimation.ins.models.ins import (
     propagate_span,
     span_work,
 )
-from navreplay.pipeline.estimation.ins.models.ins_errors import transition
+from navreplay.pipeline.estimation.ins.models.ins_errors import second_order_noise, transition
 from navreplay.pipeline.estimation.ins.models.measurement import (
     K_PR,
     ST_OUT,
@@ -190,6 +190,7 @@ def run_ekf(
         if stop[ST_STILL] > 0:
             fill_still(still, sched.imu, i_prev, i, u[3:6], (t - t_cur) * 1e-9, cfg)
         t_cur = t
+        second_order_noise(P, sw.acc, cfg.noise)
         if smoothing:
             record_prior(sm, k + 1, X, sw.acc)
         transition(X, sw.acc, cfg.noise, n, Phi, Qd)

@@ -100,7 +100,7 @@ from navreplay.pipeline.estimation.ins.models.ins import (
     span_work,
     to_full,
 )
-from navreplay.pipeline.estimation.ins.models.ins_errors import transition
+from navreplay.pipeline.estimation.ins.models.ins_errors import second_order_noise, transition
 from navreplay.pipeline.estimation.ins.models.measurement import (
     K_PR,
     ST_OUT,
@@ -159,6 +159,7 @@ def ukf_predict(st: UkfState, span: ImuSpan, cfg: Settings, ws: SigmaWork) -> in
         for r in range(X_CB):
             sigX[j, r] = sigX[0, r]
         sigX[j, X_CB] += sigX[j, X_CD] * T
+    second_order_noise(P, acc, noise)  # the attitude and bias blocks are not scaled
     transition(sigX[0], acc, noise, n, Phi, Qd)
     coords_scale(sigX[0], n, sc)
     for j in range(4):

@@ -67,7 +67,8 @@ ACC_FN = 0  # 0..2: integral of C_b^n f_b dt (nav-frame specific force), m/s
 ACC_C = 3  # 3..11: integral of C_b^n dt (row-major), s
 ACC_T = 12  # span duration, s
 ACC_GAP = 13  # total duration of IMU gaps inside the span, s
-ACC_DIM = 14
+ACC_SO = 14  # 14..16: white velocity noise densities of the second-order term, m^2/s^3
+ACC_DIM = 17
 
 
 class ImuSpan(NamedTuple):

@@ -19,6 +19,7 @@ from navreplay.pipeline.estimation.ins.models.ins import (
     ACC_C,
     ACC_FN,
     ACC_GAP,
+    ACC_SO,
     ACC_T,
     E_ATT,
     E_BA,
@@ -40,7 +41,8 @@ from navreplay.pipeline.nav.earth import E2, F64, OMEGA_IE, A, gravity
 
 # Indices of the noise vector handed to ``transition`` (see ``noise_vector``).
 NZ_ACC, NZ_GYR, NZ_BA, NZ_BG, NZ_CB, NZ_CD, NZ_GAP_ACC, NZ_GAP_GYR, NZ_GM_RATE = range(9)
-NOISE_DIM = 9
+NZ_SO_CORR = 9
+NOISE_DIM = 10
 
 
 def noise_vector(
@@ -53,6 +55,7 @@ def noise_vector(
     gap_accel_psd_m2ps3: float,
     gap_gyro_psd_rad2ps: float,
     fix_error: tuple[float, float] = (0.0, 0.0),
+    second_order_corr_s: float = 0.0,
 ) -> F64:
     """Pack the continuous noise model into the vector ``transition`` reads.
 
@@ -61,6 +64,8 @@ def noise_vector(
     turns a loosely coupled filter's states 15 and 16 (the tightly coupled clock's) into
     first-order Gauss-Markov fix errors, north and east (``inputs.fix_error_states``): rate
     ``1 / tau`` and driving density ``2 sigma^2 / tau`` in place of the clock's.
+    ``second_order_corr_s``: the correlation time ``second_order_noise`` gives the term the
+    linearised velocity error leaves out (0: none).
     """
     tau, sigma = fix_error
     if tau > 0.0:
@@ -76,8 +81,57 @@ def noise_vector(
             gap_accel_psd_m2ps3,
             gap_gyro_psd_rad2ps,
             1.0 / tau if tau > 0.0 else 0.0,
+            second_order_corr_s,
         ]
     )
+
+
+@njit(cache=True, error_model="numpy")
+def second_order_noise(P: F64, acc: F64, noise: F64) -> None:
+    """The velocity noise of the term the linearised velocity error leaves out, into
+    ``acc[ACC_SO : ACC_SO + 3]`` (white densities per NED axis, m^2/s^3; zero with
+    ``noise[NZ_SO_CORR]`` 0), from the covariance ``P`` (error coordinates, at least in the
+    attitude and accelerometer-bias blocks) at the start of the span ``acc`` describes.
+
+    The velocity error's rate holds ``psi x (C db)``, the product of the attitude error and the
+    accelerometer-bias error in the nav frame, which the Jacobian drops. A consumer bias of
+    0.5 m/s^2 that levelling put into a 0.05 rad tilt makes it 0.03 m/s^2: left out, the
+    filter explains the vertical and horizontal velocity it drives with a lateral bias and a
+    roll the first minutes of straight driving cannot tell apart, and is confident of both
+    while 4-5 sigma off (issue 22: NEES 3 to 25 x dof). Its variance per axis under the
+    filter's own Gaussian (Isserlis: ``Var(ab) = P_aa P_bb + P_ab^2``,
+    ``Cov(ab, cd) = P_ac P_bd + P_ad P_bc``) enters as a first-order Gauss-Markov
+    acceleration of correlation time ``tau = noise[NZ_SO_CORR]``, white at the low-frequency
+    density ``2 tau Var``. It vanishes as either error becomes known (a tactical-grade bias,
+    or after the first turns)."""
+    for i in range(3):
+        acc[ACC_SO + i] = 0.0
+    tau, T = noise[NZ_SO_CORR], acc[ACC_T]
+    if tau <= 0.0 or T <= 0.0:
+        return
+    C, A = np.empty((3, 3)), np.empty((3, 3))
+    PbC, B, X = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
+    for r in range(3):
+        for c in range(3):
+            C[r, c] = acc[ACC_C + 3 * r + c] / T
+            A[r, c] = P[E_ATT + r, E_ATT + c]
+    for r in range(3):  # P_bb C^T, then B = C P_bb C^T (u = C db), X = P_psi,b C^T
+        for c in range(3):
+            for q in range(3):
+                PbC[r, c] += P[E_BA + r, E_BA + q] * C[c, q]
+                X[r, c] += P[E_ATT + r, E_BA + q] * C[c, q]
+    for r in range(3):
+        for c in range(3):
+            for q in range(3):
+                B[r, c] += C[r, q] * PbC[q, c]
+    for i in range(3):  # e_i = psi_j u_k - psi_k u_j
+        j, k = (i + 1) % 3, (i + 2) % 3
+        var = (
+            A[j, j] * B[k, k] + X[j, k] ** 2
+            + A[k, k] * B[j, j] + X[k, j] ** 2
+            - 2.0 * (A[j, k] * B[k, j] + X[j, j] * X[k, k])
+        )  # fmt: skip
+        acc[ACC_SO + i] = 2.0 * tau * max(var, 0.0)
 
 
 @njit(cache=True, error_model="numpy")
@@ -199,7 +253,8 @@ def transition(X: F64, acc: F64, noise: F64, n: int, Phi: F64, Qd: F64) -> None:
     the span means of the nav-frame specific force and of ``C_b^n`` (so the first-order term
     is the exact integral of the bias couplings while the body turns);
     ``Qd = (Phi D Phi^T + D) T / 2`` (trapezoid) with ``D`` the diagonal continuous noise
-    (accel and gyro white noise, bias random walks, clock).
+    (accel and gyro white noise, bias random walks, clock; the velocity's with the span's
+    ``second_order_noise``).
     Time spent inside IMU gaps (``T_g``, bridged by interpolating the samples on both sides)
     adds white acceleration and rotation-rate noise of densities ``noise[NZ_GAP_ACC]``,
     ``noise[NZ_GAP_GYR]`` for the vehicle's unknown manoeuvres: velocity ``q_a T_g``, position
@@ -244,7 +299,7 @@ def transition(X: F64, acc: F64, noise: F64, n: int, Phi: F64, Qd: F64) -> None:
         Phi[r, r] += 1.0
     d = np.zeros(n)
     for j in range(3):
-        d[E_VEL + j] = noise[NZ_ACC]
+        d[E_VEL + j] = noise[NZ_ACC] + acc[ACC_SO + j]
         d[E_ATT + j] = noise[NZ_GYR]
         d[E_BA + j] = noise[NZ_BA]
         d[E_BG + j] = noise[NZ_BG]
