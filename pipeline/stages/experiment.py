@@ -26,9 +26,9 @@ Experiments (pure functions in pipeline/experiments/):
   robustness         issue 22: every INS filter, fwekf and iae_ekf on generated drives across
                      IMU grades (tactical to phone), fix errors white or correlated (10, 60 s)
                      with the covariance given or absent, GNSS 1-10 Hz, IMU 25-400 Hz, nominal
-                     and with 10/30/60 s outages (no --tables; --seeds, --cells; runs.csv,
-                     cells.csv, acceptance.csv, note.md: RMS against the raw fixes or SPP,
-                     NEES, status, recovery after the outages)
+                     and with 10/30/60 s outages (no --tables; --seeds, --first-seed,
+                     --cells; runs.csv, cells.csv, acceptance.csv, note.md: RMS against the
+                     raw fixes or SPP, NEES, status, recovery after the outages)
 
 examples:
   navreplay experiment vehicle_bands --tables datasets/car_speed_ramp/tables \\
@@ -85,6 +85,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     robust = parser.add_argument_group("robustness")
     robust.add_argument("--seeds", type=int, default=2, metavar="N",
                         help="seeds per cell (default 2)")  # fmt: skip
+    robust.add_argument("--first-seed", type=int, default=1, metavar="S",
+                        help="the seeds are S .. S+N-1 (default 1; e.g. --first-seed 3 checks "
+                        "a change on seeds that did not choose it)")  # fmt: skip
     robust.add_argument(
         "--cells", nargs="+", default=[], metavar="SUBSET",
         help="cell groups (base, grades, declared, rates) or label words, e.g. "
@@ -129,7 +132,10 @@ def run(args: argparse.Namespace) -> int:
     if args.name == "vehicle_switch_speed":
         return _vehicle_switch_speed(params, out)
     if args.name == "robustness":
-        return _robustness(params, out, args.seeds, args.cells, args.workers, args.scheduler)
+        return _robustness(
+            params, out, range(args.first_seed, args.first_seed + args.seeds), args.cells,
+            args.workers, args.scheduler,
+        )  # fmt: skip
     if args.tables is None:
         raise ParamsError("--tables", f"experiment {args.name} needs --tables DIR")
     tables, sensors = _read(args.tables)
@@ -202,7 +208,7 @@ def _vehicle_switch_speed(params: Params, out: Path) -> int:
 
 
 def _robustness(
-    params: Params, out: Path, seeds: int, subsets: list[str], workers: int, scheduler: str | None
+    params: Params, out: Path, seeds: range, subsets: list[str], workers: int, scheduler: str | None
 ) -> int:
     import time
 
@@ -212,8 +218,10 @@ def _robustness(
     from navreplay.pipeline.experiments.robustness import grid as gr
     from navreplay.pipeline.experiments.robustness import sweep as sw
 
-    if seeds < 1:
+    if len(seeds) < 1:
         raise ParamsError("--seeds", "must be at least 1")
+    if seeds.start < 0:
+        raise ParamsError("--first-seed", "must be at least 0")
     cells = gr.select(gr.grid(), subsets)
     if not cells:
         raise ParamsError("--cells", f"no cell matches {subsets}; labels look like "
@@ -222,11 +230,11 @@ def _robustness(
         params.synth.seoul_campus, params.synth.car_drives, params.filters
     )
     t0 = time.perf_counter()
-    print(f"robustness: {len(cells)} cells x {seeds} seeds x {len(sw.FILTERS)} filters ...",
+    print(f"robustness: {len(cells)} cells x {len(seeds)} seeds x {len(sw.FILTERS)} filters ...",
           flush=True)  # fmt: skip
     failed: list[TaskError] = []
     outcomes = sw.sweep(
-        sweep_params, cells, range(1, seeds + 1), workers=workers,
+        sweep_params, cells, seeds, workers=workers,
         scheduler=resolve_scheduler(scheduler, params.compute), compute=params.compute,
         failed=failed, progress=stderr_progress,
     )  # fmt: skip

@@ -401,14 +401,16 @@ def _markdown(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> list[
     return lines + ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
 
 
-def note(outcomes: Sequence[Outcome], filters: Sequence[str], seeds: int) -> str:
-    """Markdown: what was run, the acceptance counts, the table per cell."""
+def note(outcomes: Sequence[Outcome], filters: Sequence[str], seeds: range) -> str:
+    """Markdown: what was run (on ``seeds``), the acceptance counts, the table per cell."""
     cells = len({o.cell for o in outcomes})
+    which = f"seed {seeds.start}" if len(seeds) == 1 else f"seeds {seeds.start}-{seeds[-1]}"
     return "\n".join(
         [
             "# Robustness sweep (issue 22)",
             "",
-            f"{cells} cells x {seeds} seeds x {len(filters)} filters, each run nominal and with "
+            f"{cells} cells x {len(seeds)} seeds ({which}) x {len(filters)} filters, each run "
+            "nominal and with "
             f"outages of {', '.join(f'{n:g}' for _, n in OUTAGES)} s: {len(outcomes)} runs "
             "(`runs.csv`, one row each; the grid and the acceptance points: "
             "`navreplay.pipeline.experiments.robustness.sweep`).",

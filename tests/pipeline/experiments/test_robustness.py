@@ -135,10 +135,11 @@ def test_the_script_writes_every_run_and_prints_the_tables(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "sweep.csv"
-    argv = ["--csv", str(out), "--seeds", "1", "--workers", "1", "--cells", "base",
-            "--filters", "lc_ekf"]  # fmt: skip
+    argv = ["--csv", str(out), "--seeds", "1", "--first-seed", "3", "--workers", "1",
+            "--cells", "base", "--filters", "lc_ekf"]  # fmt: skip
     assert script.main(argv) == 0
     rows = list(csv.DictReader(out.open()))
+    assert {r["seed"] for r in rows} == {"3"}
     assert [(r["filter"], r["scenario"]) for r in rows] == [
         ("lc_ekf", "nominal"),
         ("lc_ekf", "outages"),
@@ -161,10 +162,11 @@ def test_the_script_writes_every_run_and_prints_the_tables(
 
 def test_the_experiment_stage_writes_the_runs_the_tables_and_a_note(tmp_path: Path) -> None:
     out = tmp_path / "robustness"
-    argv = ["experiment", "robustness", "--seeds", "1", "--workers", "1", "--cells", "base",
-            "--out", str(out)]  # fmt: skip
+    argv = ["experiment", "robustness", "--seeds", "1", "--first-seed", "2", "--workers", "1",
+            "--cells", "base", "--out", str(out)]  # fmt: skip
     assert main(argv) == 0
     runs = list(csv.DictReader((out / "runs.csv").open()))
+    assert {r["seed"] for r in runs} == {"2"}
     assert {r["filter"] for r in runs} == set(rs.FILTERS)
     assert len(runs) == 2 * len(rs.FILTERS)
     cells = list(csv.DictReader((out / "cells.csv").open()))
@@ -175,6 +177,7 @@ def test_the_experiment_stage_writes_the_runs_the_tables_and_a_note(tmp_path: Pa
     assert points["integrity"]["all"].split(" ")[0].endswith(f"/{2 * n}")  # both runs
     assert points["recovery"]["all"].split(" ")[0].endswith(f"/{n}")  # the outage runs
     note = (out / "note.md").read_text()
+    assert "1 seeds (seed 2)" in note
     assert "| acceptance |" in note
     assert gr.BASE.label() in note
     bad = ["experiment", "robustness", "--cells", "no such cell", "--out", str(tmp_path / "x")]
