@@ -87,6 +87,15 @@ def noise_vector(
 
 
 @njit(cache=True, error_model="numpy")
+def _span_mean_dcm(acc: F64, C: F64) -> None:
+    """The span's mean ``C_b^n`` into ``C`` (3, 3) from the accumulator (its ``ACC_T`` > 0)."""
+    T = acc[ACC_T]
+    for r in range(3):
+        for c in range(3):
+            C[r, c] = acc[ACC_C + 3 * r + c] / T
+
+
+@njit(cache=True, error_model="numpy")
 def second_order_noise(P: F64, acc: F64, noise: F64) -> None:
     """The velocity noise of the term the linearised velocity error leaves out, into
     ``acc[ACC_SO : ACC_SO + 3]`` (white densities per NED axis, m^2/s^3; zero with
@@ -111,9 +120,9 @@ def second_order_noise(P: F64, acc: F64, noise: F64) -> None:
         return
     C, A = np.empty((3, 3)), np.empty((3, 3))
     PbC, B, X = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
+    _span_mean_dcm(acc, C)
     for r in range(3):
         for c in range(3):
-            C[r, c] = acc[ACC_C + 3 * r + c] / T
             A[r, c] = P[E_ATT + r, E_ATT + c]
     for r in range(3):  # P_bb C^T, then B = C P_bb C^T (u = C db), X = P_psi,b C^T
         for c in range(3):
@@ -274,9 +283,7 @@ def transition(X: F64, acc: F64, noise: F64, n: int, Phi: F64, Qd: F64) -> None:
     if T > 0.0:
         for j in range(3):
             f_n[j] = acc[ACC_FN + j] / T
-        for r in range(3):
-            for c in range(3):
-                C[r, c] = acc[ACC_C + 3 * r + c] / T
+        _span_mean_dcm(acc, C)
     else:
         f_n[2] = -gravity(X[X_LAT], X[X_H])
         dcm_into(X[X_Q : X_Q + 4], C)
