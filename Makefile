@@ -11,7 +11,7 @@ export DVC_NO_ANALYTICS := 1
 export PATH := $(CURDIR)/$(VENV)/bin:$(PATH)
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
-.PHONY: demo test venv dev lint typecheck pytest bench clean-venv browser
+.PHONY: demo test venv dev lint typecheck pytest bench clean-venv browser warm
 
 venv: $(STAMP)
 
@@ -85,7 +85,14 @@ browser:
 # The 15 slowest tests are listed at the end (where the time goes).
 PYTEST_WORKERS ?= 2
 
-pytest: dev browser
+# Every filter's kernel compiled once, before the suite (beside mypy): cold, the two workers
+# would otherwise compile the same kernels at once, each in its own process, and the first
+# test of every filter family would pay its compile (on a fresh clone about a third of the
+# suite's time). Warm, it loads the cache in seconds.
+warm: dev
+	$(BIN)/navreplay warm
+
+pytest: dev browser warm
 	NAVREPLAY_REQUIRE_BROWSER=$$(test -x $(CHROMIUM) && test -x $(CHROMEDRIVER) && echo 1) \
 	  $(BIN)/pytest -n $(PYTEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=15
 
