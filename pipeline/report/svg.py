@@ -32,6 +32,10 @@ RC: dict[str, Any] = {
     "font.family": "sans-serif",
     "font.size": 9.0,
     "axes.titlesize": 10.0,
+    # titles at the top of their axes: matplotlib's automatic place (None) measures every
+    # axes' tick labels at each draw to lift a title over top ones, which no figure has (a
+    # fifth of a report's rendering time)
+    "axes.titley": 1.0,
     "axes.grid": True,
     "grid.alpha": 0.35,
     "grid.linewidth": 0.5,
