@@ -117,7 +117,13 @@ def simulate_drive(
         lon0_rad=math.radians(params.lon_deg),
         h0_m=params.alt_m,
         yaw0_rad=math.radians(params.yaw_deg),
-        roll_per_lat_acc=params.roll_per_lat_acc_rad,
+        body=trajectory.Body(
+            roll_per_lat_acc=params.roll_per_lat_acc_rad,
+            sideslip_per_lat_acc=params.sideslip_per_lat_acc_rad,
+            pitch_per_long_acc=params.pitch_per_long_acc_rad,
+            road_rms_m=params.road_rms_m,
+            road_seed=seed,
+        ),
     )
     n = motion.t_s.size
     dt_ns = NS_PER_S // params.imu_rate_hz

@@ -166,6 +166,11 @@ class SeoulCampusParams:
         max_grade_rate_ps: peak rate of change of the road grade, 1/s.
         noise_free: remove every random error (IMU, receiver clock noise, observables, fixes).
         imu: IMU errors. gnss: receiver. constellation: satellites.
+        sideslip_per_lat_acc_rad: the body's sideslip into a turn per m/s^2 of lateral
+            acceleration (``trajectory.Body``); 0: the idealised car, which obeys the
+            non-holonomic constraint exactly.
+        pitch_per_long_acc_rad: suspension pitch per m/s^2 of acceleration (nose up).
+        road_rms_m: the road profile's RMS as the body follows it (0: a flat road).
     """
 
     start_gps: str
@@ -186,6 +191,9 @@ class SeoulCampusParams:
     imu: ImuErrors
     gnss: ReceiverParams
     constellation: ConstellationParams
+    sideslip_per_lat_acc_rad: float = 0.0
+    pitch_per_long_acc_rad: float = 0.0
+    road_rms_m: float = 0.0
 
     def __post_init__(self) -> None:
         try:
@@ -203,6 +211,7 @@ class SeoulCampusParams:
         if self.imu_rate_hz % self.gnss_rate_hz or 1_000_000_000 % self.imu_rate_hz:
             raise FieldError("imu_rate_hz", "must be a multiple of gnss_rate_hz dividing 1 GHz")
         require_positive(self, ("max_accel_mps2", "max_yaw_accel_radps2", "max_grade_rate_ps"))
+        require_non_negative(self, ("road_rms_m",))
 
 
 NO_IMU_ERRORS = ImuErrors(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)

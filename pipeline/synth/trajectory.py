@@ -1,4 +1,4 @@
-"""Land-vehicle trajectories that obey the non-holonomic constraint exactly.
+"""Land-vehicle trajectories: on the path exactly, and the body's own motion on its wheels.
 
 A drive is a list of ``Leg`` (straights with optional hills, turns, stops) turned into three
 C2 profiles of time (``pipeline.synth.profile``): signed speed along the body x axis ``v``
@@ -12,6 +12,15 @@ at rest or, for a rolling start, already at ``start_speed_mps``. From them, exac
   (``v < 0``), the course is the heading plus 180 deg;
 - ``v_dot^n`` and the body rate w.r.t. NED ``w_nb^b`` (ZYX Euler kinematics) analytically;
 - latitude, longitude and height by Simpson's rule on the 2x-rate grid (paper 001 eq. 1).
+
+That is the idealised car, which obeys the non-holonomic constraint exactly. A real one does
+not (``Body``): its tyres slip sideways in turns, so the body points into the turn by a sideslip
+angle ``beta = k_beta v r`` (rad per m/s^2 of lateral acceleration; the lateral body velocity is
+``-v sin beta``); its suspension pitches it by ``k_p v_dot`` (squat accelerating, dive braking);
+and the road's roughness heaves it, a sum of sinusoids in the distance travelled, whose
+amplitudes follow the road-profile spectrum's ``n^-2`` law, over wavelengths of 8-60 m (the
+shorter ones the suspension absorbs: it passes to the body little above 1.5 Hz). All three
+enter the attitude, velocity and rates analytically, so the IMU readings stay exact.
 
 ``imu_from_motion`` (``pipeline.nav.mechanization``) then gives the exact IMU readings.
 Positive turn angles are to the right (clockwise seen from above, yaw increasing), whichever
@@ -180,6 +189,40 @@ def _turn(
     grd.hold(total)
 
 
+@dataclass(frozen=True)
+class Body:
+    """How the body moves on its wheels, beyond the path (module doc).
+
+    Attributes:
+        roll_per_lat_acc: body roll out of a turn, rad per m/s^2 of lateral acceleration.
+        sideslip_per_lat_acc: sideslip angle (body x into the turn from the velocity), rad per
+            m/s^2 of lateral acceleration (0.003-0.01 for passenger cars).
+        pitch_per_long_acc: suspension pitch, nose up when accelerating, rad per m/s^2.
+        road_rms_m: RMS of the road's height profile over 8-60 m wavelengths, as the body
+            follows it (a few mm on a smooth road, 1-2 cm on a poor one); 0 for a flat road.
+        road_seed: the road profile's random phases.
+    """
+
+    roll_per_lat_acc: float = 0.0
+    sideslip_per_lat_acc: float = 0.0
+    pitch_per_long_acc: float = 0.0
+    road_rms_m: float = 0.0
+    road_seed: int = 0
+
+    def road(self) -> tuple[F64, F64, F64]:
+        """The road's sinusoids: amplitudes (m), wavenumbers (rad/m) and phases (rad)."""
+        lam = np.geomspace(8.0, 60.0, ROAD_COMPONENTS)
+        k = 2.0 * np.pi / lam
+        # a spectrum G(n) ~ n^-2 over log-spaced bands (width ~ n): each band's variance ~ 1/n
+        amp = np.sqrt(lam)
+        amp *= self.road_rms_m / np.sqrt(0.5 * np.sum(amp * amp))
+        phase = np.random.default_rng(self.road_seed).uniform(0.0, 2.0 * np.pi, lam.size)
+        return amp, k, phase
+
+
+ROAD_COMPONENTS = 16
+
+
 class Motion(NamedTuple):
     """A trajectory sampled on a uniform grid (N samples).
 
@@ -213,34 +256,58 @@ def sample(
     lon0_rad: float,
     h0_m: float,
     yaw0_rad: float,
-    roll_per_lat_acc: float,
+    body: Body,
 ) -> Motion:
     """Sample the drive at ``rate_hz`` over ``[0, duration_s]`` (N = duration*rate + 1)."""
     n = round(duration_s * rate_hz) + 1
     t2 = np.arange(2 * n - 1, dtype=np.float64) / (2 * rate_hz)  # the grid and its midpoints
     sp, yr, gr = profiles.speed, profiles.yaw_rate, profiles.grade
-    v, vdot = sp(t2), sp.derivative()(t2)
+    v, vdot, vddot = sp(t2), sp.derivative()(t2), sp.derivative(2)(t2)
     r, rdot = yr(t2), yr.derivative()(t2)
     g, gdot = gr(t2), gr.derivative()(t2)
     psi = yaw0_rad + yr.antiderivative()(t2)
     cpsi, spsi = np.cos(psi), np.sin(psi)
-    vel = np.stack([v * cpsi, v * spsi, -g * v], axis=-1)
+    zdot, zddot = _heave(body, sp.antiderivative()(t2), v, vdot)  # the road lifts the body
+    vel = np.stack([v * cpsi, v * spsi, -g * v - zdot], axis=-1)
     lat, lon, h = integrate_geodetic(lat0_rad, lon0_rad, h0_m, vel, 1.0 / rate_hz)
     s = slice(0, None, 2)
     vdot_n = np.stack(
-        [vdot * cpsi - v * spsi * r, vdot * spsi + v * cpsi * r, -(gdot * v + g * vdot)], axis=-1
-    )[s]
-    theta = np.arctan(g)
-    phi = -roll_per_lat_acc * v * r
-    phidot = -roll_per_lat_acc * (vdot * r + v * rdot)
-    thetadot = gdot / (1.0 + g * g)
-    sph, cph, sth, cth = np.sin(phi), np.cos(phi), np.sin(theta), np.cos(theta)
-    w_nb = np.stack(
-        [phidot - r * sth, thetadot * cph + r * cth * sph, -thetadot * sph + r * cth * cph],
+        [
+            vdot * cpsi - v * spsi * r,
+            vdot * spsi + v * cpsi * r,
+            -(gdot * v + g * vdot) - zddot,
+        ],
         axis=-1,
     )[s]
-    rpy = np.stack([phi, theta, np.arctan2(spsi, cpsi)], axis=-1)[s]
+    theta = np.arctan(g) + body.pitch_per_long_acc * vdot
+    thetadot = gdot / (1.0 + g * g) + body.pitch_per_long_acc * vddot
+    phi = -body.roll_per_lat_acc * v * r
+    phidot = -body.roll_per_lat_acc * (vdot * r + v * rdot)
+    yaw = psi + body.sideslip_per_lat_acc * v * r  # the body points into the turn
+    yawdot = r + body.sideslip_per_lat_acc * (vdot * r + v * rdot)
+    sph, cph, sth, cth = np.sin(phi), np.cos(phi), np.sin(theta), np.cos(theta)
+    w_nb = np.stack(
+        [
+            phidot - yawdot * sth,
+            thetadot * cph + yawdot * cth * sph,
+            -thetadot * sph + yawdot * cth * cph,
+        ],
+        axis=-1,
+    )[s]
+    rpy = np.stack([phi, theta, np.arctan2(np.sin(yaw), np.cos(yaw))], axis=-1)[s]
     return Motion(t2[s], lat, lon, h, vel[s], vdot_n, rpy, w_nb, quats_from_rpy(rpy))
+
+
+def _heave(body: Body, dist: F64, v: F64, vdot: F64) -> tuple[F64, F64]:
+    """The rate and acceleration of the road's lift of the body (up), at distance ``dist``
+    along the path travelled at speed ``v`` (signed)."""
+    if body.road_rms_m == 0.0:
+        return np.zeros_like(v), np.zeros_like(v)
+    amp, k, phase = body.road()
+    arg = np.outer(dist, k) + phase
+    slope = np.cos(arg) @ (amp * k)  # dz/ds
+    curve = -(np.sin(arg) @ (amp * k * k))  # d2z/ds2
+    return slope * v, curve * v * v + slope * vdot
 
 
 def quats_from_rpy(rpy: F64) -> F64:

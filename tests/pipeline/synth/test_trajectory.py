@@ -11,6 +11,7 @@ from navreplay.ingest.typed import FieldError
 from navreplay.pipeline.nav.rotations import quat_to_dcm
 from navreplay.pipeline.synth.profile import ProfileBuilder
 from navreplay.pipeline.synth.trajectory import (
+    Body,
     Leg,
     Limits,
     Motion,
@@ -61,7 +62,7 @@ def test_sampled_motion_obeys_the_non_holonomic_constraint() -> None:
         lon0_rad=2.2,
         h0_m=60.0,
         yaw0_rad=1.0,
-        roll_per_lat_acc=0.005,
+        body=Body(roll_per_lat_acc=0.005),
     )
     v_body = np.einsum("nji,nj->ni", np.array([quat_to_dcm(q) for q in mo.q_wxyz]), mo.vel_ned_mps)
     assert np.abs(v_body[:, 1:]).max() < 1e-12
@@ -88,12 +89,14 @@ REVERSING = [
 ]
 
 
-def _motion(legs: list[Leg], duration_s: float, **kw: float) -> tuple[Profiles, Motion]:
+def _motion(
+    legs: list[Leg], duration_s: float, body: Body | None = None, **kw: float
+) -> tuple[Profiles, Motion]:
     start = kw.pop("start_speed_mps", 0.0)
     prof = build_profiles(legs, 5.0 if start == 0.0 else 0.0, duration_s, LIMITS,
                           start_speed_mps=start)  # fmt: skip
     mo = sample(prof, rate_hz=100, duration_s=duration_s, lat0_rad=0.65, lon0_rad=2.2,
-                h0_m=60.0, yaw0_rad=1.0, roll_per_lat_acc=0.005)  # fmt: skip
+                h0_m=60.0, yaw0_rad=1.0, body=body or Body(roll_per_lat_acc=0.005))  # fmt: skip
     return prof, mo
 
 
@@ -164,3 +167,40 @@ def test_legs_without_a_speed_or_a_radius_are_refused() -> None:
         Leg("straight", duration_s=3.0)
     with pytest.raises(FieldError, match="radius_m"):
         Leg("turn", speed_mps=-2.0, angle_deg=90.0, radius_m=0.0)
+
+
+# a passenger car on a fair road: 0.5 deg of sideslip and 0.3 deg of pitch per m/s^2, 1 cm of
+# road profile (issue 26: the constraint a real car breaks)
+REAL_CAR = Body(roll_per_lat_acc=0.005, sideslip_per_lat_acc=0.009, pitch_per_long_acc=0.005,
+                road_rms_m=0.01, road_seed=3)  # fmt: skip
+
+
+def test_a_real_car_slips_in_turns_and_heaves_on_the_road_with_exact_derivatives() -> None:
+    """Sideslip, suspension pitch and road heave break the non-holonomic constraint by what
+    real cars show (lateral body velocity 0.05-0.3 m/s RMS in turns, a few cm/s vertical),
+    while the path, the course and the exactness of the IMU's inputs stay."""
+    legs = [*LEGS, Leg("turn", speed_mps=12.0, angle_deg=90.0, radius_m=40.0)]
+    _, ideal = _motion(legs, 120.0)
+    _, mo = _motion(legs, 120.0, REAL_CAR)
+    _derivatives_match(mo, 100)
+    c = np.array([quat_to_dcm(q) for q in mo.q_wxyz])
+    v_body = np.einsum("nji,nj->ni", c, mo.vel_ned_mps)
+    turning = np.abs(mo.vel_ned_mps[:, :2]).max(axis=1) > 1.0
+    turning &= np.abs(ideal.w_nb_b_radps[:, 2]) > 0.1
+    lateral = float(np.sqrt(np.mean(v_body[turning, 1] ** 2)))
+    assert 0.05 < lateral < 0.3, lateral
+    # into the turn: a right turn (yaw rate > 0) slips the velocity to the body's left
+    right = turning & (ideal.w_nb_b_radps[:, 2] > 0.1)
+    assert np.all(v_body[right, 1] < 0.0)
+    moving = np.hypot(mo.vel_ned_mps[:, 0], mo.vel_ned_mps[:, 1]) > 1.0
+    vertical = float(np.sqrt(np.mean(v_body[moving, 2] ** 2)))
+    assert 0.01 < vertical < 0.1, vertical
+    # the path is the idealised car's: the same course and horizontal track, the road's
+    # heave (cm) on the height
+    np.testing.assert_allclose(mo.vel_ned_mps[:, :2], ideal.vel_ned_mps[:, :2], atol=1e-12)
+    np.testing.assert_allclose(mo.lat_rad, ideal.lat_rad, atol=1e-12)
+    assert 0.005 < np.abs(mo.h_m - ideal.h_m).max() < 0.1
+    assert np.abs(mo.rpy_rad[:, 2] - ideal.rpy_rad[:, 2]).max() > np.radians(1.0)
+    # at rest nothing moves
+    still = np.hypot(mo.vel_ned_mps[:, 0], mo.vel_ned_mps[:, 1]) == 0.0
+    assert np.abs(v_body[still]).max() == 0.0
