@@ -91,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
         imu_noise=imu_noise,
         nhc_sigma_mps=(nhc.sigma_lateral_mps, nhc.sigma_vertical_mps) if nhc else None,
         truth=truth,
+        nhc_rate_hz=nhc.rate_hz if nhc else None,
     )
     method = (
         "mean over windows of each window's mean 3-D position error (no re-alignment); "
