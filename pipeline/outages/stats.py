@@ -21,8 +21,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import bootstrap, norm
 
+from navreplay.pipeline.distributions import norm_ppf
 from navreplay.pipeline.nav.earth import F64
 
 
@@ -57,6 +57,8 @@ def _bootstrap(
 ) -> tuple[float, float]:
     if data[0].size < 2 or all(np.ptp(d) == 0 for d in data):
         return math.nan, math.nan
+    from scipy.stats import bootstrap  # scipy.stats takes seconds to import (distributions)
+
     with warnings.catch_warnings():
         # BCa warns and returns NaN on a degenerate resample distribution; NaN is reported
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -92,7 +94,7 @@ def delta_reduction(a: F64, b: F64, confidence: float = 0.95) -> Interval:
     r = mb / ma
     cov = np.cov(np.vstack([a, b]))
     var = (cov[1, 1] - 2.0 * r * cov[0, 1] + r * r * cov[0, 0]) / (n * ma * ma)
-    z = float(norm.ppf(0.5 + confidence / 2.0))
+    z = norm_ppf(0.5 + confidence / 2.0)
     half = 100.0 * z * math.sqrt(max(var, 0.0))
     est = 100.0 * (1.0 - r)
     return Interval(est, est - half, est + half)

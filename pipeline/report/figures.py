@@ -16,8 +16,8 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
 
+from navreplay.pipeline.distributions import chi2_ppf
 from navreplay.pipeline.report.inputs import DatasetInputs, Run, column, times_ns
 from navreplay.pipeline.report.series import ErrorSeries, local_en
 from navreplay.pipeline.report.svg import (
@@ -193,7 +193,7 @@ def nis(data: DatasetInputs, run: Run, key: str) -> str | None:
                 color="#0072B2",
                 label=f"mean of {NIS_WINDOW}",
             )
-            lo, hi = chi2.ppf(0.025, dof), chi2.ppf(0.975, dof)
+            lo, hi = chi2_ppf(0.025, dof), chi2_ppf(0.975, dof)
             ax.axhline(dof, color="#009E73", lw=0.8, ls="--", label=f"dof = {dof}")
             ax.axhspan(lo, hi, color="#009E73", alpha=0.08, lw=0, label="95 % bounds, one update")
             wins = [((w.start_ns - t0) / 1e9, (w.end_ns - t0) / 1e9) for w in run.windows]

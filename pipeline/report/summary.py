@@ -37,7 +37,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from navreplay.ingest.atomic import atomic_directory, atomic_write_json, atomic_write_text
 from navreplay.ingest.tables import git_commit, package_version
@@ -160,11 +159,13 @@ def onboard_cells(results: Sequence[DatasetResult]) -> dict[tuple[str, str], dic
 
 def ranking(cells: dict[tuple[str, str], dict[str, float]]) -> list[Row]:
     """Mean rank per filter over the cells (see the module docstring), best first."""
+    from scipy.stats import rankdata  # scipy.stats takes seconds to import (distributions)
+
     ranks: dict[str, list[float]] = {}
     wins: dict[str, int] = {}
     for errs in cells.values():
         names = sorted(errs)
-        r = stats.rankdata([errs[n] for n in names])
+        r = rankdata([errs[n] for n in names])
         for n, rk in zip(names, r, strict=True):
             ranks.setdefault(n, []).append(float(rk))
         best = min(names, key=lambda n: (errs[n], n))

@@ -25,8 +25,8 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
+from navreplay.pipeline.distributions import t_ppf
 from navreplay.pipeline.outages.stats import mean_interval
 from navreplay.pipeline.report.inputs import DatasetInputs, Run
 from navreplay.pipeline.report.series import ErrorSeries, error_series, local_en
@@ -196,7 +196,7 @@ def t_interval(x: np.ndarray) -> tuple[float, float, float]:
     mean = float(x.mean())
     if x.size < 2:
         return mean, math.nan, math.nan
-    half = float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
+    half = t_ppf(0.975, x.size - 1) * float(x.std(ddof=1)) / math.sqrt(x.size)
     return mean, mean - half, mean + half
 
 

@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-from scipy.stats import chi2
 
+from navreplay.pipeline.distributions import chi2_ppf
 from navreplay.pipeline.estimation.core.windows import NS, Window
 from navreplay.pipeline.estimation.ins.config import FILTER_KINDS
 from navreplay.pipeline.estimation.ins.models import measurement as me
@@ -204,7 +204,7 @@ def _f2(c: _Case) -> list[Check]:
     out.append(c.check(text, float(rej), "== 0", sel.size > 0 and rej == 0, rej_nom))
     if sel.size:
         mean = float(c.r.inn_f[sel, 0].mean())
-        bound = float(chi2.ppf(0.99, int(c.r.inn_i[sel, 3].sum())) / sel.size)
+        bound = chi2_ppf(0.99, int(c.r.inn_i[sel, 3].sum())) / sel.size
         mean_nom = float(c.nom.inn_f[sel_nom, 0].mean()) if sel_nom.size else None
         # "back within bounds" means back to the filter's fault-free consistency: where the
         # nominal run itself exceeds the chi-square bound in this window (tuning, not the

@@ -10,9 +10,12 @@ The peak slope of a transition is ``15/8 (b - a) / T``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.interpolate import PPoly
+
+if TYPE_CHECKING:
+    from scipy.interpolate import PPoly
 
 PEAK_SLOPE_FACTOR = 15.0 / 8.0
 
@@ -55,6 +58,8 @@ class ProfileBuilder:
 
     def build(self, t_end: float) -> PPoly:
         """The profile on ``[0, max(t, t_end)]``, holding the last value up to ``t_end``."""
+        from scipy.interpolate import PPoly  # slow to import: only when building
+
         if self.t < t_end:
             self.hold(t_end - self.t)
         if not self._coefs:

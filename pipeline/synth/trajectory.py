@@ -32,14 +32,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal, NamedTuple
+from typing import TYPE_CHECKING, Literal, NamedTuple
 
 import numpy as np
-from scipy.interpolate import PPoly
 
 from navreplay.ingest.typed import FieldError
 from navreplay.pipeline.nav.earth import E2, F64, A
 from navreplay.pipeline.synth.profile import PEAK_SLOPE_FACTOR, ProfileBuilder
+
+# scipy.interpolate takes most of a second to import, and params reads Leg from here
+if TYPE_CHECKING:
+    from scipy.interpolate import PPoly
 
 MIN_RAMP_S = 3.0
 

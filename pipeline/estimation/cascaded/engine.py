@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
 
+from navreplay.pipeline.distributions import chi2_ppf
 from navreplay.pipeline.errors import DivergenceError, PipelineError
 from navreplay.pipeline.estimation.cascaded import cascade as cs
 from navreplay.pipeline.estimation.cascaded.config import (
@@ -84,7 +84,7 @@ def make_setup(name: str, params: CascadedFilterParams) -> CascadeSetup:
     if params.hybrid is not None:
         for s in params.hybrid.ekf_mean:
             ekf_mean[NAV_STATE_NAMES.index(s)] = 1
-    gate = np.array([math.inf] + [float(chi2.ppf(params.gating.probability, d)) for d in (1, 2, 3)])
+    gate = np.array([math.inf] + [chi2_ppf(params.gating.probability, d) for d in (1, 2, 3)])
     settings = cs.CascadeSettings(
         est=_EST_CODE[CASCADED_KINDS[name]],
         q=np.array([pn.navigation.values(), pn.control.values()]),

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.stats import chi2
 
+from navreplay.pipeline.distributions import chi2_ppf
 from navreplay.pipeline.nav.earth import F64
 
 
@@ -37,7 +37,7 @@ def nis_by_stream(
             continue
         dof = int(inn_i[sel, 3].sum())
         mean = float(inn_f[sel, 0].mean())
-        lo, hi = chi2.ppf(0.025, dof) / k, chi2.ppf(0.975, dof) / k
+        lo, hi = chi2_ppf(0.025, dof) / k, chi2_ppf(0.975, dof) / k
         out[name] = {
             "count": k,
             "nis_mean": mean,

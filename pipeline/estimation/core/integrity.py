@@ -39,8 +39,8 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-from scipy.stats import chi2
 
+from navreplay.pipeline.distributions import chi2_isf
 from navreplay.pipeline.estimation.core.checks import positive
 from navreplay.pipeline.estimation.core.windows import NS
 
@@ -164,7 +164,7 @@ def _stream(
         s, d = cs_nis[j] - cs_nis[i], cs_dim[j] - cs_dim[i]
         if s / d > worst:
             worst, worst_ns = s / d, int(a)
-        if s / d > p.nis_factor and scale * s > chi2.isf(p.alpha, scale * d):
+        if s / d > p.nis_factor and scale * s > chi2_isf(p.alpha, scale * d):
             failed += 1
         if np.median(nis[i:j] / dim[i:j]) > p.diverged_nis:
             run_from = int(a) if run_from is None else run_from

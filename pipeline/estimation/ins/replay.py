@@ -27,11 +27,11 @@ from typing import Any, NamedTuple
 import numba as nb
 import numpy as np
 import pyarrow as pa
-from scipy.stats import chi2
 
 from navreplay.ingest.config import ImuNoise
 from navreplay.ingest.meta import SensorMeta
 from navreplay.pipeline._numba_cache import fewer_gc_passes
+from navreplay.pipeline.distributions import chi2_ppf
 from navreplay.pipeline.errors import DivergenceError
 from navreplay.pipeline.estimation.core import gating as gt
 from navreplay.pipeline.estimation.core import runlog as rl
@@ -217,7 +217,7 @@ def make_setup(
     nhc_sigma = np.array(
         [nhc.sigma_lateral_mps, nhc.sigma_vertical_mps] if nhc is not None else [1.0, 1.0]
     )
-    gate = np.array([math.inf] + [float(chi2.ppf(g.probability, d)) for d in (1, 2, 3)])
+    gate = np.array([math.inf] + [chi2_ppf(g.probability, d) for d in (1, 2, 3)])
     fz = (
         params.fuzzy.vector() if kind.fading and params.fuzzy is not None
         else params.iae.vector() if kind.iae and params.iae is not None

@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-from scipy.stats import chi2
 
+from navreplay.pipeline.distributions import chi2_ppf
 from navreplay.pipeline.errors import DivergenceError
 from navreplay.pipeline.estimation.core import gating as gt
 from navreplay.pipeline.estimation.core import runlog as rl
@@ -272,7 +272,7 @@ def make_settings(name: str, params: VehicleFilterParams) -> kv.VehicleSettings:
     n, s, im = params.noise, params.switching, params.imm
     q = np.array([n.speed_psd_m2ps3, n.slip_psd_rad2ps, n.heading_psd_rad2ps,
                   n.position_psd_m2ps, n.position_psd_m2ps])  # fmt: skip
-    gate = np.array([math.inf] + [float(chi2.ppf(params.gate_probability, d)) for d in (1, 2, 3)])
+    gate = np.array([math.inf] + [chi2_ppf(params.gate_probability, d) for d in (1, 2, 3)])
     return kv.VehicleSettings(
         vp=vehicle_vector(params),
         q=q,
