@@ -192,6 +192,10 @@ def _turn(
     grd.hold(total)
 
 
+#: the sinusoids of a road profile (``Body.road``)
+ROAD_COMPONENTS = 16
+
+
 @dataclass(frozen=True)
 class Body:
     """How the body moves on its wheels, beyond the path (module doc).
@@ -221,9 +225,6 @@ class Body:
         amp *= self.road_rms_m / np.sqrt(0.5 * np.sum(amp * amp))
         phase = np.random.default_rng(self.road_seed).uniform(0.0, 2.0 * np.pi, lam.size)
         return amp, k, phase
-
-
-ROAD_COMPONENTS = 16
 
 
 class Motion(NamedTuple):
